@@ -1,0 +1,1 @@
+"""Component families. Each module defines ``COMPONENTS``, a tuple of ComponentSpec."""

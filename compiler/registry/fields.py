@@ -1,0 +1,358 @@
+"""Typed field values: how one attribute's text becomes a value, and how it is written back.
+
+Each field of a component spec has one of these types. ``parse`` turns SOFA's text form into a
+Python value (numbers as numpy arrays for anything bulk) or raises :class:`FieldValueError` with
+the diagnostic code to report; ``check_count`` validates the number of values once the DataType of
+the component is known; ``format`` writes a value back in SOFA's text form.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .datatypes import DataType
+
+
+class FieldValueError(ValueError):
+    """A value that does not parse (E204), has the wrong count (E205) or is not finite (E206)."""
+
+    def __init__(self, message: str, code: str = "E204", hint: str = "") -> None:
+        super().__init__(message)
+        self.code = code
+        self.hint = hint
+
+
+def _format_real(x: float) -> str:
+    return repr(float(x)) if not float(x).is_integer() or abs(x) >= 1e16 else str(int(x))
+
+
+def parse_reals(text: str) -> np.ndarray:
+    """Whitespace-separated reals (SOFA also tolerates commas and brackets in vectors)."""
+    tokens = text.replace(",", " ").replace("[", " ").replace("]", " ").split()
+    try:
+        values = np.array(tokens, dtype=np.float64)
+    except ValueError:
+        for position, token in enumerate(tokens, start=1):
+            try:
+                float(token)
+            except ValueError:
+                raise FieldValueError(
+                    f"value {position} ({token!r}) is not a number", hint="write plain decimal numbers"
+                ) from None
+        raise
+    if values.size and not np.isfinite(values).all():
+        bad = int(np.flatnonzero(~np.isfinite(values))[0])
+        raise FieldValueError(
+            f"value {bad + 1} ({tokens[bad]}) is not finite",
+            code="E206",
+            hint="nan and inf are not valid scene values",
+        )
+    return values
+
+
+def parse_ints(text: str, *, nonnegative: bool = True) -> np.ndarray:
+    tokens = text.replace(",", " ").replace("[", " ").replace("]", " ").split()
+    try:
+        values = np.array([int(t) for t in tokens], dtype=np.int64)
+    except (ValueError, OverflowError):
+        for position, token in enumerate(tokens, start=1):
+            try:
+                int(token)
+            except ValueError:
+                raise FieldValueError(
+                    f"value {position} ({token!r}) is not an integer", hint="indices are whole numbers"
+                ) from None
+        raise
+    if nonnegative and values.size and (values < 0).any():
+        bad = int(np.flatnonzero(values < 0)[0])
+        raise FieldValueError(f"index {values[bad]} (value {bad + 1}) is negative", code="E218")
+    return values
+
+
+@dataclass(frozen=True)
+class FieldType:
+    """Base: a single string value."""
+
+    kind = "string"
+
+    def parse(self, text: str) -> Any:
+        return text
+
+    def format(self, value: Any) -> str:
+        if isinstance(value, np.ndarray):
+            return " ".join(_format_real(x) if value.dtype.kind == "f" else str(x) for x in value.tolist())
+        if isinstance(value, bool):
+            return "1" if value else "0"
+        if isinstance(value, float):
+            return _format_real(value)
+        if isinstance(value, (list, tuple)):
+            return " ".join(self.format(v) for v in value)
+        return str(value)
+
+    def check_count(self, value: Any, datatype: DataType | None) -> str | None:
+        return None
+
+    def describe(self) -> str:
+        return self.kind
+
+
+@dataclass(frozen=True)
+class Text(FieldType):
+    kind = "string"
+
+
+@dataclass(frozen=True)
+class Real(FieldType):
+    kind = "real"
+
+    def parse(self, text: str) -> float:
+        values = parse_reals(text)
+        if values.size != 1:
+            raise FieldValueError(f"expected one number, got {values.size}", code="E205")
+        return float(values[0])
+
+
+@dataclass(frozen=True)
+class Int(FieldType):
+    kind = "int"
+    nonnegative: bool = False
+
+    def parse(self, text: str) -> int:
+        values = parse_ints(text, nonnegative=self.nonnegative)
+        if values.size != 1:
+            raise FieldValueError(f"expected one integer, got {values.size}", code="E205")
+        return int(values[0])
+
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+
+
+@dataclass(frozen=True)
+class Bool(FieldType):
+    kind = "bool"
+
+    def parse(self, text: str) -> bool:
+        word = text.strip().lower()
+        if word in _TRUE:
+            return True
+        if word in _FALSE:
+            return False
+        raise FieldValueError(f"{text.strip()!r} is not a boolean", hint="write 0/1 or false/true")
+
+
+@dataclass(frozen=True)
+class Enum(FieldType):
+    kind = "enum"
+    values: tuple[str, ...] = ()
+    case_sensitive: bool = False
+
+    def parse(self, text: str) -> str:
+        word = text.strip()
+        for value in self.values:
+            if word == value or (not self.case_sensitive and word.lower() == value.lower()):
+                return value
+        raise FieldValueError(
+            f"{word!r} is not one of {', '.join(self.values)}", hint=f"use one of: {', '.join(self.values)}"
+        )
+
+    def describe(self) -> str:
+        return "enum(" + "|".join(self.values) + ")"
+
+
+@dataclass(frozen=True)
+class Reals(FieldType):
+    """A vector of reals: fixed ``size``, or any count that is a multiple of ``multiple``."""
+
+    kind = "reals"
+    size: int | None = None
+    multiple: int = 1
+    allow_scalar: bool = False  # one value broadcast to the whole vector is accepted
+
+    def parse(self, text: str) -> np.ndarray:
+        values = parse_reals(text)
+        if self.size is not None and values.size != self.size and not (self.allow_scalar and values.size == 1):
+            raise FieldValueError(f"expected {self.size} numbers, got {values.size}", code="E205")
+        if self.multiple > 1 and values.size % self.multiple:
+            raise FieldValueError(
+                f"expected a multiple of {self.multiple} numbers, got {values.size}", code="E205"
+            )
+        return values
+
+    def describe(self) -> str:
+        return f"reals[{self.size}]" if self.size else "reals"
+
+
+@dataclass(frozen=True)
+class Ints(FieldType):
+    """A list of non-negative integers (indices, element connectivity)."""
+
+    kind = "indices"
+    multiple: int = 1
+
+    def parse(self, text: str) -> np.ndarray:
+        values = parse_ints(text)
+        if self.multiple > 1 and values.size % self.multiple:
+            raise FieldValueError(
+                f"expected a multiple of {self.multiple} indices, got {values.size}", code="E205"
+            )
+        return values
+
+
+@dataclass(frozen=True)
+class Coords(FieldType):
+    """Per-DOF vectors of the component's DataType: positions (Coord) or velocities/forces (Deriv)."""
+
+    kind = "coords"
+    deriv: bool = False
+    allow_single: bool = False  # one value replicated to every DOF is accepted
+
+    def parse(self, text: str) -> np.ndarray:
+        return parse_reals(text)
+
+    def unit(self, datatype: DataType) -> int:
+        return datatype.deriv_size if self.deriv else datatype.coord_size
+
+    def check_count(self, value: Any, datatype: DataType | None) -> str | None:
+        if datatype is None or not isinstance(value, np.ndarray):
+            return None
+        unit = self.unit(datatype)
+        if value.size % unit:
+            what = "Deriv" if self.deriv else "Coord"
+            return (
+                f"{value.size} numbers is not a multiple of {unit}, the size of one {datatype.name} {what}"
+            )
+        return None
+
+    def describe(self) -> str:
+        return "deriv[]" if self.deriv else "coord[]"
+
+
+@dataclass(frozen=True)
+class Springs(FieldType):
+    """Spring list ``i j ks kd L0`` per spring."""
+
+    kind = "springs"
+
+    def parse(self, text: str) -> np.ndarray:
+        values = parse_reals(text)
+        if values.size % 5:
+            raise FieldValueError(
+                f"{values.size} numbers is not a multiple of 5",
+                code="E205",
+                hint="each spring is 'i j stiffness damping restLength'",
+            )
+        springs = values.reshape(-1, 5)
+        ends = springs[:, :2]
+        if (ends != np.floor(ends)).any() or (ends < 0).any():
+            row = int(np.flatnonzero(((ends != np.floor(ends)) | (ends < 0)).any(axis=1))[0])
+            raise FieldValueError(
+                f"spring {row}: end indices {ends[row, 0]:g} {ends[row, 1]:g} are not non-negative integers"
+            )
+        return springs
+
+    def format(self, value: Any) -> str:
+        rows = np.asarray(value).reshape(-1, 5)
+        return "  ".join(
+            f"{int(r[0])} {int(r[1])} {_format_real(r[2])} {_format_real(r[3])} {_format_real(r[4])}" for r in rows
+        )
+
+
+@dataclass(frozen=True)
+class MassValue(FieldType):
+    """One DOF's mass: a real for Vec types, ``m volume I[9]`` (or just ``m``) for Rigid3d."""
+
+    kind = "mass"
+
+    def parse(self, text: str) -> np.ndarray:
+        return parse_reals(text)
+
+    def check_count(self, value: Any, datatype: DataType | None) -> str | None:
+        if datatype is None or not isinstance(value, np.ndarray):
+            return None
+        if value.size not in datatype.mass_sizes:
+            sizes = " or ".join(str(s) for s in datatype.mass_sizes)
+            return f"a {datatype.name} mass has {sizes} numbers, got {value.size}"
+        return None
+
+
+@dataclass(frozen=True)
+class Link(FieldType):
+    """A link to another object (``@../dofs``): ``target`` names the category expected."""
+
+    kind = "link"
+    target: str = "object"
+
+    def parse(self, text: str) -> str:
+        return text.strip()
+
+
+@dataclass(frozen=True)
+class FileName(FieldType):
+    kind = "file"
+
+    def parse(self, text: str) -> str:
+        return text.strip()
+
+
+@dataclass(frozen=True)
+class Words(FieldType):
+    """Whitespace-separated words (display flags, plugin names, tags)."""
+
+    kind = "words"
+
+    def parse(self, text: str) -> tuple[str, ...]:
+        return tuple(text.split())
+
+
+COLOR_NAMES: dict[str, tuple[float, float, float, float]] = {
+    "white": (1, 1, 1, 1),
+    "black": (0, 0, 0, 1),
+    "red": (1, 0, 0, 1),
+    "green": (0, 1, 0, 1),
+    "blue": (0, 0, 1, 1),
+    "cyan": (0, 1, 1, 1),
+    "magenta": (1, 0, 1, 1),
+    "yellow": (1, 1, 0, 1),
+    "gray": (0.5, 0.5, 0.5, 1),
+    "grey": (0.5, 0.5, 0.5, 1),
+    "orange": (1, 0.5, 0, 1),
+    "purple": (0.5, 0, 0.5, 1),
+    "pink": (1, 0.75, 0.8, 1),
+    "brown": (0.6, 0.4, 0.2, 1),
+    "darkgray": (0.25, 0.25, 0.25, 1),
+    "lightgray": (0.75, 0.75, 0.75, 1),
+}
+
+
+@dataclass(frozen=True)
+class Color(FieldType):
+    """A color: a name, ``#rrggbb[aa]``, or 3/4 numbers in [0, 1]."""
+
+    kind = "color"
+
+    def parse(self, text: str) -> tuple[float, float, float, float]:
+        word = text.strip()
+        if word.lower() in COLOR_NAMES:
+            return COLOR_NAMES[word.lower()]
+        if word.startswith("#") and len(word) in (7, 9):
+            try:
+                channels = [int(word[i : i + 2], 16) / 255 for i in range(1, len(word), 2)]
+            except ValueError:
+                raise FieldValueError(f"{word!r} is not a color") from None
+            return tuple([*channels, 1.0][:4])  # type: ignore[return-value]
+        values = parse_reals(word)
+        if values.size not in (3, 4):
+            raise FieldValueError(
+                f"{word!r} is not a color", hint="use a name (red), #rrggbb, or 'r g b a' in [0, 1]"
+            )
+        rgba = [*values.tolist(), 1.0][:4]
+        return tuple(rgba)  # type: ignore[return-value]
+
+
+def is_finite_number(x: float) -> bool:
+    return math.isfinite(x)
