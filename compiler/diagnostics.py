@@ -53,6 +53,8 @@ CODES: dict[str, CodeInfo] = {
     "E108": _e("path outside the allowed data roots"),
     "E109": _e("invalid include or Attribute element"),
     "W110": _w("unused include override"),
+    "W111": _w("element ignored (not allowed at this place)"),
+    "E112": _e("root element is not a Node"),
     # --- checking (check stage)
     "E200": _e("unknown component"),
     "E201": _e("component name no longer accepted by SOFA"),

@@ -129,7 +129,7 @@ class Node(_Element):
         self.objects: list[Component] = []
 
     # --- SofaPython3-style building API -------------------------------------------------------
-    def addChild(self, name: str, **attributes: Any) -> Node:  # noqa: N802 (SofaPython3 spelling)
+    def addChild(self, name: str, **attributes: Any) -> Node:
         loc = _caller_loc()
         child = Node(name, loc)
         for key, value in attributes.items():
@@ -137,7 +137,7 @@ class Node(_Element):
         self.add_node(child)
         return child
 
-    def addObject(self, type_name: str, **attributes: Any) -> Component:  # noqa: N802
+    def addObject(self, type_name: str, **attributes: Any) -> Component:
         loc = _caller_loc()
         component = Component(type_name, loc)
         for key, value in attributes.items():

@@ -165,6 +165,19 @@ class Enum(FieldType):
 
 
 @dataclass(frozen=True)
+class Options(Enum):
+    """SOFA's OptionsGroup: one of ``values``, written by name or by its 0-based index."""
+
+    kind = "options"
+
+    def parse(self, text: str) -> str:
+        word = text.strip()
+        if word.isdigit() and int(word) < len(self.values):
+            return self.values[int(word)]
+        return super().parse(text)
+
+
+@dataclass(frozen=True)
 class Reals(FieldType):
     """A vector of reals: fixed ``size``, or any count that is a multiple of ``multiple``."""
 
@@ -175,7 +188,8 @@ class Reals(FieldType):
 
     def parse(self, text: str) -> np.ndarray:
         values = parse_reals(text)
-        if self.size is not None and values.size != self.size and not (self.allow_scalar and values.size == 1):
+        broadcast = self.allow_scalar and values.size == 1
+        if self.size is not None and values.size != self.size and not broadcast:
             raise FieldValueError(f"expected {self.size} numbers, got {values.size}", code="E205")
         if self.multiple > 1 and values.size % self.multiple:
             raise FieldValueError(
@@ -204,6 +218,53 @@ class Ints(FieldType):
 
 
 @dataclass(frozen=True)
+class IntVector(FieldType):
+    """A fixed-size vector of integers (grid resolutions ``n``, index ranges ``localRange``)."""
+
+    kind = "ints"
+    size: int = 3
+    nonnegative: bool = False
+
+    def parse(self, text: str) -> np.ndarray:
+        values = parse_ints(text, nonnegative=self.nonnegative)
+        if values.size != self.size:
+            raise FieldValueError(f"expected {self.size} integers, got {values.size}", code="E205")
+        return values
+
+    def describe(self) -> str:
+        return f"ints[{self.size}]"
+
+
+@dataclass(frozen=True)
+class Bools(FieldType):
+    """A list of booleans written as 0/1 (or true/false) words: direction masks, per-spring flags."""
+
+    kind = "bools"
+    size: int | None = None
+
+    def parse(self, text: str) -> np.ndarray:
+        words = text.replace(",", " ").replace("[", " ").replace("]", " ").split()
+        values = []
+        for position, word in enumerate(words, start=1):
+            lowered = word.lower()
+            if lowered in _TRUE:
+                values.append(True)
+            elif lowered in _FALSE:
+                values.append(False)
+            else:
+                raise FieldValueError(f"value {position} ({word!r}) is not a boolean", hint="write 0 or 1")
+        if self.size is not None and len(values) != self.size:
+            raise FieldValueError(f"expected {self.size} flags, got {len(values)}", code="E205")
+        return np.array(values, dtype=bool)
+
+    def format(self, value: Any) -> str:
+        return " ".join("1" if bool(v) else "0" for v in np.asarray(value).ravel().tolist())
+
+    def describe(self) -> str:
+        return f"bools[{self.size}]" if self.size else "bools"
+
+
+@dataclass(frozen=True)
 class Coords(FieldType):
     """Per-DOF vectors of the component's DataType: positions (Coord) or velocities/forces (Deriv)."""
 
@@ -223,9 +284,7 @@ class Coords(FieldType):
         unit = self.unit(datatype)
         if value.size % unit:
             what = "Deriv" if self.deriv else "Coord"
-            return (
-                f"{value.size} numbers is not a multiple of {unit}, the size of one {datatype.name} {what}"
-            )
+            return f"{value.size} numbers is not a multiple of {unit}, the size of one {datatype.name} {what}"
         return None
 
     def describe(self) -> str:
@@ -257,9 +316,7 @@ class Springs(FieldType):
 
     def format(self, value: Any) -> str:
         rows = np.asarray(value).reshape(-1, 5)
-        return "  ".join(
-            f"{int(r[0])} {int(r[1])} {_format_real(r[2])} {_format_real(r[3])} {_format_real(r[4])}" for r in rows
-        )
+        return "  ".join(f"{int(r[0])} {int(r[1])} {' '.join(_format_real(x) for x in r[2:])}" for r in rows)
 
 
 @dataclass(frozen=True)
@@ -289,6 +346,16 @@ class Link(FieldType):
 
     def parse(self, text: str) -> str:
         return text.strip()
+
+
+@dataclass(frozen=True)
+class LinkList(Link):
+    """Several links in one attribute, separated by whitespace (``input="@../a @../b"``)."""
+
+    kind = "links"
+
+    def parse(self, text: str) -> tuple[str, ...]:  # type: ignore[override]
+        return tuple(text.split())
 
 
 @dataclass(frozen=True)

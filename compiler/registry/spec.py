@@ -88,6 +88,13 @@ class FieldSpec:
     required: bool = False
     # Legacy spelling, accepted with a warning (e.g. StaticSolver's newton_iterations).
     deprecated: bool = False
+    # For index lists: which state the indices point into, checked against its size:
+    # "state" (the component's own state), "input"/"output" (a mapping's), "object1"/"object2".
+    indexes: str | None = None
+    # An umbrella attribute: SOFA registers this name as an alias of several Data, so a value given
+    # here is written to each of these fields (e.g. MeshSpringForceField ``stiffness`` sets
+    # ``linesStiffness``, ``trianglesStiffness``, ...). Such a field has no value of its own.
+    sets: tuple[str, ...] = ()
 
 
 # Data every SOFA object has (sofa::core::objectmodel::Base / BaseObject).
@@ -127,6 +134,9 @@ class ComponentSpec:
     # For ODE solvers: does it need a linear solver (implicit schemes)?
     needs_linear_solver: bool = False
     deprecated: str = ""  # non-empty: SOFA marks the class deprecated; the text says what to use
+    # Name of the front-end evaluator (in evaluate.py) that computes this component's output Data
+    # at compile time: "mesh_loader", "sphere_loader", "grid", "box_roi", ... ("" = none).
+    compute: str = ""
 
     _by_name: dict[str, FieldSpec] = field(default_factory=dict, compare=False, repr=False)
 

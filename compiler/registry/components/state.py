@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..fields import Bool, Coords, Int, Real, Reals, Text, Words
+from ..fields import Bool, Coords, Int, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import ALL_TYPES, MUST_BE_POSITIVE
 
@@ -68,7 +68,9 @@ MECHANICAL_OBJECT = ComponentSpec(
         FieldSpec("rest_position", Coords(), doc="rest positions", aliases=("x0",)),
         FieldSpec("reset_position", Coords(), doc="positions restored on reset"),
         FieldSpec("reset_velocity", Coords(deriv=True), doc="velocities restored on reset"),
-        FieldSpec("restScale", Real(), 1.0, "scale of the rest shape (<1 pre-stresses)", valid=MUST_BE_POSITIVE),
+        FieldSpec(
+            "restScale", Real(), 1.0, "scale of the rest shape (<1 pre-stresses)", valid=MUST_BE_POSITIVE
+        ),
         FieldSpec("useTopology", Bool(), True, "take size/positions from the node's topology"),
         FieldSpec("size", Int(nonnegative=True), 0, "number of DOFs"),
         FieldSpec("reserve", Int(nonnegative=True), 0, "capacity to reserve"),

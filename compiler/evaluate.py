@@ -1,0 +1,129 @@
+"""Compile-time evaluation of data-producing components: loaders, grid generators, BoxROI.
+
+SOFA computes these at init; their outputs (positions, elements, selected indices) are pure
+functions of the scene, so sofac evaluates them once, in the front end. The checker uses them to
+check sizes and indices; later stages use them as the arrays handed to the compiled module.
+Each evaluator is named by a component spec's ``compute`` attribute.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from . import meshes
+
+
+class EvaluationError(Exception):
+    """An output could not be computed; ``attribute`` names the field at fault."""
+
+    def __init__(self, message: str, attribute: str | None = None, code: str = "E219") -> None:
+        super().__init__(message)
+        self.attribute = attribute
+        self.code = code
+
+
+class Context(Protocol):
+    """What an evaluator may ask of the checker about the component it evaluates."""
+
+    def value(self, name: str) -> Any: ...
+
+    def is_set(self, name: str) -> bool: ...
+
+    def file(self, name: str) -> Path | None: ...
+
+    def input_positions(self) -> np.ndarray | None: ...
+
+
+Outputs = dict[str, np.ndarray]
+
+
+def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
+    return meshes.apply_transform(
+        points,
+        translation=np.asarray(ctx.value("translation"), dtype=float),
+        rotation_deg=np.asarray(ctx.value("rotation"), dtype=float),
+        scale=np.asarray(ctx.value("scale3d"), dtype=float),
+    )
+
+
+def _file(ctx: Context) -> Path:
+    path = ctx.file("filename")
+    if path is None:
+        raise EvaluationError("no readable file", "filename")
+    return path
+
+
+def mesh_loader(ctx: Context) -> Outputs:
+    try:
+        mesh = meshes.read_mesh(_file(ctx))
+    except meshes.MeshError as error:
+        raise EvaluationError(str(error), "filename") from None
+    return {
+        "position": _transform(ctx, mesh.positions).ravel(),
+        "edges": mesh.edges.ravel(),
+        "triangles": mesh.triangles.ravel(),
+        "quads": mesh.quads.ravel(),
+        "tetrahedra": mesh.tetrahedra.ravel(),
+        "hexahedra": mesh.hexahedra.ravel(),
+    }
+
+
+def sphere_loader(ctx: Context) -> Outputs:
+    try:
+        spheres = meshes.read_spheres(_file(ctx))
+    except meshes.MeshError as error:
+        raise EvaluationError(str(error), "filename") from None
+    return {"position": spheres.centers.ravel(), "listRadius": spheres.radii}
+
+
+def grid(ctx: Context) -> Outputs:
+    """RegularGridTopology / GridTopology points: index = x + nx (y + ny z)."""
+    legacy_counts = ("nx", "ny", "nz")
+    if any(ctx.is_set(name) for name in legacy_counts):
+        counts = np.array([int(ctx.value(name) or 1) for name in legacy_counts], dtype=np.int64)
+    else:
+        counts = np.asarray(ctx.value("n"), dtype=np.int64)
+    legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+    if all(ctx.is_set(name) for name in legacy_bounds):
+        bounds = np.array([float(ctx.value(name)) for name in legacy_bounds])
+        low, high = bounds[:3], bounds[3:]
+    else:
+        low = np.asarray(ctx.value("min"), dtype=float)
+        high = np.asarray(ctx.value("max"), dtype=float)
+    if (counts < 1).any():
+        raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
+    axes = [
+        np.linspace(low[a], high[a], int(counts[a])) if counts[a] > 1 else np.array([low[a]])
+        for a in range(3)
+    ]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+    points = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    return {"position": points.ravel()}
+
+
+def box_roi(ctx: Context) -> Outputs:
+    """Indices of the input points inside any of the boxes (xmin ymin zmin xmax ymax zmax)."""
+    boxes = np.asarray(ctx.value("box"), dtype=float).reshape(-1, 6)
+    points = ctx.input_positions()
+    if points is None:
+        raise EvaluationError("BoxROI has no input positions", "position", code="E212")
+    dim = points.shape[1]
+    inside = np.zeros(len(points), dtype=bool)
+    for box in boxes:
+        low, high = box[:3], box[3:]
+        padded = np.zeros((len(points), 3))
+        padded[:, : min(dim, 3)] = points[:, :3]
+        inside |= ((padded >= low) & (padded <= high)).all(axis=1)
+    return {"indices": np.flatnonzero(inside).astype(np.int64)}
+
+
+EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
+    "mesh_loader": mesh_loader,
+    "sphere_loader": sphere_loader,
+    "grid": grid,
+    "box_roi": box_roi,
+}

@@ -1,0 +1,123 @@
+"""Engines: Data-to-Data functions evaluated lazily by SOFA (statically by sofac when possible)."""
+
+from __future__ import annotations
+
+from ..fields import Bool, Coords, Int, Ints, Real, Reals
+from ..spec import Category, ComponentSpec, Effect, FieldSpec
+
+_DATA = frozenset({Effect.DATA})
+
+_ROI_ELEMENTS = (
+    ("edges", "edge", "edgeIndices", "edgesInROI", 2),
+    ("triangles", "triangle", "triangleIndices", "trianglesInROI", 3),
+    ("quads", "quad", "quadIndices", "quadsInROI", 4),
+    ("tetrahedra", "tetrahedron", "tetrahedronIndices", "tetrahedraInROI", 4),
+    ("hexahedra", "hexahedron", "hexahedronIndices", "hexahedraInROI", 8),
+)
+
+
+def _element_fields() -> tuple[FieldSpec, ...]:
+    fields: list[FieldSpec] = []
+    for plural, _single, indices, in_roi, size in _ROI_ELEMENTS:
+        quad = plural == "quads"
+        compute = f"compute{plural[0].upper()}{plural[1:]}"
+        fields += [
+            FieldSpec(
+                plural,
+                Ints(size),
+                doc=f"input {plural} (default: the node's topology)",
+                aliases=("quad",) if quad else (),
+            ),
+            FieldSpec(
+                compute,
+                Bool(),
+                True,
+                f"select the {plural} inside the ROI",
+                aliases=("computeQuad",) if quad else (),
+            ),
+            FieldSpec(indices, Ints(), doc=f"output: indices of the {plural} inside the ROI"),
+            FieldSpec(
+                in_roi,
+                Ints(size),
+                doc=f"output: {plural} inside the ROI",
+                aliases=("quadInROI",) if quad else (),
+            ),
+        ]
+    return tuple(fields)
+
+
+BOX_ROI = ComponentSpec(
+    name="BoxROI",
+    category=Category.ENGINE,
+    module="Sofa.Component.Engine.Select",
+    doc="Selects the points (and elements) inside axis-aligned or oriented boxes; with static inputs "
+    "a pure function of the rest positions.",
+    templates=("Vec3d", "Vec2d", "Vec1d", "Rigid3d", "Vec6d"),
+    default_template="Vec3d",
+    supported=True,
+    effects=_DATA,
+    compute="box_roi",
+    fields=(
+        FieldSpec("box", Reals(multiple=6), doc="boxes, 6 numbers each: xmin ymin zmin xmax ymax zmax"),
+        FieldSpec("orientedBox", Reals(multiple=10), doc="oriented boxes: three points p0 p1 p2 and a depth"),
+        FieldSpec("position", Coords(), doc="input points (default: the node's rest positions)"),
+        FieldSpec("strict", Bool(), True, "an element is inside only if all its nodes are"),
+        FieldSpec("indices", Ints(), doc="output: indices of the points inside"),
+        FieldSpec("pointsInROI", Coords(), doc="output: points inside"),
+        FieldSpec("nbIndices", Int(), doc="output: number of points inside"),
+        *_element_fields(),
+        FieldSpec("indicesOut", Ints(), doc="output: indices of the points outside"),
+        FieldSpec("pointsOutROI", Coords(), doc="output: points outside"),
+        FieldSpec("edgeOutIndices", Ints(), doc="output"),
+        FieldSpec("edgesOutROI", Ints(2), doc="output"),
+        FieldSpec("triangleOutIndices", Ints(), doc="output"),
+        FieldSpec("trianglesOutROI", Ints(3), doc="output"),
+        FieldSpec("tetrahedronOutIndices", Ints(), doc="output"),
+        FieldSpec("tetrahedraOutROI", Ints(4), doc="output"),
+        FieldSpec("drawROI", Bool(), False, "draw the boxes", aliases=("drawBoxes",)),
+        FieldSpec("drawPoints", Bool(), False),
+        FieldSpec("drawEdges", Bool(), False),
+        FieldSpec("drawTriangles", Bool(), False),
+        FieldSpec("drawQuads", Bool(), False),
+        FieldSpec("drawTetrahedra", Bool(), False),
+        FieldSpec("drawHexahedra", Bool(), False),
+        FieldSpec("drawSize", Real(), 1.0, "display size"),
+        FieldSpec("doUpdate", Bool(), True, "update the selection at each step"),
+    ),
+)
+
+TRANSFORM_ENGINE = ComponentSpec(
+    name="TransformEngine",
+    category=Category.ENGINE,
+    module="Sofa.Component.Engine.Transform",
+    doc="Applies scale, rotation and translation (or their inverse) to a list of points.",
+    templates=("Vec3d", "Vec1d", "Vec2d", "Rigid2d", "Rigid3d"),
+    default_template="Vec3d",
+    unsupported_reason="TransformEngine is not evaluated by sofac yet",
+    effects=_DATA,
+    fields=(
+        FieldSpec("input_position", Coords(), doc="input points"),
+        FieldSpec("output_position", Coords(), doc="output: transformed points"),
+        FieldSpec("translation", Reals(3), (0.0, 0.0, 0.0)),
+        FieldSpec("rotation", Reals(3), (0.0, 0.0, 0.0), "Euler angles (degrees)"),
+        FieldSpec("quaternion", Reals(4), (0.0, 0.0, 0.0, 1.0), "rotation quaternion (x y z w)"),
+        FieldSpec("scale", Reals(3), (1.0, 1.0, 1.0)),
+        FieldSpec("inverse", Bool(), False, "apply the inverse transform"),
+    ),
+)
+
+MERGE_VECTORS = ComponentSpec(
+    name="MergeVectors",
+    category=Category.ENGINE,
+    module="Sofa.Component.Engine.Generate",
+    doc="Concatenates nbInputs vectors input1, input2, ... into `output`.",
+    unsupported_reason="MergeVectors is not evaluated by sofac yet",
+    effects=_DATA,
+    fields=(
+        FieldSpec("nbInputs", Int(nonnegative=True), 2, "number of inputs"),
+        *(FieldSpec(f"input{i}", Reals(), doc=f"input vector {i}") for i in range(1, 9)),
+        FieldSpec("output", Reals(), doc="output: concatenation"),
+    ),
+)
+
+COMPONENTS = (BOX_ROI, TRANSFORM_ENGINE, MERGE_VECTORS)

@@ -1,0 +1,454 @@
+"""Linear solvers, preconditioners, linear systems and orderings (the A x = b of implicit steps)."""
+
+from __future__ import annotations
+
+from ..fields import Bool, Int, IntVector, Link, LinkList, Real
+from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from .common import (
+    CRS_BLOCKS,
+    CRS_MAT3,
+    CRS_SCALAR,
+    GRAPH_SCATTERED,
+    LINEAR_SOLVER_FIELDS,
+    MUST_BE_AT_LEAST_ONE,
+    MUST_BE_NONNEGATIVE,
+    MUST_BE_POSITIVE,
+)
+
+_ITERATIVE = "Sofa.Component.LinearSolver.Iterative"
+_DIRECT = "Sofa.Component.LinearSolver.Direct"
+_PRECONDITIONER = "Sofa.Component.LinearSolver.Preconditioner"
+_SYSTEM = "Sofa.Component.LinearSystem"
+_SOLVE = frozenset({Effect.LINEAR_SOLVE})
+
+FULL_MATRIX = "FullMatrix"
+SPARSE_MATRIX = "SparseMatrix"
+DIAGONAL_MATRIX = "DiagonalMatrix"
+BLOCK_DIAGONAL_MATRIX = "BlockDiagonalMatrixMat3x3d"
+ROTATION_MATRIX = "RotationMatrixd"
+BTD_MATRIX = "BTDMatrix6d"
+
+# Iterative solvers: matrix-free (default) or on an assembled matrix.
+_ITERATIVE_TEMPLATES = (GRAPH_SCATTERED, FULL_MATRIX, SPARSE_MATRIX, CRS_SCALAR, *CRS_BLOCKS)
+_SPARSE_DIRECT_TEMPLATES = (CRS_SCALAR, CRS_MAT3)
+
+_ITERATIONS = FieldSpec("iterations", Int(), 25, "maximum iterations", valid=MUST_BE_AT_LEAST_ONE)
+_TOLERANCE = FieldSpec(
+    "tolerance", Real(), 1e-5, "stop when |r|^2 / |b|^2 is below this", valid=MUST_BE_NONNEGATIVE
+)
+_ORDERING = FieldSpec(
+    "orderingMethod", Link("ordering"), doc="fill-reducing ordering (default: found or created)"
+)
+_VERBOSE_LOG = FieldSpec("verbose", Bool(), doc="alias of printLog", sets=("printLog",))
+
+CG_LINEAR_SOLVER = ComponentSpec(
+    name="CGLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_ITERATIVE,
+    doc="Unpreconditioned conjugate gradient; matrix-free with GraphScattered (default).",
+    templates=_ITERATIVE_TEMPLATES,
+    default_template=GRAPH_SCATTERED,
+    former_names=("CGSolver", "ConjugateGradient"),
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        _ITERATIONS,
+        _TOLERANCE,
+        FieldSpec(
+            "threshold",
+            Real(),
+            1e-5,
+            "stop when the denominator p^T A p falls below this",
+            valid=MUST_BE_NONNEGATIVE,
+        ),
+        FieldSpec("warmStart", Bool(), False, "start from the previous solution instead of 0"),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+PCG_LINEAR_SOLVER = ComponentSpec(
+    name="PCGLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_ITERATIVE,
+    doc="Preconditioned conjugate gradient (matrix-free), preconditioned by another linear solver.",
+    templates=(GRAPH_SCATTERED,),
+    default_template=GRAPH_SCATTERED,
+    renamed_from=("ShewchukPCGLinearSolver",),
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        _ITERATIONS,
+        _TOLERANCE,
+        FieldSpec("use_precond", Bool(), True, "apply the preconditioner"),
+        FieldSpec("preconditioner", Link("linear_solver"), doc="linear solver used as preconditioner"),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+MIN_RES_LINEAR_SOLVER = ComponentSpec(
+    name="MinResLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_ITERATIVE,
+    doc="MINRES iterations (symmetric, possibly indefinite systems).",
+    templates=_ITERATIVE_TEMPLATES,
+    default_template=GRAPH_SCATTERED,
+    former_names=("MINRESSolver", "MinResSolver"),
+    supported=True,
+    effects=_SOLVE,
+    fields=(_ITERATIONS, _TOLERANCE, *LINEAR_SOLVER_FIELDS),
+)
+
+SPARSE_LDL_SOLVER = ComponentSpec(
+    name="SparseLDLSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="Direct sparse L D L^T factorisation of the assembled matrix, every step.",
+    templates=_SPARSE_DIRECT_TEMPLATES,
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("precomputeSymbolicDecomposition", Bool(), True, "reuse the symbolic factorisation"),
+        FieldSpec("L_nnz", Int(), 0, "output: non-zeros of L"),
+        _ORDERING,
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+SPARSE_CHOLESKY_SOLVER = ComponentSpec(
+    name="SparseCholeskySolver",
+    category=Category.LINEAR_SOLVER,
+    module="CSparseSolvers",
+    doc="Direct sparse Cholesky (L L^T) factorisation. Moved out of SOFA's main repository into the "
+    'CSparseSolvers plugin in v23.12 (recent SOFA needs <RequiredPlugin name="CSparseSolvers"/>).',
+    templates=(CRS_SCALAR,),
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=(_ORDERING, *LINEAR_SOLVER_FIELDS),
+)
+
+
+def _eigen(name: str, what: str) -> ComponentSpec:
+    return ComponentSpec(
+        name=name,
+        category=Category.LINEAR_SOLVER,
+        module=_DIRECT,
+        doc=f"Direct sparse {what} factorisation (Eigen) of the assembled matrix.",
+        templates=_SPARSE_DIRECT_TEMPLATES,
+        default_template=CRS_SCALAR,
+        supported=True,
+        effects=_SOLVE,
+        fields=(_ORDERING, *LINEAR_SOLVER_FIELDS),
+    )
+
+
+EIGEN_SIMPLICIAL_LDLT = _eigen("EigenSimplicialLDLT", "L D L^T")
+EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T")
+EIGEN_SPARSE_LU = _eigen("EigenSparseLU", "LU")
+EIGEN_SPARSE_QR = _eigen("EigenSparseQR", "QR")
+
+BTD_LINEAR_SOLVER = ComponentSpec(
+    name="BTDLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="Thomas algorithm on a block-tridiagonal matrix (6x6 blocks, beams).",
+    templates=(BTD_MATRIX,),
+    default_template=BTD_MATRIX,
+    unsupported_reason="BTDLinearSolver (block-tridiagonal) is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("verbose", Bool(), False, "dump the system every iteration"),
+        FieldSpec("showProblem", Bool(), False),
+        FieldSpec("subpartSolve", Bool(), False, "solve only a subpart of the system"),
+        FieldSpec("verification", Bool(), False),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+SVD_LINEAR_SOLVER = ComponentSpec(
+    name="SVDLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="Dense SVD of the system matrix (small singular values clamped).",
+    templates=(FULL_MATRIX, CRS_SCALAR, CRS_MAT3),
+    default_template=FULL_MATRIX,
+    former_names=("SVDLinear", "SVD"),
+    unsupported_reason="SVDLinearSolver (dense SVD) is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("verbose", Bool(), False),
+        FieldSpec(
+            "minSingularValue",
+            Real(),
+            1e-6,
+            "singular values below this are set to 0",
+            valid=MUST_BE_NONNEGATIVE,
+        ),
+        FieldSpec("conditionNumber", Real(), 0.0, "output: condition number"),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+PRECOMPUTED_LINEAR_SOLVER = ComponentSpec(
+    name="PrecomputedLinearSolver",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="Solves with an inverse matrix precomputed at init (optionally cached in a file).",
+    templates=(CRS_SCALAR,),
+    default_template=CRS_SCALAR,
+    unsupported_reason="PrecomputedLinearSolver is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("jmjt_twostep", Bool(), True),
+        FieldSpec("use_file", Bool(), True, "cache the inverse in a file"),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+JACOBI_PRECONDITIONER = ComponentSpec(
+    name="JacobiPreconditioner",
+    category=Category.PRECONDITIONER,
+    module=_PRECONDITIONER,
+    doc="Diagonal (Jacobi) preconditioner.",
+    templates=(DIAGONAL_MATRIX,),
+    default_template=DIAGONAL_MATRIX,
+    former_names=("JacobiLinearSolver", "JacobiSolver"),
+    supported=True,
+    effects=_SOLVE,
+    fields=LINEAR_SOLVER_FIELDS,
+)
+
+BLOCK_JACOBI_PRECONDITIONER = ComponentSpec(
+    name="BlockJacobiPreconditioner",
+    category=Category.PRECONDITIONER,
+    module=_PRECONDITIONER,
+    doc="Block-diagonal (3x3 blocks) Jacobi preconditioner.",
+    templates=(BLOCK_DIAGONAL_MATRIX,),
+    default_template=BLOCK_DIAGONAL_MATRIX,
+    supported=True,
+    effects=_SOLVE,
+    fields=(_VERBOSE_LOG, *LINEAR_SOLVER_FIELDS),
+)
+
+SSOR_PRECONDITIONER = ComponentSpec(
+    name="SSORPreconditioner",
+    category=Category.PRECONDITIONER,
+    module=_PRECONDITIONER,
+    doc="Symmetric successive over-relaxation preconditioner.",
+    templates=_SPARSE_DIRECT_TEMPLATES,
+    default_template=CRS_SCALAR,
+    former_names=("SSORLinearSolver", "SSORSolver"),
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("omega", Real(), 1.0, "relaxation factor (0 < omega < 2)", valid=MUST_BE_POSITIVE),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+WARP_PRECONDITIONER = ComponentSpec(
+    name="WarpPreconditioner",
+    category=Category.PRECONDITIONER,
+    module=_PRECONDITIONER,
+    doc="Wraps another (precomputed) solver with per-node rotations.",
+    templates=(ROTATION_MATRIX,),
+    default_template=ROTATION_MATRIX,
+    unsupported_reason="WarpPreconditioner is not implemented yet",
+    effects=_SOLVE,
+    fields=(FieldSpec("linearSolver", Link("linear_solver"), doc="wrapped solver"), *LINEAR_SOLVER_FIELDS),
+)
+
+PRECOMPUTED_WARP_PRECONDITIONER = ComponentSpec(
+    name="PrecomputedWarpPreconditioner",
+    category=Category.PRECONDITIONER,
+    module=_PRECONDITIONER,
+    doc="Precomputed inverse, rotated per node each step.",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    unsupported_reason="PrecomputedWarpPreconditioner is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("jmjt_twostep", Bool(), True),
+        FieldSpec("use_file", Bool(), True, "cache the inverse in a file"),
+        FieldSpec("share_matrix", Bool(), True),
+        FieldSpec("use_rotations", Bool(), True),
+        FieldSpec("draw_rotations_scale", Real(), 0.0),
+        FieldSpec("linearSolver", Link("linear_solver"), doc="solver used for the precomputation"),
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+# BaseMatrixLinearSystem + MatrixLinearSystem.
+_SYSTEM_BASE = (
+    FieldSpec("matrixSize", IntVector(2, nonnegative=True), doc="output: size of the global matrix"),
+    FieldSpec("enableAssembly", Bool(), True, "assemble the system matrix"),
+)
+_MATRIX_SYSTEM_FIELDS = (
+    FieldSpec("assembleStiffness", Bool(), True, "add stiffness to the global matrix"),
+    FieldSpec("assembleMass", Bool(), True, "add mass to the global matrix"),
+    FieldSpec("assembleDamping", Bool(), True, "add damping to the global matrix"),
+    FieldSpec("assembleGeometricStiffness", Bool(), True, "add mappings' geometric stiffness"),
+    FieldSpec(
+        "applyProjectiveConstraints", Bool(), True, "project the matrix with the projective constraints"
+    ),
+    FieldSpec("applyMappedComponents", Bool(), True, "include components under mappings"),
+    FieldSpec("checkIndices", Bool(), False, "check indices before adding entries (slower)"),
+    FieldSpec("parallelAssemblyIndependentMatrices", Bool(), False),
+    *_SYSTEM_BASE,
+)
+
+MATRIX_LINEAR_SYSTEM = ComponentSpec(
+    name="MatrixLinearSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_SYSTEM,
+    doc="Assembles the global system matrix for an assembled linear solver.",
+    templates=(
+        FULL_MATRIX,
+        SPARSE_MATRIX,
+        CRS_SCALAR,
+        *CRS_BLOCKS,
+        DIAGONAL_MATRIX,
+        BLOCK_DIAGONAL_MATRIX,
+        ROTATION_MATRIX,
+    ),
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=_MATRIX_SYSTEM_FIELDS,
+)
+
+CONSTANT_SPARSITY_PATTERN_SYSTEM = ComponentSpec(
+    name="ConstantSparsityPatternSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_SYSTEM,
+    doc="MatrixLinearSystem that reuses the sparsity pattern of the first assembly.",
+    templates=(CRS_SCALAR,),
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=_MATRIX_SYSTEM_FIELDS,
+)
+
+COMPOSITE_LINEAR_SYSTEM = ComponentSpec(
+    name="CompositeLinearSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_SYSTEM,
+    doc="Delegates to several linear systems, one of which is solved.",
+    templates=(
+        FULL_MATRIX,
+        SPARSE_MATRIX,
+        CRS_SCALAR,
+        *CRS_BLOCKS,
+        DIAGONAL_MATRIX,
+        BLOCK_DIAGONAL_MATRIX,
+        ROTATION_MATRIX,
+        BTD_MATRIX,
+    ),
+    default_template=FULL_MATRIX,
+    unsupported_reason="CompositeLinearSystem is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("linearSystems", LinkList("linear_system"), doc="the delegated systems"),
+        FieldSpec("solverLinearSystem", Link("linear_system"), doc="the system the solver uses"),
+        *_SYSTEM_BASE,
+    ),
+)
+
+ROTATION_MATRIX_SYSTEM = ComponentSpec(
+    name="RotationMatrixSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_PRECONDITIONER,
+    doc="Per-node rotation matrix warping another linear system (warped preconditioners).",
+    templates=(ROTATION_MATRIX,),
+    default_template=ROTATION_MATRIX,
+    unsupported_reason="RotationMatrixSystem (warped preconditioning) is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("assemblingRate", Int(), 1, "update period in steps", valid=MUST_BE_AT_LEAST_ONE),
+        FieldSpec("mainSystem", Link("linear_system")),
+        FieldSpec("rotationFinder", Link("object")),
+        *_SYSTEM_BASE,
+    ),
+)
+
+PRECONDITIONED_MATRIX_FREE_SYSTEM = ComponentSpec(
+    name="PreconditionedMatrixFreeSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_ITERATIVE,
+    doc="Matrix-free system whose preconditioner matrix is assembled every assemblingRate steps.",
+    templates=(GRAPH_SCATTERED,),
+    default_template=GRAPH_SCATTERED,
+    unsupported_reason="PreconditionedMatrixFreeSystem is not implemented yet",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec(
+            "assemblingRate",
+            Int(),
+            1,
+            "preconditioner update period in steps",
+            aliases=("update_step",),
+            valid=MUST_BE_AT_LEAST_ONE,
+        ),
+        FieldSpec("preconditionerSystem", Link("linear_system")),
+        *_SYSTEM_BASE,
+    ),
+)
+
+PRECOMPUTED_MATRIX_SYSTEM = ComponentSpec(
+    name="PrecomputedMatrixSystem",
+    category=Category.LINEAR_SYSTEM,
+    module=_PRECONDITIONER,
+    doc="System matrix assembled once at init.",
+    templates=(CRS_SCALAR,),
+    default_template=CRS_SCALAR,
+    unsupported_reason="PrecomputedMatrixSystem is not implemented yet",
+    effects=_SOLVE,
+    fields=_SYSTEM_BASE,
+)
+
+NATURAL_ORDERING_METHOD = ComponentSpec(
+    name="NaturalOrderingMethod",
+    category=Category.ORDERING,
+    module="Sofa.Component.LinearSolver.Ordering",
+    doc="Identity permutation for sparse direct solvers (no fill-reducing reordering).",
+    supported=True,
+    effects=_SOLVE,
+)
+
+GLOBAL_SYSTEM_MATRIX_IMAGE = ComponentSpec(
+    name="GlobalSystemMatrixImage",
+    category=Category.UTILITY,
+    module="SofaMatrix",
+    doc="SofaMatrix plugin: shows the sparsity of the global matrix in the GUI.",
+    unsupported_reason="GlobalSystemMatrixImage (SofaMatrix plugin GUI view) is not supported",
+    fields=(FieldSpec("linearSystem", Link("linear_system")),),
+)
+
+COMPONENTS = (
+    CG_LINEAR_SOLVER,
+    PCG_LINEAR_SOLVER,
+    MIN_RES_LINEAR_SOLVER,
+    SPARSE_LDL_SOLVER,
+    SPARSE_CHOLESKY_SOLVER,
+    EIGEN_SIMPLICIAL_LDLT,
+    EIGEN_SIMPLICIAL_LLT,
+    EIGEN_SPARSE_LU,
+    EIGEN_SPARSE_QR,
+    BTD_LINEAR_SOLVER,
+    SVD_LINEAR_SOLVER,
+    PRECOMPUTED_LINEAR_SOLVER,
+    JACOBI_PRECONDITIONER,
+    BLOCK_JACOBI_PRECONDITIONER,
+    SSOR_PRECONDITIONER,
+    WARP_PRECONDITIONER,
+    PRECOMPUTED_WARP_PRECONDITIONER,
+    MATRIX_LINEAR_SYSTEM,
+    CONSTANT_SPARSITY_PATTERN_SYSTEM,
+    COMPOSITE_LINEAR_SYSTEM,
+    ROTATION_MATRIX_SYSTEM,
+    PRECONDITIONED_MATRIX_FREE_SYSTEM,
+    PRECOMPUTED_MATRIX_SYSTEM,
+    NATURAL_ORDERING_METHOD,
+    GLOBAL_SYSTEM_MATRIX_IMAGE,
+)

@@ -1,0 +1,82 @@
+"""Scene utilities: the animation loop, plugin loading and settings."""
+
+from __future__ import annotations
+
+from ..fields import Bool, FileName, Text, Words
+from ..spec import Category, ComponentSpec, FieldSpec
+from .common import ANIMATION_LOOP_FIELDS, TASK_SCHEDULER_FIELDS
+
+DEFAULT_ANIMATION_LOOP = ComponentSpec(
+    name="DefaultAnimationLoop",
+    category=Category.ANIMATION_LOOP,
+    module="Sofa.Simulation.Core",
+    doc="The standard step: collision, then each ODE solver integrates its subtree, then mappings "
+    "(added automatically when missing).",
+    supported=True,
+    fields=(
+        FieldSpec("parallelODESolving", Bool(), False, "integrate independent subtrees in parallel"),
+        *ANIMATION_LOOP_FIELDS,
+    ),
+)
+
+REQUIRED_PLUGIN = ComponentSpec(
+    name="RequiredPlugin",
+    category=Category.UTILITY,
+    module="Sofa.Simulation.Core",
+    doc="Loads SOFA modules/plugins (name= or pluginName=); no physics.",
+    supported=True,
+    fields=(
+        FieldSpec("pluginName", Words(), doc="plugins to load (default: the component's name)"),
+        FieldSpec("suffixMap", Words(), doc="standard-to-custom library suffix pairs"),
+        FieldSpec("stopAfterFirstNameFound", Bool(), False),
+        FieldSpec("stopAfterFirstSuffixFound", Bool(), True),
+        FieldSpec("requireOne", Bool(), False, "error if no plugin could be loaded"),
+        FieldSpec("requireAll", Bool(), True, "error if any plugin could not be loaded"),
+        FieldSpec("loadedPlugins", Words(), doc="output: plugins loaded"),
+    ),
+)
+
+TASK_SCHEDULER_SETTINGS = ComponentSpec(
+    name="TaskSchedulerSettings",
+    category=Category.UTILITY,
+    module="Sofa.Simulation.Core",
+    doc="Configures the global task scheduler (threads).",
+    unsupported_reason="multithreading settings (TaskSchedulerSettings) are not supported",
+    fields=TASK_SCHEDULER_FIELDS,
+)
+
+CONSTRAINT_ATTACH_BUTTON_SETTING = ComponentSpec(
+    name="ConstraintAttachButtonSetting",
+    category=Category.UTILITY,
+    module="Sofa.GUI.Component",
+    doc="GUI setting: mouse picking attaches objects with Lagrangian constraints.",
+    unsupported_reason="GUI mouse interaction settings are not supported",
+    fields=(FieldSpec("button", Text(), doc="mouse button"),),
+)
+
+API_VERSION = ComponentSpec(
+    name="APIVersion",
+    category=Category.UTILITY,
+    module="Sofa.Component.SceneUtility",
+    doc="Declares the SOFA API level the scene was written for (e.g. 17.06).",
+    unsupported_reason="APIVersion (legacy compatibility switches) is not supported",
+    fields=(FieldSpec("level", Text(), doc="API level of the scene"),),
+)
+
+ADD_DATA_REPOSITORY = ComponentSpec(
+    name="AddDataRepository",
+    category=Category.UTILITY,
+    module="Sofa.Component.SceneUtility",
+    doc="Adds a directory to the data file search path.",
+    unsupported_reason="AddDataRepository is not supported: pass the folder with --data-path",
+    fields=(FieldSpec("path", FileName(), doc="directory to add"),),
+)
+
+COMPONENTS = (
+    DEFAULT_ANIMATION_LOOP,
+    REQUIRED_PLUGIN,
+    TASK_SCHEDULER_SETTINGS,
+    CONSTRAINT_ATTACH_BUTTON_SETTING,
+    API_VERSION,
+    ADD_DATA_REPOSITORY,
+)

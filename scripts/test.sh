@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The whole test suite (what .ci/run calls): install what is missing, lint, run the tests.
+# Arguments are passed to pytest.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+bash scripts/setup.sh
+# shellcheck source=scripts/python.sh
+source scripts/python.sh
+
+status=0
+echo "== ruff check ."
+"$PYTHON" -m ruff check . || status=1
+
+echo "== pytest"
+pytest_status=0
+"$PYTHON" -m pytest -q "$@" || pytest_status=$?
+if ((pytest_status == 5)); then
+    echo "test.sh: pytest ran no test; that counts as a failure" >&2
+    status=1
+elif ((pytest_status != 0)); then
+    status=1
+fi
+exit "$status"

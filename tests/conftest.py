@@ -1,0 +1,33 @@
+"""Shared pytest fixtures: where the team's shared material (the SOFA scene corpus) lives."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+
+def find_shared() -> Path | None:
+    """``../shared`` next to the repository, else ``$SOFAC_SHARED``; None if neither has the corpus."""
+    candidates = [Path(__file__).resolve().parents[2] / "shared"]
+    if os.environ.get("SOFAC_SHARED"):
+        candidates.append(Path(os.environ["SOFAC_SHARED"]))
+    for candidate in candidates:
+        if (candidate / "corpus" / "sofa").is_dir():
+            return candidate
+    return None
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    shared = find_shared()
+    if shared is None:
+        pytest.skip("shared/ (SOFA scene corpus) not available; set SOFAC_SHARED")
+    return shared
+
+
+@pytest.fixture(scope="session")
+def corpus_dir(shared_dir: Path) -> Path:
+    """``shared/corpus/sofa``: real SOFA scenes with every file they reference."""
+    return shared_dir / "corpus" / "sofa"
