@@ -17,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from . import evaluate, links, registry
+from . import evaluate, links, meshes, registry
 from .diagnostics import Diagnostics, SceneError, SourceLoc
 from .model import Component, Node, Scene
 from .registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
+from .registry.components.common import MATRIX_TEMPLATE_ALIASES
 from .registry.datatypes import DATATYPES, canonical_datatype, split_template
-from .registry.fields import Coords, FieldValueError, Link, Springs
+from .registry.fields import Coords, FieldValueError, Link, LinkList, Springs
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -37,6 +38,7 @@ class CheckedComponent:
     template: str | None = None  # canonical template ("Vec3d", "Rigid3d,Vec3d", matrix type...)
     fields: dict[str, Any] = field(default_factory=dict)  # typed values of explicit attributes
     links: dict[str, Component | Node] = field(default_factory=dict)  # resolved object links
+    link_lists: dict[str, list[Component]] = field(default_factory=dict)  # resolved multi-links
     # Attributes whose value is a link to another component's Data: field -> (path, location).
     data_links: dict[str, tuple[links.LinkPath, SourceLoc]] = field(default_factory=dict)
     src: Component | None = None
@@ -44,6 +46,7 @@ class CheckedComponent:
     state: Component | None = None
     outputs: dict[str, np.ndarray] | None = None  # evaluated outputs (loaders, grids, BoxROI)
     size: int | None = None  # number of DOFs, for states whose size is known statically
+    cache: dict[str, Any] = field(default_factory=dict)  # derived values (a state's positions)
 
     @property
     def category(self) -> Category | None:
@@ -100,6 +103,7 @@ class _Checker:
         self.scene = scene
         self.diags = diagnostics
         self.checked = CheckedScene(scene)
+        self._referenced: set[int] | None = None  # ids of components some link names
 
     # ------------------------------------------------------------------------------------------
     def run(self) -> CheckedScene:
@@ -310,13 +314,33 @@ class _Checker:
             text = attribute.value if attribute else field_spec.default
             if text is None:
                 continue
+            loc = attribute.loc if attribute else component.loc
+            if isinstance(field_spec.type, LinkList):
+                targets = []
+                for item in str(text).split():
+                    path = links.parse_link(item if item.startswith("@") else "@" + item)
+                    found = links.resolve(path, component) if path is not None else None
+                    if isinstance(found, Node):
+                        role = field_spec.type.target
+                        found = self._singleton(found, role) if role in ("state", "topology") else None
+                    if found is None:
+                        self.diags.add(
+                            "E213",
+                            loc,
+                            f"{checked.spec.name} {component.label!r}: {field_spec.name}: {item!r} "
+                            "points to nothing",
+                            "paths are relative to the component's node: '@../name' is in the parent node",
+                        )
+                    else:
+                        targets.append(found)
+                checked.link_lists[field_spec.name] = targets
+                continue
             text = str(text).strip()
             if not text.startswith("@"):
                 text = "@" + text  # old scenes write object1="name"
             path = links.parse_link(text)
             assert path is not None
             target = links.resolve(path, component)
-            loc = attribute.loc if attribute else component.loc
             if target is None:
                 if attribute is not None:
                     self.diags.add(
@@ -417,6 +441,8 @@ class _Checker:
                 continue
             if not (checked.category.acts_on_state or checked.category is Category.COLLISION_MODEL):  # type: ignore[union-attr]
                 continue
+            if checked.links.get("object1") is not None or checked.links.get("object2") is not None:
+                continue  # acts between the two states it links (e.g. BilateralLagrangianConstraint)
             explicit = checked.links.get("mstate")
             state = explicit if isinstance(explicit, Component) else None
             if state is None:
@@ -439,6 +465,9 @@ class _Checker:
             return None
         parts = []
         for part in split_template(text):
+            if part in MATRIX_TEMPLATE_ALIASES:
+                parts.append(MATRIX_TEMPLATE_ALIASES[part])
+                continue
             canonical = canonical_datatype(part)
             if canonical is None:
                 parts.append(part)
@@ -507,13 +536,18 @@ class _Checker:
         return state
 
     # --- values ------------------------------------------------------------------------------
-    def value(self, checked: CheckedComponent, name: str, depth: int = 0) -> Any:
+    def value(self, checked: CheckedComponent, name: str, depth: int = 0, *, raw: bool = False) -> Any:
         """The value a field of a component will have: explicit, linked, from src, computed, default."""
         assert checked.spec is not None
         if depth > 32:
             return None
         if name in checked.fields:
             return checked.fields[name]
+        if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
+            name = "position"  # both start as a copy of the transformed positions
+        if checked.category is Category.STATE and name == "position" and not raw:
+            points = self.positions(checked.component)
+            return None if points is None else points.ravel()
         if name in checked.data_links:
             path, _ = checked.data_links[name]
             target = links.resolve(path, checked.component)
@@ -540,6 +574,8 @@ class _Checker:
         checked.outputs = {}  # guards against cycles while evaluating
         try:
             checked.outputs = evaluator(_EvalContext(self, checked))
+        except evaluate.UnknownInput:
+            pass  # computed by a generator sofac cannot evaluate (yet): nothing to check against
         except evaluate.EvaluationError as error:
             if error.code != "E219":  # missing files are reported by _check_files
                 self.diags.add(
@@ -552,10 +588,49 @@ class _Checker:
         return checked.outputs
 
     def positions(self, state: Component) -> np.ndarray | None:
-        """Rest positions of a state, reshaped (n, coord_size), when they can be known statically."""
+        """Initial positions of a state, reshaped (n, coord_size), when they can be known statically.
+
+        As SOFA's MechanicalObject::init: the written (or linked) positions, else its topology's,
+        then scaled, rotated and translated (legacy ``dx``/``rx``/``scale`` attributes included).
+        """
         checked = self.checked.of(state)
+        if "position" in checked.cache:
+            return checked.cache["position"]
+        checked.cache["position"] = None  # guards against link cycles
+        points = self._untransformed_positions(checked)
+        if points is not None and points.shape[1] in (1, 2, 3, 7):
+            points = self._transform_state(checked, points)
+        checked.cache["position"] = points
+        return points
+
+    def _transform_state(self, checked: CheckedComponent, points: np.ndarray) -> np.ndarray:
+        fields = checked.fields
+
+        def triple(name: str, legacy: tuple[str, str, str], default: float) -> np.ndarray:
+            value = np.asarray(fields.get(name, (default,) * 3), dtype=float)
+            for axis, key in enumerate(legacy):
+                if key in fields:
+                    value[axis] = float(fields[key])
+            return value
+
+        scale = triple("scale3d", ("sx", "sy", "sz"), 1.0) * float(fields.get("scale", 1.0))
+        rotation = triple("rotation", ("rx", "ry", "rz"), 0.0)
+        translation = triple("translation", ("dx", "dy", "dz"), 0.0)
+        if (scale == 1).all() and not rotation.any() and not translation.any():
+            return points
+        if points.shape[1] == 7:  # Rigid3d: move the frames' origins, turn their orientations
+            moved = points.copy()
+            moved[:, :3] = meshes.apply_transform(points[:, :3], translation, rotation, scale)
+            if rotation.any():
+                turn = meshes.euler_to_quaternion(rotation)
+                moved[:, 3:] = [meshes.quaternion_multiply(turn, q) for q in points[:, 3:]]
+            return moved
+        return meshes.apply_transform(points, translation, rotation, scale)
+
+    def _untransformed_positions(self, checked: CheckedComponent) -> np.ndarray | None:
+        state = checked.component
         datatype = checked.datatype or DATATYPES["Vec3d"]
-        value = self.value(checked, "position")
+        value = self.value(checked, "position", raw=True)
         if value is None or np.size(value) == 0:
             topology, _ = links.pick_in_node(
                 state.node, lambda c: self._is(c, Category.TOPOLOGY), climb=False
@@ -563,7 +638,13 @@ class _Checker:
             if topology is not None:
                 value = self.value(self.checked.of(topology), "position")
         if value is None or np.size(value) == 0:
-            return None
+            count = int(checked.fields.get("size", 0))
+            if not count:
+                return None
+            rest = np.zeros((count, datatype.coord_size))
+            if datatype.coord_size == 7:
+                rest[:, 6] = 1.0  # identity orientations
+            return rest
         value = np.asarray(value, dtype=float)
         if value.size % datatype.coord_size:
             return None
@@ -750,7 +831,7 @@ class _Checker:
         if dynamic:
             names = ", ".join(f"{d.spec.name} {d.component.label!r}" for d in dynamic[:3])  # type: ignore[union-attr]
             self.diags.add(
-                "E220",
+                "W220",
                 state.loc,
                 f"MechanicalObject {state.label!r} has {names} acting on it but no ODE solver above it: "
                 "it would never move",
@@ -819,11 +900,32 @@ class _Checker:
             field_spec = spec.field(name)
             if field_spec is None or not isinstance(field_spec.type, FileName) or not value:
                 continue
-            self.file_of(checked, name, report=True)
+            if field_spec.type.output:
+                continue
+            self.file_of(checked, name, report=True, unused=self._unused_loader(checked))
         if spec.compute:
             self._outputs(checked)
 
-    def file_of(self, checked: CheckedComponent, name: str, *, report: bool = False) -> Path | None:
+    def _unused_loader(self, checked: CheckedComponent) -> bool:
+        """A loader whose outputs no component reads (SOFA loads such scenes, logging an error)."""
+        if checked.category is not Category.LOADER:
+            return False
+        if self._referenced is None:
+            self._referenced = set()
+            for other in self.checked:
+                self._referenced.update(id(t) for t in other.links.values())
+                self._referenced.update(id(t) for ts in other.link_lists.values() for t in ts)
+                if other.src is not None:
+                    self._referenced.add(id(other.src))
+                for path, _ in other.data_links.values():
+                    target = links.resolve(path, other.component)
+                    if target is not None:
+                        self._referenced.add(id(target))
+        return id(checked.component) not in self._referenced
+
+    def file_of(
+        self, checked: CheckedComponent, name: str, *, report: bool = False, unused: bool = False
+    ) -> Path | None:
         from . import parse
 
         value = checked.fields.get(name)
@@ -836,10 +938,11 @@ class _Checker:
             attribute = self._attribute_name(checked, name)
             roots = ", ".join(str(r) for r in self.scene.data_roots) or str(base)
             self.diags.add(
-                "E219",
+                "W229" if unused else "E219",
                 component.attribute_loc(attribute),
                 f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
-                f"file {value!r} not found (searched {base} and the data roots: {roots})",
+                f"file {value!r} not found (searched {base} and the data roots: {roots})"
+                + ("; nothing reads this loader's outputs" if unused else ""),
                 "fix the path, or add the folder holding it with --data-path",
             )
         return path
@@ -891,7 +994,12 @@ class _EvalContext:
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)
-        return self.checker.positions(state) if state is not None else None
+        if state is None:
+            return None
+        points = self.checker.positions(state)
+        if points is None:
+            raise evaluate.UnknownInput(f"the positions of {state.label!r} are only known at run time")
+        return points
 
 
 def check_scene(scene: Scene, diagnostics: Diagnostics, *, allow_unsupported: bool = False) -> CheckedScene:

@@ -26,6 +26,10 @@ class EvaluationError(Exception):
         self.code = code
 
 
+class UnknownInput(Exception):
+    """An input exists but its value cannot be known before run time; outputs stay unknown."""
+
+
 class Context(Protocol):
     """What an evaluator may ask of the checker about the component it evaluates."""
 

@@ -64,6 +64,7 @@ __all__ = [
     "count_points",
     "euler_to_matrix",
     "euler_to_quaternion",
+    "quaternion_multiply",
     "read_mesh",
     "read_rigid",
     "read_spheres",
@@ -1758,6 +1759,20 @@ def euler_to_quaternion(rotation_deg: Sequence[float] | np.ndarray) -> np.ndarra
             c1 * s2 * c3 + s1 * c2 * s3,
             c1 * c2 * s3 - s1 * s2 * c3,
             c1 * c2 * c3 + s1 * s2 * s3,
+        ]
+    )
+
+
+def quaternion_multiply(a: Sequence[float] | np.ndarray, b: Sequence[float] | np.ndarray) -> np.ndarray:
+    """Hamilton product ``a ⊗ b`` of quaternions stored ``(x, y, z, w)``, as SOFA stores them."""
+    ax, ay, az, aw = (float(c) for c in a)
+    bx, by, bz, bw = (float(c) for c in b)
+    return np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
         ]
     )
 

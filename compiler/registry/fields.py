@@ -360,7 +360,10 @@ class LinkList(Link):
 
 @dataclass(frozen=True)
 class FileName(FieldType):
+    """A data file path; ``output`` files are written by SOFA, so they need not exist."""
+
     kind = "file"
+    output: bool = False
 
     def parse(self, text: str) -> str:
         return text.strip()

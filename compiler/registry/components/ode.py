@@ -264,7 +264,7 @@ VARIATIONAL_SYMPLECTIC_SOLVER = ComponentSpec(
         *_rayleigh("r_K"),
         FieldSpec("saveEnergyInFile", Bool(), False, "write the energies to a CSV file each step"),
         FieldSpec("explicitIntegration", Bool(), False, "explicit variant"),
-        FieldSpec("file", FileName(), doc="output CSV file of the energies"),
+        FieldSpec("file", FileName(output=True), doc="output CSV file of the energies"),
         FieldSpec("computeHamiltonian", Bool(), True),
         FieldSpec("hamiltonianEnergy", Real(), 0.0, "output: Hamiltonian"),
         FieldSpec("useIncrementalPotentialEnergy", Bool(), True),

@@ -57,7 +57,12 @@ _VISUAL_MODEL_IMPL_FIELDS = (
     ),
     *(FieldSpec(a, Real(), doc="legacy translation component") for a in ("dx", "dy", "dz")),
     *(FieldSpec(a, Real(), doc="legacy rotation component (degrees)") for a in ("rx", "ry", "rz")),
-    FieldSpec("scale", Real(), doc="legacy uniform scale", valid=MUST_BE_POSITIVE),
+    FieldSpec(
+        "scale",
+        Reals(3, allow_scalar=True),
+        doc="legacy scale (one number, or one per axis)",
+        valid=MUST_BE_POSITIVE,
+    ),
     *(FieldSpec(a, Real(), doc="legacy per-axis scale", valid=MUST_BE_POSITIVE) for a in ("sx", "sy", "sz")),
     FieldSpec("topology", Link("topology"), doc="topology to draw (default: none, own arrays)"),
     *VISUAL_MODEL_FIELDS,
