@@ -64,6 +64,16 @@ class CheckedScene:
     scene: Scene
     components: dict[int, CheckedComponent] = field(default_factory=dict)  # by id(component)
     check_seconds: float = 0.0
+    # The checker, kept for the later stages' value look-ups (value(), positions()).
+    resolver: Any = field(default=None, repr=False, compare=False)
+
+    def value(self, component: Component, name: str) -> Any:
+        """The value a component's field has: written, linked, from src, computed, or default."""
+        return self.resolver.value(self.of(component), name)
+
+    def positions(self, state: Component) -> np.ndarray | None:
+        """A MechanicalObject's initial positions (n, coord_size), as SOFA's init computes them."""
+        return self.resolver.positions(state)
 
     def of(self, component: Component) -> CheckedComponent:
         return self.components[id(component)]
@@ -103,6 +113,7 @@ class _Checker:
         self.scene = scene
         self.diags = diagnostics
         self.checked = CheckedScene(scene)
+        self.checked.resolver = self
         self._referenced: set[int] | None = None  # ids of components some link names
 
     # ------------------------------------------------------------------------------------------

@@ -84,7 +84,9 @@ class FieldType:
 
     def format(self, value: Any) -> str:
         if isinstance(value, np.ndarray):
-            return " ".join(_format_real(x) if value.dtype.kind == "f" else str(x) for x in value.tolist())
+            # ravel: a 0-d array (a scalar such as dt) or a 2-D one formats as a flat list of numbers.
+            numbers = value.ravel().tolist()
+            return " ".join(_format_real(x) if value.dtype.kind == "f" else str(x) for x in numbers)
         if isinstance(value, bool):
             return "1" if value else "0"
         if isinstance(value, float):

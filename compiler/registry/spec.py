@@ -137,6 +137,9 @@ class ComponentSpec:
     # Name of the front-end evaluator (in evaluate.py) that computes this component's output Data
     # at compile time: "mesh_loader", "sphere_loader", "grid", "box_roi", ... ("" = none).
     compute: str = ""
+    # Name of the lowering (in plan.py) that turns it into kernel calls of the compiled step;
+    # "" = the compiler cannot compile it yet (components with no part in the step need none).
+    kernel: str = ""
 
     _by_name: dict[str, FieldSpec] = field(default_factory=dict, compare=False, repr=False)
 

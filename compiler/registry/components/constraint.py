@@ -26,6 +26,7 @@ _FIXED_FIELDS = (
 
 FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="FixedProjectiveConstraint",
+    kernel="fixed",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Keeps the selected DOFs at their initial positions (whole DOF: every translation/rotation).",
@@ -39,6 +40,7 @@ FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 PARTIAL_FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PartialFixedProjectiveConstraint",
+    kernel="partial_fixed",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Fixes the selected DOFs along some coordinates only (one 0/1 flag per Deriv coordinate).",

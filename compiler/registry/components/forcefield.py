@@ -79,6 +79,7 @@ _UNIFORM_STIFFNESS = (
 
 SPRING_FORCE_FIELD = ComponentSpec(
     name="SpringForceField",
+    kernel="springs",
     category=Category.INTERACTION_FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Linear springs between DOFs of object1 and object2 (possibly the same state), with damping "
@@ -112,6 +113,7 @@ _mesh_cubes = _per_element("cubes", 0.0, 0.0, "hexahedron")
 
 MESH_SPRING_FORCE_FIELD = ComponentSpec(
     name="MeshSpringForceField",
+    kernel="mesh_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="One spring per vertex pair of the node's topology elements; per-spring ks = stiffness / L0 and "
@@ -205,6 +207,7 @@ REGULAR_GRID_SPRING_FORCE_FIELD = ComponentSpec(
 
 REST_SHAPE_SPRINGS_FORCE_FIELD = ComponentSpec(
     name="RestShapeSpringsForceField",
+    kernel="rest_shape_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs pulling DOFs back to their rest positions (or to another state's positions); for "
@@ -313,6 +316,7 @@ FAST_TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
 
 CONSTANT_FORCE_FIELD = ComponentSpec(
     name="ConstantForceField",
+    kernel="constant_force",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="A constant force on selected DOFs: `forces` (one, or per index) or `totalForce` spread evenly.",

@@ -38,6 +38,7 @@ BARYCENTRIC_MAPPING = ComponentSpec(
 
 SUBSET_MAPPING = ComponentSpec(
     name="SubsetMapping",
+    kernel="subset_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child DOF i is parent DOF indices[i] (or matched by position within `radius`).",
@@ -67,6 +68,7 @@ SUBSET_MAPPING = ComponentSpec(
 
 IDENTITY_MAPPING = ComponentSpec(
     name="IdentityMapping",
+    kernel="identity_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child = parent, DOF by DOF (Rigid to Vec keeps the positions).",
@@ -89,6 +91,7 @@ IDENTITY_MAPPING = ComponentSpec(
 
 RIGID_MAPPING = ComponentSpec(
     name="RigidMapping",
+    kernel="rigid_mapping",
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="Points (or frames) attached to rigid parent frames: x = c + R(q) p with p in local coordinates.",

@@ -20,6 +20,7 @@ _DENSITY_TEMPLATES = ("Vec3d", "Vec2d", "Vec2d,Vec3d", "Vec1d", "Vec1d,Vec2d", "
 
 UNIFORM_MASS = ComponentSpec(
     name="UniformMass",
+    kernel="uniform_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="The same mass for every DOF: vertexMass each, or totalMass spread evenly. One of the two is "
@@ -48,6 +49,7 @@ UNIFORM_MASS = ComponentSpec(
 
 DIAGONAL_MASS = ComponentSpec(
     name="DiagonalMass",
+    kernel="diagonal_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="Lumped mass from the node's topology: each element gives density x measure / nodes to its "

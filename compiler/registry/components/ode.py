@@ -61,6 +61,7 @@ EULER_IMPLICIT_SOLVER = ComponentSpec(
 
 EULER_EXPLICIT_SOLVER = ComponentSpec(
     name="EulerExplicitSolver",
+    kernel="euler_explicit",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Explicit Euler, symplectic (v first, then x with the new v) by default. Needs a linear solver "
@@ -77,6 +78,7 @@ EULER_EXPLICIT_SOLVER = ComponentSpec(
 
 RUNGE_KUTTA2_SOLVER = ComponentSpec(
     name="RungeKutta2Solver",
+    kernel="runge_kutta2",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Explicit midpoint method on (x, v).",
@@ -87,6 +89,7 @@ RUNGE_KUTTA2_SOLVER = ComponentSpec(
 
 RUNGE_KUTTA4_SOLVER = ComponentSpec(
     name="RungeKutta4Solver",
+    kernel="runge_kutta4",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Classical explicit 4-stage Runge-Kutta on (x, v).",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..fields import Bool, FileName, Text, Words
+from ..fields import Bool, FileName, Ints, Real, Reals, Text, Words
 from ..spec import Category, ComponentSpec, FieldSpec
 from .common import ANIMATION_LOOP_FIELDS, TASK_SCHEDULER_FIELDS
 
@@ -72,7 +72,30 @@ ADD_DATA_REPOSITORY = ComponentSpec(
     fields=(FieldSpec("path", FileName(), doc="directory to add"),),
 )
 
+WRITE_STATE = ComponentSpec(
+    name="WriteState",
+    category=Category.UTILITY,
+    module="Sofa.Component.Playback",
+    doc="Writes its node's MechanicalObject to a text file at the beginning of steps (T=, X=, V=); "
+    "sofac records the same with `sofac run --export-states`.",
+    supported=True,
+    fields=(
+        FieldSpec("filename", FileName(output=True), doc="output file (.gz compresses)"),
+        FieldSpec("writeX", Bool(), True, "write positions"),
+        FieldSpec("writeX0", Bool(), False, "write rest positions"),
+        FieldSpec("writeV", Bool(), False, "write velocities"),
+        FieldSpec("writeF", Bool(), False, "write forces"),
+        FieldSpec("time", Reals(), (0.0,), "times at which to write"),
+        FieldSpec("period", Real(), 0.0, "period between writes (0: every step)"),
+        FieldSpec("DOFsX", Ints(), doc="only these DOFs' positions"),
+        FieldSpec("DOFsV", Ints(), doc="only these DOFs' velocities"),
+        FieldSpec("stopAt", Real(), 0.0, "stop writing after this time (0: never)"),
+        FieldSpec("keperiod", Real(), 0.0, "kinetic-energy threshold period"),
+    ),
+)
+
 COMPONENTS = (
+    WRITE_STATE,
     DEFAULT_ANIMATION_LOOP,
     REQUIRED_PLUGIN,
     TASK_SCHEDULER_SETTINGS,

@@ -1,0 +1,885 @@
+"""Plan stage: what SOFA's visitors would do each step, worked out once from a checked scene.
+
+The plan is a small IR: the arrays the compiled instance owns (state vectors, parameters, bulk
+data such as spring lists), the mechanical states in SOFA's traversal order, and for each ODE
+solver its *group* (section 5.1 of the SOFA introduction): the independent states it integrates,
+the mapped states below them in parent → child order, and the kernel calls of one step
+(propagate down the mappings, accumulate forces, map forces up with Jᵀ, a = M⁻¹f, project).
+
+Each component is lowered by the function its spec names (``ComponentSpec.kernel``); a component
+that takes part in the step but has no lowering is reported as unsupported (E222), with its line.
+Nothing from the scene text reaches C++: identifiers are made here from counters, and every
+number and array is a buffer handed to the instance when it is created.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .check import CheckedComponent, CheckedScene
+from .diagnostics import Diagnostics, SceneError
+from .model import Component, Node
+from .registry import Category
+from .registry.datatypes import DATATYPES, DataType
+
+# C++ DataTypes names in runtime/sofac/types.h, by canonical template.
+CPP_TYPES = {name: name for name in ("Vec1d", "Vec2d", "Vec3d", "Vec6d", "Rigid3d", "Rigid2d")}
+
+# Categories whose components run inside the step and therefore need a lowering.
+_STEP_CATEGORIES = frozenset(
+    {
+        Category.STATE,
+        Category.MASS,
+        Category.FORCEFIELD,
+        Category.INTERACTION_FORCEFIELD,
+        Category.PROJECTIVE_CONSTRAINT,
+        Category.LAGRANGIAN_CONSTRAINT,
+        Category.CONSTRAINT_SOLVER,
+        Category.CONSTRAINT_CORRECTION,
+        Category.ODE_SOLVER,
+        Category.MAPPING,
+        Category.MULTI_MAPPING,
+    }
+)
+
+
+@dataclass
+class Buffer:
+    """An array the compiled instance owns, initialised from ``initial`` at creation."""
+
+    ident: str  # C++ member name
+    key: str  # name seen from Python: "<component path>.<field>"
+    kind: str  # "f64" or "i64"
+    initial: np.ndarray
+    columns: int = 1  # row width of its numpy view
+    role: str = "data"  # "state" (restored by reset), "param" (tunable), "data", "scratch"
+
+
+@dataclass
+class Op:
+    """C++ statements of one component's part of the step, with where it comes from."""
+
+    origin: str  # "TypeName 'path' (file:line)"
+    code: list[str]
+
+
+@dataclass
+class StatePlan:
+    component: Component
+    ident: str
+    datatype: DataType
+    size: int
+    mapped: bool
+    x: Buffer
+    v: Buffer
+    f: Buffer
+    rest: Buffer
+    acc: Buffer | None = None  # a = M⁻¹ f, independent states only
+    mass: Any = None  # (Buffer, stride) of the mass acting on it, if any
+    # Runge-Kutta stage vectors (x0, v0 and, for RK4, the sums dx, dv), only where a scheme needs them.
+    stages: dict[str, Buffer] = field(default_factory=dict)
+
+    @property
+    def cpp_type(self) -> str:
+        return "sofac::" + CPP_TYPES[self.datatype.name]
+
+    @property
+    def path(self) -> str:
+        return self.component.path
+
+
+@dataclass
+class Group:
+    """One ODE solver and what it integrates."""
+
+    solver: Component
+    ident: str
+    scheme: str  # "euler", "rk2", "rk4"
+    symplectic: bool
+    states: list[StatePlan] = field(default_factory=list)  # independent
+    mapped: list[StatePlan] = field(default_factory=list)  # parent → child order
+    propagate: list[Op] = field(default_factory=list)  # x and v down the mappings
+    forces: list[Op] = field(default_factory=list)  # force fields and gravity
+    map_forces_up: list[Op] = field(default_factory=list)  # Jᵀ, child → parent
+    accelerations: list[Op] = field(default_factory=list)  # a = M⁻¹ f
+    projections: list[Op] = field(default_factory=list)  # on a
+    energy: list[Op] = field(default_factory=list)
+    scratch: list[Buffer] = field(default_factory=list)  # RK stages: x0, v0, dx, dv
+
+
+@dataclass
+class Plan:
+    scene_file: str
+    dt: Buffer
+    gravity: Buffer
+    buffers: list[Buffer]
+    states: list[StatePlan]  # all MechanicalObjects, SOFA traversal order
+    groups: list[Group]
+    ignored: list[tuple[Component, str]]  # components kept out of the step, and why
+
+    def buffer(self, key: str) -> Buffer:
+        for buffer in self.buffers:
+            if buffer.key == key:
+                return buffer
+        raise KeyError(key)
+
+
+def origin_of(component: Component) -> str:
+    """A one-line, comment-safe description of a component: type, path, file and line."""
+    text = f"{component.type_name} {component.path!r} ({component.loc.file}:{component.loc.line})"
+    return re.sub(r"[^\x20-\x7e]", "?", text).replace("*/", "*?")
+
+
+class _Planner:
+    def __init__(self, checked: CheckedScene, diagnostics: Diagnostics) -> None:
+        self.checked = checked
+        self.diags = diagnostics
+        self.buffers: list[Buffer] = []
+        self.states: dict[int, StatePlan] = {}
+        self.ignored: list[tuple[Component, str]] = []
+
+    # --- helpers -------------------------------------------------------------------------------
+    def value(self, component: Component, name: str) -> Any:
+        return self.checked.value(component, name)
+
+    def buffer(
+        self,
+        owner: Component | str,
+        name: str,
+        data: Any,
+        kind: str = "f64",
+        columns: int = 1,
+        role: str = "data",
+    ) -> Buffer:
+        array = np.ascontiguousarray(
+            np.asarray(data, dtype=np.float64 if kind == "f64" else np.int64).ravel()
+        )
+        key = f"{owner if isinstance(owner, str) else owner.path}.{name}"
+        ident = f"b{len(self.buffers)}_{re.sub(r'[^A-Za-z0-9]', '_', name)[:24]}"
+        buffer = Buffer(ident, key, kind, array, columns, role)
+        self.buffers.append(buffer)
+        return buffer
+
+    def unsupported(self, checked: CheckedComponent, why: str) -> None:
+        component = checked.component
+        self.diags.add(
+            "E222",
+            component.loc,
+            f"unsupported component {component.type_name} at line {component.loc.line}: {why}",
+            "sofac check --allow-unsupported validates such scenes without compiling them",
+        )
+
+    # --- run -----------------------------------------------------------------------------------
+    def run(self) -> Plan:
+        root = self.checked.scene.root
+        dt = float(self.value_node(root, "dt"))
+        gravity = np.asarray(self.value_node(root, "gravity"), dtype=float)
+        for checked in self.checked:
+            if checked.category is Category.CONTEXT and checked.spec and checked.spec.name == "Gravity":
+                if checked.component.node is root:
+                    gravity = np.asarray(self.value(checked.component, "gravity"), dtype=float)
+                else:
+                    self.unsupported(checked, "a Gravity component below the root is not compiled yet")
+        self.dt = self.buffer("/", "dt", [dt], role="param")
+        self.gravity = self.buffer("/", "gravity", gravity, columns=3, role="param")
+        self._screen()
+        for checked in self.checked.states():
+            self._plan_state(checked)
+        groups = self._groups()
+        if self.diags.has_errors():
+            raise SceneError(self.diags.sorted())
+        return Plan(
+            scene_file=str(self.checked.scene.file),
+            dt=self.dt,
+            gravity=self.gravity,
+            buffers=self.buffers,
+            states=[self.states[id(c.component)] for c in self.checked.states()],
+            groups=groups,
+            ignored=self.ignored,
+        )
+
+    def value_node(self, node: Node, name: str) -> Any:
+        from .registry import node_spec
+
+        spec = node_spec()
+        attribute = node.attributes.get(name)
+        field_spec = spec.field(name)
+        assert field_spec is not None
+        return field_spec.type.parse(attribute.value) if attribute else field_spec.default
+
+    def _screen(self) -> None:
+        """Every component that takes part in the step must have a lowering."""
+        has_pipeline = any(c.category is Category.COLLISION_PIPELINE for c in self.checked)
+        for checked in self.checked:
+            spec = checked.spec
+            if spec is None:
+                continue
+            if checked.category is Category.COLLISION_MODEL and has_pipeline:
+                self.unsupported(checked, "collision detection and response are not compiled yet")
+            elif checked.category in _STEP_CATEGORIES and not spec.kernel:
+                if self._is_visual_mapping(checked):
+                    self.ignored.append((checked.component, "visual mapping: computed only for rendering"))
+                    continue
+                self.unsupported(checked, f"sofac cannot compile {spec.name} yet")
+            elif checked.category not in _STEP_CATEGORIES:
+                self.ignored.append((checked.component, f"{checked.category.value}: no part in the step"))
+
+    def _is_visual_mapping(self, checked: CheckedComponent) -> bool:
+        output = checked.links.get("output")
+        return (
+            checked.category is Category.MAPPING
+            and isinstance(output, Component)
+            and self.checked.of(output).category is Category.VISUAL
+        )
+
+    # --- states --------------------------------------------------------------------------------
+    def _plan_state(self, checked: CheckedComponent) -> None:
+        component = checked.component
+        datatype = checked.datatype or DATATYPES["Vec3d"]
+        if datatype.name not in CPP_TYPES:
+            self.unsupported(checked, f"template {datatype.name} is not compiled yet")
+            return
+        positions = self.checked.positions(component)
+        if positions is None:
+            positions = np.zeros((0, datatype.coord_size))
+        n = len(positions)
+        velocity = self.value(component, "velocity")
+        v = np.zeros((n, datatype.deriv_size))
+        if velocity is not None and np.size(velocity):
+            given = np.asarray(velocity, dtype=float).reshape(-1, datatype.deriv_size)
+            v[: min(n, len(given))] = given[: min(n, len(given))]
+            if len(given) == 1 and n > 1:
+                v[:] = given[0]
+        rest_written = component.get("rest_position")
+        rest = positions
+        if rest_written is not None:
+            rest_value = self.value(component, "rest_position")
+            if rest_value is not None and np.size(rest_value) == positions.size:
+                rest = np.asarray(rest_value, dtype=float).reshape(positions.shape)
+        ident = f"s{len(self.states)}"
+        mapped = self.checked.mapping_of(component) is not None
+        state = StatePlan(
+            component=component,
+            ident=ident,
+            datatype=datatype,
+            size=n,
+            mapped=mapped,
+            x=self.buffer(component, "position", positions, columns=datatype.coord_size, role="state"),
+            v=self.buffer(component, "velocity", v, columns=datatype.deriv_size, role="state"),
+            f=self.buffer(component, "force", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"),
+            rest=self.buffer(component, "rest_position", rest, columns=datatype.coord_size),
+        )
+        if not mapped:
+            state.acc = self.buffer(
+                component, "acceleration", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"
+            )
+        self.states[id(component)] = state
+
+    def state_of(self, checked: CheckedComponent) -> StatePlan | None:
+        return self.states.get(id(checked.state)) if checked.state is not None else None
+
+    # --- groups --------------------------------------------------------------------------------
+    def _groups(self) -> list[Group]:
+        groups: dict[int, Group] = {}
+        owner: dict[int, Group] = {}  # state id -> group
+        for state in self.states.values():
+            if state.mapped:
+                continue
+            solver = self.checked.solver_of(state.component.node)
+            if solver is None:
+                continue  # nothing integrates it: it stays where it is, as in SOFA
+            group = groups.get(id(solver.component))
+            if group is None:
+                group = self._new_group(solver, len(groups))
+                if group is None:
+                    continue
+                groups[id(solver.component)] = group
+            group.states.append(state)
+            owner[id(state.component)] = group
+        self._attach_mapped(owner)
+        for group in groups.values():
+            names = {"euler": (), "rk2": ("x0", "v0"), "rk4": ("x0", "v0", "dx", "dv")}[group.scheme]
+            for state in group.states:
+                for name in names:
+                    like = state.x if name == "x0" else state.v
+                    columns = like.columns
+                    state.stages[name] = self.buffer(
+                        state.component, name, np.zeros_like(like.initial), columns=columns, role="scratch"
+                    )
+        for checked in self.checked:
+            lowering = LOWERINGS.get(checked.spec.kernel) if checked.spec else None
+            if lowering is None or checked.category in (Category.STATE, Category.ODE_SOLVER):
+                continue
+            lowering(self, checked, owner)
+        return list(groups.values())
+
+    def _new_group(self, solver: CheckedComponent, index: int) -> Group | None:
+        kernel = solver.spec.kernel if solver.spec else ""
+        scheme = {"euler_explicit": "euler", "runge_kutta2": "rk2", "runge_kutta4": "rk4"}.get(kernel)
+        if scheme is None:
+            return None  # reported by _screen
+        symplectic = bool(self.value(solver.component, "symplectic")) if scheme == "euler" else False
+        return Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
+
+    def _attach_mapped(self, owner: dict[int, Group]) -> None:
+        """Mapped states join their input's group, parents before children."""
+        pending = [c for c in self.checked.states() if self.states[id(c.component)].mapped]
+        progress = True
+        while pending and progress:
+            progress = False
+            for checked in list(pending):
+                mapping = self.checked.mapping_of(checked.component)
+                assert mapping is not None
+                source = mapping.links.get("input")
+                group = owner.get(id(source)) if isinstance(source, Component) else None
+                if (
+                    group is None
+                    and isinstance(source, Component)
+                    and any(p.component is source for p in pending)
+                ):
+                    continue  # its parent is not placed yet
+                pending.remove(checked)
+                progress = True
+                if group is not None:
+                    group.mapped.append(self.states[id(checked.component)])
+                    owner[id(checked.component)] = group
+
+
+# --- lowerings ------------------------------------------------------------------------------------
+# Each lowering reads its component's fields and appends kernel calls to its group.
+Lowering = Callable[[_Planner, CheckedComponent, dict[int, Group]], None]
+
+
+def _ptr(buffer: Buffer) -> str:
+    return f"S.{buffer.ident}.data()"
+
+
+def _call(function: str, *arguments: Any) -> str:
+    """A kernel call statement; buffers become pointers to their data."""
+    text = ", ".join(_ptr(a) if isinstance(a, Buffer) else str(a) for a in arguments)
+    return f"sofac::{function}({text});"
+
+
+def _count(buffer: Buffer, per: int = 1) -> str:
+    return f"Index(S.{buffer.ident}.size() / {per})" if per != 1 else f"Index(S.{buffer.ident}.size())"
+
+
+def _target(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group] | None:
+    state = planner.state_of(checked)
+    if state is None:
+        return None
+    group = owner.get(id(state.component))
+    if group is None:
+        planner.ignored.append((checked.component, "its state has no ODE solver: it never moves"))
+        return None
+    return state, group
+
+
+def _indices(
+    planner: _Planner, checked: CheckedComponent, name: str, size: int, all_if_empty: bool = True
+) -> np.ndarray:
+    value = planner.value(checked.component, name)
+    if value is None or np.size(value) == 0:
+        return np.arange(size, dtype=np.int64) if all_if_empty else np.zeros(0, dtype=np.int64)
+    return np.asarray(value, dtype=np.int64).ravel()
+
+
+def _lower_uniform_mass(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    datatype = state.datatype
+    total = planner.value(component, "totalMass")
+    vertex = planner.value(component, "vertexMass")
+    if datatype.rigid and datatype.coord_size == 7:
+        values = np.asarray(vertex if vertex is not None else [1.0], dtype=float).ravel()
+        mass = values[0] if total is None else float(total) / max(state.size, 1)
+        inertia = values[2:11].reshape(3, 3) if values.size >= 11 else np.eye(3)
+        data = np.concatenate([[mass], (inertia * mass).ravel()])
+        stride = 10
+    elif datatype.rigid:
+        values = np.asarray(vertex if vertex is not None else [1.0], dtype=float).ravel()
+        mass = values[0] if total is None else float(total) / max(state.size, 1)
+        inertia = values[2] if values.size >= 3 else 1.0
+        data, stride = np.array([mass, inertia * mass]), 2
+    else:
+        if total is not None:
+            mass = float(total) / max(state.size, 1)
+        else:
+            mass = float(np.asarray(vertex if vertex is not None else [1.0], dtype=float).ravel()[0])
+        data, stride = np.array([mass]), 1
+    buffer = planner.buffer(component, "vertexMass", data, columns=stride, role="param")
+    _add_mass(planner, checked, state, group, buffer, 0)
+
+
+def _lower_diagonal_mass(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    if state.datatype.rigid:
+        planner.unsupported(checked, "DiagonalMass on rigid frames is not compiled yet")
+        return
+    masses = planner.value(checked.component, "vertexMass")
+    if masses is None or np.size(masses) != state.size:
+        planner.unsupported(checked, "DiagonalMass computed from a topology is not compiled yet")
+        return
+    buffer = planner.buffer(checked.component, "vertexMass", masses, role="param")
+    _add_mass(planner, checked, state, group, buffer, 1)
+
+
+def _add_mass(
+    planner: _Planner, checked: CheckedComponent, state: StatePlan, group: Group, buffer: Buffer, stride: int
+) -> None:
+    origin = origin_of(checked.component)
+    t, n = state.cpp_type, state.size
+    stride_value = stride if stride else 0
+    group.forces.append(
+        Op(
+            origin,
+            [_call(f"mass_gravity<{t}>", state.f, n, buffer, stride_value, planner.gravity)],
+        )
+    )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"mass_energy<{t}>",
+                    state.x,
+                    state.v,
+                    n,
+                    buffer,
+                    stride_value,
+                    planner.gravity,
+                    "&kinetic",
+                    "&potential",
+                )
+            ],
+        )
+    )
+    if state.acc is not None:
+        state.mass = (buffer, stride_value)
+        group.accelerations.append(
+            Op(
+                origin,
+                [_call(f"mass_acceleration<{t}>", state.acc, state.f, n, buffer, stride_value)],
+            )
+        )
+
+
+def _springs_from_fields(planner: _Planner, checked: CheckedComponent) -> np.ndarray:
+    """Springs as rows (i, j, ks, kd, L0) from ``spring`` or the indices/stiffness/... lists."""
+    component = checked.component
+    listed = planner.value(component, "spring")
+    if listed is not None and np.size(listed):
+        return np.asarray(listed, dtype=float).reshape(-1, 5)
+    first = planner.value(component, "springsIndices1")
+    second = planner.value(component, "springsIndices2")
+    if first is None or second is None or not np.size(first):
+        return np.zeros((0, 5))
+    first = np.asarray(first, dtype=float).ravel()
+    count = len(first)
+
+    def spread(name: str, default: float) -> np.ndarray:
+        value = planner.value(component, name)
+        values = np.asarray(value if value is not None and np.size(value) else [default], dtype=float).ravel()
+        return values if values.size == count else np.full(count, values[0])
+
+    return np.column_stack(
+        [
+            first,
+            np.asarray(second, dtype=float).ravel()[:count],
+            spread("stiffness", 100.0),
+            spread("damping", 5.0),
+            spread("lengths", 0.0),
+        ]
+    )
+
+
+def _flags(planner: _Planner, component: Component, name: str, count: int, default: bool) -> np.ndarray:
+    value = planner.value(component, name)
+    values = np.asarray(value if value is not None and np.size(value) else [default], dtype=bool).ravel()
+    return (values if values.size == count else np.full(count, values[0])).astype(np.int64)
+
+
+def _add_springs(
+    planner: _Planner,
+    checked: CheckedComponent,
+    springs: np.ndarray,
+    first: StatePlan,
+    second: StatePlan,
+    group: Group,
+) -> None:
+    component = checked.component
+    count = len(springs)
+    a = planner.buffer(component, "indices1", springs[:, 0], "i64")
+    b = planner.buffer(component, "indices2", springs[:, 1], "i64")
+    ks = planner.buffer(component, "stiffness", springs[:, 2], role="param")
+    kd = planner.buffer(component, "damping", springs[:, 3], role="param")
+    rest = planner.buffer(component, "lengths", springs[:, 4], role="param")
+    elongation = planner.buffer(
+        component, "elongationOnly", _flags(planner, component, "elongationOnly", count, False), "i64"
+    )
+    enabled = planner.buffer(component, "enabled", _flags(planner, component, "enabled", count, True), "i64")
+    table = (
+        f"sofac::Springs{{{_ptr(a)}, {_ptr(b)}, {_ptr(ks)}, {_ptr(kd)}, {_ptr(rest)}, {_ptr(elongation)}, "
+        f"{_ptr(enabled)}, {count}}}"
+    )
+    types = f"{first.cpp_type}, {second.cpp_type}"
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [
+                f"sofac::spring_forces<{types}>({table}, {_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
+                f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)});"
+            ],
+        )
+    )
+    group.energy.append(
+        Op(
+            origin,
+            [f"potential += sofac::spring_energy<{types}>({table}, {_ptr(first.x)}, {_ptr(second.x)});"],
+        )
+    )
+
+
+def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        if not isinstance(target, Component):
+            target = checked.state or planner.checked.resolver._node_state(checked.component.node)
+        ends.append(planner.states.get(id(target)) if target is not None else None)
+    if ends[0] is None or ends[1] is None:
+        planner.unsupported(checked, "a spring force field must join MechanicalObjects")
+        return
+    groups = {id(owner.get(id(e.component))) for e in ends}
+    group = owner.get(id(ends[0].component))
+    if group is None or len(groups) != 1:
+        if group is None and owner.get(id(ends[1].component)) is None:
+            planner.ignored.append((checked.component, "its states have no ODE solver"))
+            return
+        planner.unsupported(checked, "springs between states of different ODE solvers are not compiled yet")
+        return
+    if ends[0].datatype.coord_size not in (1, 2, 3, 7) or ends[1].datatype.coord_size not in (1, 2, 3, 7):
+        planner.unsupported(checked, "springs on this template are not compiled yet")
+        return
+    springs = _springs_from_fields(planner, checked)
+    _add_springs(planner, checked, springs, ends[0], ends[1], group)
+
+
+def _lower_mesh_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    planner.unsupported(checked, "springs built from a topology are not compiled yet")
+
+
+def _lower_constant_force(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    width = state.datatype.deriv_size
+    indices = _indices(planner, checked, "indices", state.size)
+    forces = planner.value(component, "forces")
+    total = planner.value(component, "totalForce")
+    single = planner.value(component, "force")
+    if forces is not None and np.size(forces):
+        rows = np.asarray(forces, dtype=float).reshape(-1, width)
+        rows = rows if len(rows) == len(indices) else np.tile(rows[-1], (len(indices), 1))
+    elif total is not None and np.size(total) and len(indices):
+        rows = np.tile(np.asarray(total, dtype=float).ravel()[:width] / len(indices), (len(indices), 1))
+    elif single is not None and np.size(single):
+        rows = np.tile(np.asarray(single, dtype=float).ravel()[:width], (len(indices), 1))
+    else:
+        rows = np.zeros((len(indices), width))
+    index_buffer = planner.buffer(component, "indices", indices, "i64")
+    force_buffer = planner.buffer(component, "forces", rows, columns=width, role="param")
+    group.forces.append(
+        Op(
+            origin_of(component),
+            [_call(f"constant_forces<{state.cpp_type}>", state.f, index_buffer, force_buffer, len(indices))],
+        )
+    )
+
+
+def _lower_rest_shape(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.rigid or checked.links.get("external_rest_shape") is not None:
+        planner.unsupported(checked, "rigid or external rest shapes are not compiled yet")
+        return
+    indices = _indices(planner, checked, "points", state.size)
+    stiffness = planner.value(component, "stiffness")
+    stiffness = np.asarray(
+        stiffness if stiffness is not None and np.size(stiffness) else [100.0], dtype=float
+    )
+    index_buffer = planner.buffer(component, "points", indices, "i64")
+    k_buffer = planner.buffer(component, "stiffness", stiffness, role="param")
+    origin = origin_of(component)
+    arguments = f"{_ptr(index_buffer)}, {_ptr(k_buffer)}, {stiffness.size}, {len(indices)}"
+    t = state.cpp_type
+    group.forces.append(
+        Op(
+            origin,
+            [_call(f"rest_shape_forces<{t}>", state.f, state.x, state.rest, arguments)],
+        )
+    )
+    group.energy.append(
+        Op(
+            origin,
+            ["potential += " + _call(f"rest_shape_energy<{t}>", state.x, state.rest, arguments)],
+        )
+    )
+
+
+def _fixed_indices(planner: _Planner, checked: CheckedComponent, state: StatePlan) -> np.ndarray:
+    if planner.value(checked.component, "fixAll"):
+        return np.arange(state.size, dtype=np.int64)
+    return _indices(planner, checked, "indices", state.size, all_if_empty=False)
+
+
+def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    if state.acc is None:
+        planner.ignored.append((checked.component, "on a mapped state: no effect on an explicit step"))
+        return
+    indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
+    code = [_call(f"project_fixed<{state.cpp_type}>", state.acc, indices, _count(indices))]
+    if planner.value(checked.component, "activate_projectVelocity"):
+        code.append(_call(f"project_fixed<{state.cpp_type}>", state.v, indices, _count(indices)))
+    group.projections.append(Op(origin_of(checked.component), code))
+
+
+def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    if state.acc is None:
+        planner.ignored.append((checked.component, "on a mapped state: no effect on an explicit step"))
+        return
+    width = state.datatype.deriv_size
+    directions = planner.value(checked.component, "fixedDirections")
+    flags = np.zeros(width, dtype=np.int64)
+    if directions is not None:
+        given = np.asarray(directions, dtype=bool).ravel()[:width]
+        flags[: given.size] = given
+    indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
+    mask = planner.buffer(checked.component, "fixedDirections", flags, "i64")
+    code = [_call(f"project_partial<{state.cpp_type}>", state.acc, indices, _count(indices), mask)]
+    if planner.value(checked.component, "projectVelocity") or planner.value(
+        checked.component, "activate_projectVelocity"
+    ):
+        code.append(_call(f"project_partial<{state.cpp_type}>", state.v, indices, _count(indices), mask))
+    group.projections.append(Op(origin_of(checked.component), code))
+
+
+def _mapping_ends(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, StatePlan, Group] | None:
+    source, target = checked.links.get("input"), checked.links.get("output")
+    parent = planner.states.get(id(source)) if isinstance(source, Component) else None
+    child = planner.states.get(id(target)) if isinstance(target, Component) else None
+    if parent is None or child is None:
+        return None  # visual output: kept out of the step
+    group = owner.get(id(child.component))
+    if group is None:
+        planner.ignored.append((checked.component, "its input has no ODE solver"))
+        return None
+    return parent, child, group
+
+
+def _lower_rigid_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    ends = _mapping_ends(planner, checked, owner)
+    if ends is None:
+        return
+    parent, child, group = ends
+    component = checked.component
+    pair = (parent.datatype.name, child.datatype.name)
+    if pair not in (("Rigid3d", "Vec3d"), ("Rigid2d", "Vec2d")):
+        planner.unsupported(checked, f"RigidMapping {pair[0]},{pair[1]} is not compiled yet")
+        return
+    dim = child.datatype.coord_size
+    points = planner.checked.positions(child.component)
+    points = np.zeros((0, dim)) if points is None else points
+    frames = planner.checked.positions(parent.component)
+    frames = np.zeros((0, parent.datatype.coord_size)) if frames is None else frames
+    per_point = planner.value(component, "rigidIndexPerPoint")
+    if per_point is not None and np.size(per_point) == len(points):
+        frame_of = np.asarray(per_point, dtype=np.int64).ravel()
+    else:
+        index = int(planner.value(component, "index") or 0)
+        if planner.value(component, "indexFromEnd"):
+            index = len(frames) - 1 - index
+        frame_of = np.full(len(points), index, dtype=np.int64)
+    if len(points) and (frame_of.max() >= len(frames) or frame_of.min() < 0):
+        planner.unsupported(checked, "its frame indices are out of range")
+        return
+    local = np.array(points, dtype=float)
+    if planner.value(component, "globalToLocalCoords"):
+        local = _to_local(frames, frame_of, local)
+    local_buffer = planner.buffer(component, "initialPoints", local, columns=dim)
+    frame_buffer = planner.buffer(component, "rigidIndexPerPoint", frame_of, "i64")
+    offset = planner.buffer(component, "offsets", np.zeros_like(local), columns=dim, role="scratch")
+    prefix = "rigid" if dim == 3 else "rigid2"
+    n = len(points)
+    origin = origin_of(component)
+    group.propagate.append(
+        Op(
+            origin,
+            [
+                _call(f"{prefix}_apply", parent.x, child.x, local_buffer, frame_buffer, offset, n),
+                _call(f"{prefix}_apply_j", parent.v, child.v, frame_buffer, offset, n),
+            ],
+        )
+    )
+    if planner.value(component, "mapForces") is not False:
+        group.map_forces_up.insert(
+            0,
+            Op(
+                origin,
+                [_call(f"{prefix}_apply_jt", parent.f, child.f, frame_buffer, offset, n)],
+            ),
+        )
+
+
+def _to_local(frames: np.ndarray, frame_of: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Global points expressed in their frame (globalToLocalCoords)."""
+    local = np.empty_like(points)
+    for k, (point, c) in enumerate(zip(points, frame_of, strict=True)):
+        frame = frames[c]
+        if frames.shape[1] == 7:
+            x, y, z, w = frame[3:7]
+            rotation = np.array(
+                [
+                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+                ]
+            )
+            local[k] = rotation.T @ (point - frame[:3])
+        else:
+            c_, s_ = np.cos(frame[2]), np.sin(frame[2])
+            d = point - frame[:2]
+            local[k] = [c_ * d[0] + s_ * d[1], -s_ * d[0] + c_ * d[1]]
+    return local
+
+
+def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    ends = _mapping_ends(planner, checked, owner)
+    if ends is None:
+        return
+    parent, child, group = ends
+    component = checked.component
+    if parent.datatype is not child.datatype:
+        planner.unsupported(checked, f"{component.type_name} between different templates is not compiled yet")
+        return
+    if checked.spec and checked.spec.kernel == "identity_mapping":
+        indices = np.arange(parent.size, dtype=np.int64)
+    else:
+        indices = _indices(planner, checked, "indices", 0, all_if_empty=False)
+        first, last = planner.value(component, "first"), planner.value(component, "last")
+        if not indices.size and first is not None:
+            stop = int(last) if last is not None and int(last) >= 0 else parent.size - 1
+            indices = np.arange(int(first), stop + 1, dtype=np.int64)
+    if indices.size != child.size:
+        planner.unsupported(checked, f"it maps {indices.size} DOFs onto a state of {child.size}")
+        return
+    buffer = planner.buffer(component, "indices", indices, "i64")
+    t, n = parent.cpp_type, indices.size
+    coord, deriv = parent.datatype.coord_size, parent.datatype.deriv_size
+    origin = origin_of(component)
+    group.propagate.append(
+        Op(
+            origin,
+            [
+                f"sofac::subset_apply<{t}>({_ptr(parent.x)}, {_ptr(child.x)}, {_ptr(buffer)}, {n}, {coord});",
+                f"sofac::subset_apply<{t}>({_ptr(parent.v)}, {_ptr(child.v)}, {_ptr(buffer)}, {n}, {deriv});",
+            ],
+        )
+    )
+    if planner.value(component, "mapForces") is not False:
+        group.map_forces_up.insert(
+            0,
+            Op(
+                origin,
+                [f"sofac::subset_apply_jt<{t}>({_ptr(parent.f)}, {_ptr(child.f)}, {_ptr(buffer)}, {n});"],
+            ),
+        )
+
+
+LOWERINGS: dict[str, Lowering] = {
+    "uniform_mass": _lower_uniform_mass,
+    "diagonal_mass": _lower_diagonal_mass,
+    "springs": _lower_springs,
+    "mesh_springs": _lower_mesh_springs,
+    "constant_force": _lower_constant_force,
+    "rest_shape_springs": _lower_rest_shape,
+    "fixed": _lower_fixed,
+    "partial_fixed": _lower_partial_fixed,
+    "rigid_mapping": _lower_rigid_mapping,
+    "identity_mapping": _lower_subset_mapping,
+    "subset_mapping": _lower_subset_mapping,
+}
+
+
+def plan_scene(checked: CheckedScene, diagnostics: Diagnostics | None = None) -> Plan:
+    """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled."""
+    return _Planner(checked, diagnostics if diagnostics is not None else Diagnostics()).run()
+
+
+def format_schedule(plan: Plan) -> str:
+    """The plan as text, for ``sofac inspect --schedule``."""
+    lines = [
+        f"scene {plan.scene_file}",
+        f"dt = {plan.dt.initial[0]!r}, gravity = {plan.gravity.initial.tolist()}",
+    ]
+    for group in plan.groups:
+        scheme = {
+            "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
+            "rk2": "RK2 (midpoint)",
+            "rk4": "RK4",
+        }[group.scheme]
+        lines.append(f"solver {origin_of(group.solver)}: {scheme}")
+        lines.append(
+            "  independent states: "
+            + ", ".join(f"{s.path} <{s.datatype.name}> x{s.size}" for s in group.states)
+        )
+        if group.mapped:
+            lines.append(
+                "  mapped states: "
+                + ", ".join(f"{s.path} <{s.datatype.name}> x{s.size}" for s in group.mapped)
+            )
+        for title, ops in (
+            ("propagate x, v down the mappings", group.propagate),
+            ("reset forces, accumulate forces and gravity", group.forces),
+            ("map forces up (J^T)", group.map_forces_up),
+            ("a = M^-1 f", group.accelerations),
+            ("project constraints on a", group.projections),
+        ):
+            lines.append(f"  {title}:")
+            lines.extend(f"    - {op.origin}" for op in ops)
+        lines.append("  update x, v; propagate again")
+    idle = [s for s in plan.states if not s.mapped and not any(s in g.states for g in plan.groups)]
+    for state in idle:
+        lines.append(f"not integrated (no ODE solver): {state.path}")
+    for component, why in plan.ignored:
+        lines.append(f"kept out of the step: {origin_of(component)}: {why}")
+    return "\n".join(lines)

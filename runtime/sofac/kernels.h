@@ -1,0 +1,274 @@
+// The per-component kernels the generated step calls. Each is a small inline template over
+// DataTypes, works on flat arrays, allocates nothing and reads its parameters through pointers
+// into the instance's parameter storage (so they can be changed from Python between steps).
+//
+// The formulas follow SOFA's components (see docs in compiler/registry/components/*.py).
+#pragma once
+
+#include <cmath>
+
+#include "types.h"
+
+namespace sofac {
+
+// ---- vector operations -------------------------------------------------------------------------
+
+inline void clear(double* a, Index size) {
+    for (Index k = 0; k < size; ++k) a[k] = 0.0;
+}
+
+inline void copy(double* out, const double* in, Index size) {
+    for (Index k = 0; k < size; ++k) out[k] = in[k];
+}
+
+// out = a + h * b (derivative-shaped arrays)
+inline void add_scaled(double* out, const double* a, const double* b, double h, Index size) {
+    for (Index k = 0; k < size; ++k) out[k] = a[k] + h * b[k];
+}
+
+// out = x "+" h * v on coordinates: a translation for points; for rigid frames the orientation
+// turns by the rotation vector h*w, left-multiplied in world axes (SOFA's RigidCoord += Deriv).
+template <class DT>
+inline void advance(double* out, const double* x, const double* v, double h, Index n) {
+    if constexpr (!DT::rigid) {
+        add_scaled(out, x, v, h, DT::coord * n);
+    } else if constexpr (DT::coord == 7) {
+        for (Index i = 0; i < n; ++i) {
+            point<DT>(out, i) = point<DT>(x, i) + h * linear<DT>(v, i);
+            const Quat turn = quat_from_rotation_vector(h * angular(v, i));
+            orientation(out, i) = turn * orientation(x, i);
+        }
+    } else {
+        add_scaled(out, x, v, h, 3 * n);  // Rigid2d: x, y, theta
+    }
+}
+
+// ---- masses ------------------------------------------------------------------------------------
+
+// Rigid masses are (m, inertia[9]) with the inertia already multiplied by m, applied in world
+// axes: SOFA neither rotates the inertia with the body nor adds the gyroscopic term.
+template <class DT>
+inline void mass_gravity(double* f, Index n, const double* mass, Index mass_stride, const double* g) {
+    for (Index i = 0; i < n; ++i) {
+        const double m = mass[i * mass_stride];
+        for (int d = 0; d < DT::spatial; ++d) f[DT::deriv * i + d] += m * g[d];
+    }
+}
+
+template <class DT>
+inline void mass_acceleration(double* a, const double* f, Index n, const double* mass, Index mass_stride) {
+    for (Index i = 0; i < n; ++i) {
+        const double* mi = mass + i * mass_stride;
+        if constexpr (DT::rigid && DT::coord == 7) {
+            linear<DT>(a, i) = linear<DT>(f, i) / mi[0];
+            const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> inertia(mi + 1);
+            angular(a, i) = inertia.ldlt().solve(Vec3(angular(f, i)));
+        } else if constexpr (DT::rigid) {
+            a[3 * i] = f[3 * i] / mi[0];
+            a[3 * i + 1] = f[3 * i + 1] / mi[0];
+            a[3 * i + 2] = f[3 * i + 2] / mi[1];
+        } else {
+            for (int d = 0; d < DT::deriv; ++d) a[DT::deriv * i + d] = f[DT::deriv * i + d] / mi[0];
+        }
+    }
+}
+
+// Kinetic energy 1/2 v.M.v and gravity's potential -m g.x.
+template <class DT>
+inline void mass_energy(const double* x, const double* v, Index n, const double* mass, Index mass_stride,
+                        const double* g, double* kinetic, double* potential) {
+    for (Index i = 0; i < n; ++i) {
+        const double* mi = mass + i * mass_stride;
+        *kinetic += 0.5 * mi[0] * linear<DT>(v, i).squaredNorm();
+        if constexpr (DT::rigid && DT::coord == 7) {
+            const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> inertia(mi + 1);
+            *kinetic += 0.5 * angular(v, i).dot(inertia * angular(v, i));
+        } else if constexpr (DT::rigid) {
+            *kinetic += 0.5 * mi[1] * v[3 * i + 2] * v[3 * i + 2];
+        } else {
+            for (int d = DT::spatial; d < DT::deriv; ++d) *kinetic += 0.5 * mi[0] * v[DT::deriv * i + d] * v[DT::deriv * i + d];
+        }
+        for (int d = 0; d < DT::spatial; ++d) *potential -= mi[0] * g[d] * x[DT::coord * i + d];
+    }
+}
+
+// ---- force fields ------------------------------------------------------------------------------
+
+// Springs between point a of state 1 and point b of state 2 (may be the same state):
+// u = x_b - x_a, d = |u|, n = u/d, F = ks (d - L0) + kd (v_b - v_a).n; f_a += F n, f_b -= F n.
+struct Springs {
+    const Index* a;
+    const Index* b;
+    const double* stiffness;
+    const double* damping;
+    const double* rest_length;
+    const Index* elongation_only;  // 0/1 per spring
+    const Index* enabled;          // 0/1 per spring
+    Index count;
+};
+
+template <class D1, class D2>
+inline void spring_forces(const Springs& s, const double* x1, const double* v1, double* f1, const double* x2,
+                          const double* v2, double* f2) {
+    static_assert(D1::spatial == D2::spatial, "springs join points of the same dimension");
+    constexpr int S = D1::spatial;
+    for (Index k = 0; k < s.count; ++k) {
+        if (!s.enabled[k]) continue;
+        const Index a = s.a[k], b = s.b[k];
+        const VecN<S> u = point<D2>(x2, b) - point<D1>(x1, a);
+        const double d = u.norm();
+        if (d < 1.0e-9 || (s.elongation_only[k] && d < s.rest_length[k])) continue;
+        const VecN<S> dir = u / d;
+        const double relative_speed = (linear<D2>(v2, b) - linear<D1>(v1, a)).dot(dir);
+        const double intensity = s.stiffness[k] * (d - s.rest_length[k]) + s.damping[k] * relative_speed;
+        linear<D1>(f1, a) += intensity * dir;
+        linear<D2>(f2, b) -= intensity * dir;
+    }
+}
+
+template <class D1, class D2>
+inline double spring_energy(const Springs& s, const double* x1, const double* x2) {
+    double energy = 0.0;
+    for (Index k = 0; k < s.count; ++k) {
+        if (!s.enabled[k]) continue;
+        const double d = (point<D2>(x2, s.b[k]) - point<D1>(x1, s.a[k])).norm();
+        if (s.elongation_only[k] && d < s.rest_length[k]) continue;
+        const double stretch = d - s.rest_length[k];
+        energy += 0.5 * s.stiffness[k] * stretch * stretch;
+    }
+    return energy;
+}
+
+// A constant force per listed DOF (deriv-shaped rows).
+template <class DT>
+inline void constant_forces(double* f, const Index* indices, const double* forces, Index count) {
+    for (Index k = 0; k < count; ++k)
+        for (int d = 0; d < DT::deriv; ++d) f[DT::deriv * indices[k] + d] += forces[DT::deriv * k + d];
+}
+
+// RestShapeSpringsForceField on points: f_i -= k_i (x_i - x_rest_i) (translation only).
+template <class DT>
+inline void rest_shape_forces(double* f, const double* x, const double* rest, const Index* indices,
+                              const double* stiffness, Index stiffness_count, Index count) {
+    for (Index k = 0; k < count; ++k) {
+        const Index i = indices[k];
+        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        linear<DT>(f, i) -= ks * (point<DT>(x, i) - point<DT>(rest, i));
+    }
+}
+
+template <class DT>
+inline double rest_shape_energy(const double* x, const double* rest, const Index* indices, const double* stiffness,
+                                Index stiffness_count, Index count) {
+    double energy = 0.0;
+    for (Index k = 0; k < count; ++k) {
+        const Index i = indices[k];
+        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        energy += 0.5 * ks * (point<DT>(x, i) - point<DT>(rest, i)).squaredNorm();
+    }
+    return energy;
+}
+
+// ---- projective constraints ----------------------------------------------------------------------
+
+// Zero the listed DOFs of a derivative-shaped vector (FixedProjectiveConstraint).
+template <class DT>
+inline void project_fixed(double* dx, const Index* indices, Index count) {
+    for (Index k = 0; k < count; ++k)
+        for (int d = 0; d < DT::deriv; ++d) dx[DT::deriv * indices[k] + d] = 0.0;
+}
+
+// Zero the flagged directions of the listed DOFs (PartialFixedProjectiveConstraint).
+template <class DT>
+inline void project_partial(double* dx, const Index* indices, Index count, const Index* directions) {
+    for (Index k = 0; k < count; ++k)
+        for (int d = 0; d < DT::deriv; ++d)
+            if (directions[d]) dx[DT::deriv * indices[k] + d] = 0.0;
+}
+
+// ---- mappings ----------------------------------------------------------------------------------
+
+// RigidMapping Rigid3d -> Vec3d: p = c + R r, v = v_c + w x (R r), f_c += f, tau_c += (R r) x f.
+// `offset` holds the current R r per point, computed by apply and reused by applyJ / applyJT.
+inline void rigid_apply(const double* in_x, double* out_x, const double* local, const Index* frame,
+                        double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = frame[i];
+        const Vec3 r = orientation(in_x, c) * Eigen::Map<const Vec3>(local + 3 * i);
+        Eigen::Map<Vec3>(offset + 3 * i) = r;
+        Eigen::Map<Vec3>(out_x + 3 * i) = point<Rigid3d>(in_x, c) + r;
+    }
+}
+
+inline void rigid_apply_j(const double* in_v, double* out_v, const Index* frame, const double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = frame[i];
+        Eigen::Map<Vec3>(out_v + 3 * i) =
+            linear<Rigid3d>(in_v, c) + angular(in_v, c).cross(Eigen::Map<const Vec3>(offset + 3 * i));
+    }
+}
+
+inline void rigid_apply_jt(double* in_f, const double* out_f, const Index* frame, const double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = frame[i];
+        const Eigen::Map<const Vec3> f(out_f + 3 * i);
+        linear<Rigid3d>(in_f, c) += f;
+        angular(in_f, c) += Eigen::Map<const Vec3>(offset + 3 * i).cross(f);
+    }
+}
+
+// RigidMapping Rigid2d -> Vec2d (rotation by theta in the plane).
+inline void rigid2_apply(const double* in_x, double* out_x, const double* local, const Index* frame,
+                         double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const double* c = in_x + 3 * frame[i];
+        const double cs = std::cos(c[2]), sn = std::sin(c[2]);
+        const double rx = cs * local[2 * i] - sn * local[2 * i + 1];
+        const double ry = sn * local[2 * i] + cs * local[2 * i + 1];
+        offset[2 * i] = rx;
+        offset[2 * i + 1] = ry;
+        out_x[2 * i] = c[0] + rx;
+        out_x[2 * i + 1] = c[1] + ry;
+    }
+}
+
+inline void rigid2_apply_j(const double* in_v, double* out_v, const Index* frame, const double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const double* c = in_v + 3 * frame[i];
+        out_v[2 * i] = c[0] - c[2] * offset[2 * i + 1];
+        out_v[2 * i + 1] = c[1] + c[2] * offset[2 * i];
+    }
+}
+
+inline void rigid2_apply_jt(double* in_f, const double* out_f, const Index* frame, const double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        double* c = in_f + 3 * frame[i];
+        c[0] += out_f[2 * i];
+        c[1] += out_f[2 * i + 1];
+        c[2] += offset[2 * i] * out_f[2 * i + 1] - offset[2 * i + 1] * out_f[2 * i];
+    }
+}
+
+// SubsetMapping (and IdentityMapping with indices 0..n-1): out_k = in[index_k]; J^T adds back.
+template <class DT>
+inline void subset_apply(const double* in, double* out, const Index* indices, Index n, int width) {
+    for (Index k = 0; k < n; ++k)
+        for (int d = 0; d < width; ++d) out[width * k + d] = in[width * indices[k] + d];
+}
+
+template <class DT>
+inline void subset_apply_jt(double* in_f, const double* out_f, const Index* indices, Index n) {
+    for (Index k = 0; k < n; ++k)
+        for (int d = 0; d < DT::deriv; ++d) in_f[DT::deriv * indices[k] + d] += out_f[DT::deriv * k + d];
+}
+
+// ---- guards ------------------------------------------------------------------------------------
+
+// Index of the first non-finite number, or -1.
+inline Index first_non_finite(const double* a, Index size) {
+    for (Index k = 0; k < size; ++k)
+        if (!std::isfinite(a[k])) return k;
+    return -1;
+}
+
+}  // namespace sofac
