@@ -7,14 +7,31 @@ The pipeline, one module per stage, data flowing one way::
     plan      (plan.py)      CheckedScene -> Plan: buffers, mechanical groups, the step's kernel calls
     generate  (generate.py)  Plan -> C++ source (templates/*.j2 over runtime/sofac kernels)
     build     (build.py)     C++ -> shared library, in a content-addressed cache
-    load      (load.py)      library -> Simulation (numpy views of the native state)
+    load      (loader.py)    library -> Simulation (numpy views of the native state)
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 __version__ = "0.1.0"
 
-from .diagnostics import SceneError, SofacError
-from .load import Simulation, SimulationDiverged, load
-
 __all__ = ["SceneError", "Simulation", "SimulationDiverged", "SofacError", "__version__", "load"]
+
+_LAZY = {
+    "SceneError": "diagnostics",
+    "SofacError": "diagnostics",
+    "Simulation": "loader",
+    "SimulationDiverged": "loader",
+    "load": "loader",
+}
+
+
+def __getattr__(name: str) -> Any:
+    # Imported on first use, so that `import sofac` stays light (no numpy) for tools that only read
+    # its version or resources.
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

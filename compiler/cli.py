@@ -164,6 +164,10 @@ def _list_components(fmt: str) -> int:
 def _cmd_inspect(args: argparse.Namespace) -> int:
     if args.components:
         return _list_components(args.format)
+    if args.schedule and args.scene is not None:
+        from .commands import cmd_schedule
+
+        return cmd_schedule(args)
     if args.scene is None:
         raise UsageError("inspect needs a SCENE file (or --components)")
     path = Path(args.scene)
@@ -184,6 +188,41 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         else:
             sys.stdout.write(format_tree(checked) + "\n")
     return EXIT_ERRORS if diagnostics.has_errors() else EXIT_OK
+
+
+def _cmd_regress(args: argparse.Namespace) -> int:
+    from . import regress
+
+    list_path = Path(args.list) if args.list else regress.default_list()
+    if not list_path.is_file():
+        hint = "" if args.list else " (pass LIST, or set SOFAC_SHARED to the shared folder)"
+        raise UsageError(f"no regression list at {list_path}{hint}")
+    scenes = Path(args.scenes) if args.scenes else regress.default_scenes_root()
+    if not scenes.is_dir():
+        raise UsageError(f"--scenes {scenes}: no such folder")
+    references = Path(args.references) if args.references else regress.default_reference_root(list_path)
+    if not references.is_dir():
+        raise UsageError(f"--references {references}: no such folder")
+    if args.jobs < 1:
+        raise UsageError("--jobs must be at least 1")
+    try:
+        entries = regress.select_entries(regress.parse_regression_list(list_path).entries, args.only)
+    except regress.RegressionListError as exc:
+        raise UsageError(str(exc)) from exc
+    if not entries:
+        raise UsageError(f"no scene of {list_path} matches --only {' '.join(args.only or [])}")
+
+    def progress(result: regress.SceneResult) -> None:
+        if sys.stderr.isatty():
+            print(f"  {result.status.value:<11} {result.scene} ({result.seconds:.1f}s)", file=sys.stderr)
+
+    results = regress.run_regression(list_path, scenes, references, args.only, args.jobs, progress=progress)
+    if args.format == "json":
+        sys.stdout.write(regress.results_as_json(results, list_path))
+    else:
+        sys.stdout.write(regress.format_table(results))
+    failed = any(r.failed or (args.strict and r.status is regress.Status.UNSUPPORTED) for r in results)
+    return EXIT_ERRORS if failed else EXIT_OK
 
 
 def _cmd_version(args: argparse.Namespace) -> int:
@@ -245,7 +284,52 @@ def build_parser() -> argparse.ArgumentParser:
     inspect.add_argument(
         "--components", action="store_true", help="list the components sofac knows instead of a scene"
     )
+    inspect.add_argument(
+        "--schedule", action="store_true", help="print the compiled step's plan: groups, states, kernel calls"
+    )
     inspect.set_defaults(handler=_cmd_inspect)
+
+    regress = commands.add_parser(
+        "regress",
+        help="run SOFA's regression scenes and compare with SOFA's reference states",
+        description=(
+            "Run each scene of SOFA's regression list for its STEPS and apply SOFA's pass criterion "
+            "(mean absolute state error per DOF, summed over the stored times, averaged over the "
+            "compared states, <= EPSILON). Defaults come from the shared folder: $SOFAC_SHARED, "
+            "else ../shared next to the repository."
+        ),
+        epilog=(
+            "exit codes: 0 no scene failed (UNSUPPORTED is not a failure unless --strict), "
+            "1 a scene FAILed, ERRORed or has no reference, 2 usage error (E002)"
+        ),
+    )
+    regress.add_argument(
+        "list",
+        nargs="?",
+        metavar="LIST",
+        help="the regression list (default: the shared scenes.regression-tests)",
+    )
+    regress.add_argument("--scenes", metavar="ROOT", help="folder the list's scene paths are relative to")
+    regress.add_argument(
+        "--references", metavar="ROOT", help="folder of the reference files (default: the list's folder)"
+    )
+    regress.add_argument(
+        "--only",
+        nargs="+",
+        action="extend",
+        metavar="SUBSTRING",
+        help="run only scenes whose path contains one",
+    )
+    regress.add_argument("--format", choices=("text", "json"), default="text", help="output format")
+    regress.add_argument("--strict", action="store_true", help="count UNSUPPORTED scenes as failures")
+    regress.add_argument(
+        "--jobs", "-j", type=int, default=1, metavar="N", help="run N scenes at once, each in its own process"
+    )
+    regress.set_defaults(handler=_cmd_regress)
+
+    from .commands import register
+
+    register(commands, _EPILOG)
 
     version = commands.add_parser("version", help="print sofac's version")
     version.set_defaults(handler=_cmd_version)

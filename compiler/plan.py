@@ -79,6 +79,7 @@ class StatePlan:
     v: Buffer
     f: Buffer
     rest: Buffer
+    simulated: bool = False  # an ODE solver in its node or above
     acc: Buffer | None = None  # a = M⁻¹ f, independent states only
     mass: Any = None  # (Buffer, stride) of the mass acting on it, if any
     # Runge-Kutta stage vectors (x0, v0 and, for RK4, the sums dx, dv), only where a scheme needs them.
@@ -274,6 +275,7 @@ class _Planner:
             f=self.buffer(component, "force", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"),
             rest=self.buffer(component, "rest_position", rest, columns=datatype.coord_size),
         )
+        state.simulated = self.checked.solver_of(component.node) is not None
         if not mapped:
             state.acc = self.buffer(
                 component, "acceleration", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"

@@ -31,3 +31,11 @@ def shared_dir() -> Path:
 def corpus_dir(shared_dir: Path) -> Path:
     """``shared/corpus/sofa``: real SOFA scenes with every file they reference."""
     return shared_dir / "corpus" / "sofa"
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compile_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One compile cache for the whole test session (each scene compiles once), away from the user's."""
+    folder = Path(os.environ.get("SOFAC_TEST_CACHE") or tmp_path_factory.mktemp("sofac-cache"))
+    os.environ["SOFAC_CACHE_DIR"] = str(folder)
+    return folder

@@ -65,6 +65,7 @@ class StateInfo:
     mapped: bool
     template: str
     size: int
+    simulated: bool  # an ODE solver in its node or above (SOFA records only those)
 
 
 class State:
@@ -109,7 +110,8 @@ class Simulation:
         for state in self.plan.states:
             index = {id(b): i for i, b in enumerate(self.plan.buffers)}
             datatype = state.datatype
-            info = StateInfo(state.path, state.component.label, state.mapped, datatype.name, state.size)
+            name = sofa_name(state.component)
+            info = StateInfo(state.path, name, state.mapped, datatype.name, state.size, state.simulated)
             self._states[state.path] = State(
                 info,
                 self._views[index[id(state.x)]].reshape(-1, datatype.coord_size),
@@ -193,6 +195,14 @@ class Simulation:
     def energy(self) -> Energy:
         kinetic, potential = self._native.energy()
         return Energy(float(kinetic), float(potential))
+
+
+def sofa_name(component: Any) -> str:
+    """The name SOFA gives a component: its own, else class name + a per-node counter from 1."""
+    if component.name:
+        return component.name
+    same = [c for c in component.node.objects if not c.name and c.type_name == component.type_name]
+    return f"{component.type_name}{same.index(component) + 1}"
 
 
 def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = ()) -> Compiled:

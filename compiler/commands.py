@@ -1,0 +1,167 @@
+"""The ``sofac`` subcommands that compile and run scenes: compile, emit, run (and inspect --schedule).
+
+Scene problems and build failures are reported as diagnostics / sofac errors with exit code 1,
+never as tracebacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+from .diagnostics import SceneError, Severity, SofacError
+
+EXIT_OK = 0
+EXIT_ERRORS = 1
+
+
+@contextlib.contextmanager
+def _reported() -> Iterator[None]:
+    """Turn sofac errors into messages on stderr (the caller returns exit code 1)."""
+    from .report import format_diagnostic
+
+    try:
+        yield
+    except SceneError as error:
+        for diag in error.diagnostics:
+            if diag.severity >= Severity.WARNING:
+                print(format_diagnostic(diag), file=sys.stderr)
+        raise _Failed from None
+    except SofacError as error:
+        print(f"sofac: error: {error}", file=sys.stderr)
+        raise _Failed from None
+
+
+class _Failed(Exception):
+    pass
+
+
+def _scene(args: argparse.Namespace) -> Path:
+    from .cli import UsageError
+
+    path = Path(args.scene)
+    if not path.is_file():
+        raise UsageError(f"no such file: {args.scene}")
+    return path
+
+
+def _compile(args: argparse.Namespace):  # -> loader.Compiled
+    from . import loader
+
+    return loader.compile_scene(_scene(args), data_roots=[Path(p) for p in args.data_path or ()])
+
+
+def cmd_compile(args: argparse.Namespace) -> int:
+    try:
+        with _reported():
+            compiled = _compile(args)
+    except _Failed:
+        return EXIT_ERRORS
+    built = compiled.built
+    how = "from the cache" if built.cached else f"compiled in {built.seconds:.2f} s"
+    print(built.library)
+    print(f"sofac: {how}", file=sys.stderr)
+    return EXIT_OK
+
+
+def cmd_emit(args: argparse.Namespace) -> int:
+    from . import check, generate, plan
+
+    try:
+        with _reported():
+            checked, diagnostics = check.check_file(_scene(args))
+            if checked is None or diagnostics.has_errors():
+                raise SceneError(diagnostics.sorted())
+            sys.stdout.write(generate.render(plan.plan_scene(checked, diagnostics)))
+    except _Failed:
+        return EXIT_ERRORS
+    return EXIT_OK
+
+
+def cmd_schedule(args: argparse.Namespace) -> int:
+    from . import check, plan
+
+    try:
+        with _reported():
+            checked, diagnostics = check.check_file(_scene(args))
+            if checked is None or diagnostics.has_errors():
+                raise SceneError(diagnostics.sorted())
+            print(plan.format_schedule(plan.plan_scene(checked, diagnostics)))
+    except _Failed:
+        return EXIT_ERRORS
+    return EXIT_OK
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .cli import UsageError
+
+    if args.steps < 0:
+        raise UsageError("--steps must be >= 0")
+    if args.dt is not None and not args.dt > 0:
+        raise UsageError("--dt must be > 0")
+    if args.every < 1:
+        raise UsageError("--every must be >= 1")
+    try:
+        with _reported():
+            started = time.perf_counter()
+            compiled = _compile(args)
+            sim = compiled.instantiate()
+            if args.dt is not None:
+                sim.dt = args.dt
+            ready = time.perf_counter()
+            if args.export_states:
+                from .writestate import export_states
+
+                export_states(sim, args.steps, Path(args.export_states), every=args.every, mapped=args.mapped)
+            else:
+                sim.step(args.steps)
+            stepped = time.perf_counter()
+    except _Failed:
+        return EXIT_ERRORS
+    built = compiled.built
+    how = "cache hit" if built.cached else f"compiled in {built.seconds:.2f} s"
+    per_step = (stepped - ready) / args.steps * 1e3 if args.steps else 0.0
+    print(
+        f"{args.steps} steps of dt={sim.dt:g} to t={sim.time:g}; load {ready - started:.3f} s ({how}), "
+        f"{per_step:.4f} ms/step"
+    )
+    for path in sim.objects():
+        state = sim[path]
+        if state.info.mapped and not args.mapped:
+            continue
+        rows = state.position[: args.show]
+        more = f" ... ({state.info.size} DOFs)" if state.info.size > args.show else ""
+        values = "; ".join(" ".join(f"{v:.6g}" for v in row) for row in rows)
+        print(f"  {path} <{state.info.template}>: {values}{more}")
+    return EXIT_OK
+
+
+def register(commands: argparse._SubParsersAction, epilog: str) -> None:
+    """Add compile, emit and run to the ``sofac`` parser."""
+
+    def scene_parser(name: str, help_text: str) -> argparse.ArgumentParser:
+        parser = commands.add_parser(name, help=help_text, description=help_text, epilog=epilog)
+        parser.add_argument("scene", metavar="SCENE", help="the scene file")
+        parser.add_argument(
+            "--data-path", action="append", metavar="DIR", help="folder to search (repeatable)"
+        )
+        return parser
+
+    scene_parser(
+        "compile", "compile a scene (or take it from the cache) and print the library's path"
+    ).set_defaults(handler=cmd_compile)
+    scene_parser("emit", "print the C++ generated for a scene").set_defaults(handler=cmd_emit)
+    run = scene_parser("run", "compile and run a scene, printing where its states end up")
+    run.add_argument("--steps", type=int, default=100, help="number of steps (default 100)")
+    run.add_argument("--dt", type=float, help="time step (default: the scene's)")
+    run.add_argument(
+        "--export-states", metavar="DIR", help="write SOFA WriteState files <K>_<NAME>_mstate.txt.gz"
+    )
+    run.add_argument("--every", type=int, default=1, help="record every K steps (default 1)")
+    run.add_argument("--mapped", action="store_true", help="also export / print mapped states")
+    run.add_argument("--show", type=int, default=4, help="DOFs printed per state (default 4)")
+    run.set_defaults(handler=cmd_run)

@@ -1,0 +1,341 @@
+"""The compile pipeline against analytic solutions, SOFA's own trajectories, and its contracts
+(cache, views, parameters, errors)."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sofac
+from sofac import build
+from sofac.loader import compile_scene
+
+REPO = Path(__file__).resolve().parents[1]
+
+ROOT = '<Node name="root" gravity="{gravity}" dt="{dt}"><DefaultAnimationLoop/>{body}</Node>'
+
+
+def scene(
+    tmp_path: Path, body: str, *, dt: float = 0.01, gravity: str = "0 0 0", name: str = "s.scn"
+) -> Path:
+    path = tmp_path / name
+    path.write_text(ROOT.format(gravity=gravity, dt=repr(dt), body=body))
+    return path
+
+
+def nums(values: object) -> str:
+    return " ".join(repr(float(v)) for v in np.ravel(values))
+
+
+def oscillator(solver: str, *, damping: float = 0.0) -> str:
+    """A particle of mass 1 on a spring k=100, L0=1, from x=1.1 at rest (omega = 10)."""
+    return (
+        f'<Node name="osc">{solver}<MechanicalObject name="dofs" position="0 0 0  1.1 0 0"/>'
+        '<UniformMass vertexMass="1"/><FixedProjectiveConstraint indices="0"/>'
+        f'<SpringForceField name="spring" spring="0 1 100 {damping!r} 1"/></Node>'
+    )
+
+
+SOLVERS = {
+    "euler": ('<EulerExplicitSolver symplectic="0"/>', 1),
+    "symplectic": ("<EulerExplicitSolver/>", 1),
+    "rk2": ("<RungeKutta2Solver/>", 2),
+    "rk4": ("<RungeKutta4Solver/>", 4),
+}
+
+
+def oscillator_error(tmp_path: Path, solver: str, dt: float, t_end: float = 1.0) -> float:
+    sim = sofac.load(scene(tmp_path, oscillator(solver), dt=dt, name=f"osc{dt!r}.scn"))
+    sim.step(round(t_end / dt))
+    return abs(sim["dofs"].position[1, 0] - (1 + 0.1 * math.cos(10 * sim.time)))
+
+
+@pytest.mark.parametrize("name", list(SOLVERS))
+def test_order_of_convergence(tmp_path: Path, name: str) -> None:
+    solver, order = SOLVERS[name]
+    steps = (0.004, 0.002, 0.001)
+    errors = [oscillator_error(tmp_path, solver, dt) for dt in steps]
+    measured = [math.log2(a / b) for a, b in itertools.pairwise(errors)]
+    assert all(abs(m - order) < 0.25 for m in measured), (errors, measured)
+
+
+def test_damped_oscillator_matches_analytic(tmp_path: Path) -> None:
+    c = 2.0  # damping coefficient: x'' = -100 u - 2 u'
+    sim = sofac.load(scene(tmp_path, oscillator("<RungeKutta4Solver/>", damping=c), dt=1e-3))
+    sim.step(1000)
+    zeta_omega, omega_d = c / 2, math.sqrt(100 - (c / 2) ** 2)
+    t = sim.time
+    exact = (
+        0.1
+        * math.exp(-zeta_omega * t)
+        * (math.cos(omega_d * t) + zeta_omega / omega_d * math.sin(omega_d * t))
+    )
+    assert sim["dofs"].position[1, 0] - 1 == pytest.approx(exact, abs=1e-10)
+
+
+def test_free_fall(tmp_path: Path) -> None:
+    body = (
+        '<Node name="p"><RungeKutta4Solver/><MechanicalObject name="dofs" position="0 5 0"/>'
+        '<UniformMass vertexMass="2"/></Node>'
+    )
+    sim = sofac.load(scene(tmp_path, body, dt=0.01, gravity="0 -9.81 0"))
+    sim.step(100)
+    t = sim.time
+    assert sim["dofs"].position[0].tolist() == pytest.approx([0, 5 - 9.81 * t * t / 2, 0], abs=1e-12)
+    assert sim["dofs"].velocity[0, 1] == pytest.approx(-9.81 * t, abs=1e-12)
+    # symplectic Euler: v_n = -g n dt, y_n = y0 - g dt^2 n (n + 1) / 2, exactly
+    sim2 = sofac.load(
+        scene(
+            tmp_path,
+            body.replace("RungeKutta4Solver", "EulerExplicitSolver"),
+            gravity="0 -9.81 0",
+            name="e.scn",
+        )
+    )
+    sim2.step(100)
+    assert sim2["dofs"].position[0, 1] == pytest.approx(5 - 9.81 * 0.01**2 * 100 * 101 / 2, abs=1e-12)
+
+
+def test_torque_free_rigid_body_rotates_exactly(tmp_path: Path) -> None:
+    omega = np.array([0.3, -0.2, 1.1])
+    body = (
+        '<Node name="r"><EulerExplicitSolver/>'
+        '<MechanicalObject name="frame" template="Rigid3d" position="1 2 3  0 0 0 1" '
+        f'velocity="0 0 0 {nums(omega)}"/>'
+        '<UniformMass vertexMass="2 1 [1 0 0, 0 1 0, 0 0 1]"/></Node>'
+    )
+    sim = sofac.load(scene(tmp_path, body, dt=0.01))
+    sim.step(250)
+    t = sim.time
+    angle = np.linalg.norm(omega) * t
+    axis = omega / np.linalg.norm(omega)
+    expected = [*(axis * math.sin(angle / 2)), math.cos(angle / 2)]
+    frame = sim["frame"].position[0]
+    assert frame[:3].tolist() == pytest.approx([1, 2, 3], abs=1e-14)
+    assert frame[3:].tolist() == pytest.approx(expected, abs=1e-12)
+
+
+RIGID_WITH_POINT = (
+    '<Node name="body"><EulerExplicitSolver/>'
+    '<MechanicalObject name="frame" template="Rigid3d" position="0.5 -1 2  {q}"/>'
+    '<UniformMass vertexMass="3 1 [0.5 0 0, 0 0.7 0, 0 0 0.9]"/>'
+    '<Node name="tip"><MechanicalObject name="point" position="0.4 -0.3 1.2"/><RigidMapping/>{tip}</Node>'
+    "</Node>"
+)
+
+
+def _quat(axis: np.ndarray, angle: float) -> np.ndarray:
+    axis = axis / np.linalg.norm(axis)
+    return np.array([*(axis * math.sin(angle / 2)), math.cos(angle / 2)])
+
+
+def test_rigid_mapping_positions_and_velocities_match_finite_differences(tmp_path: Path) -> None:
+    q = _quat(np.array([1.0, 2.0, -0.5]), 0.8)
+    sim = sofac.load(scene(tmp_path, RIGID_WITH_POINT.format(q=nums(q), tip="")))
+    frame, point = sim["frame"], sim["point"]
+    rotation = _rotation(q)
+    local = np.array([0.4, -0.3, 1.2])
+    assert point.position[0] == pytest.approx(np.array([0.5, -1, 2]) + rotation @ local, abs=1e-14)
+    # J against finite differences: move the frame by h * v and compare the point's motion.
+    v = np.array([0.1, -0.4, 0.3, 0.7, -0.2, 0.5])
+    frame.velocity[0] = v
+    sim._native.init()  # propagate x and v down the mapping
+    mapped_v = point.velocity[0].copy()
+    h = 1e-7
+    turned = _quat_mul(_quat(v[3:], np.linalg.norm(v[3:]) * h), q)
+    moved = np.array([0.5, -1, 2]) + h * v[:3] + _rotation(turned) @ local
+    fd = (moved - point.position[0]) / h
+    assert mapped_v == pytest.approx(fd, abs=1e-6)
+
+
+def test_rigid_mapping_transposes_forces_into_force_and_torque(tmp_path: Path) -> None:
+    q = _quat(np.array([0.0, 0.0, 1.0]), 0.3)
+    force = np.array([1.0, -2.0, 0.5])
+    tip = f'<ConstantForceField forces="{nums(force)}"/>'
+    sim = sofac.load(scene(tmp_path, RIGID_WITH_POINT.format(q=nums(q), tip=tip), dt=1e-3))
+    arm = sim["point"].position[0] - np.array([0.5, -1, 2])
+    sim.step(1)
+    v = sim["frame"].velocity[0]
+    assert v[:3] == pytest.approx(1e-3 * force / 3, abs=1e-15)
+    inertia = 3 * np.diag([0.5, 0.7, 0.9])  # applied in world axes, as SOFA does
+    assert v[3:] == pytest.approx(1e-3 * np.linalg.solve(inertia, np.cross(arm, force)), abs=1e-15)
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    from sofac.meshes import quaternion_multiply
+
+    return quaternion_multiply(a, b)
+
+
+def _reference(path: Path) -> dict[int, np.ndarray]:
+    """step -> rows (dof order) of a reference CSV from ../shared/reference/sofa/data."""
+    frames: dict[int, list[list[float]]] = {}
+    with path.open() as stream:
+        for row in csv.DictReader(stream):
+            values = [float(v) for k, v in row.items() if k not in ("step", "time", "dof")]
+            frames.setdefault(int(row["step"]), []).append(values)
+    return {k: np.array(v) for k, v in frames.items()}
+
+
+CASES = [
+    ("a_pendulum_euler_explicit", {"dofs": "a_pendulum_euler_explicit.every100.csv"}),
+    ("a2_pendulum_euler_explicit_totalmass", {"dofs": "a2_pendulum_euler_explicit_totalmass.every100.csv"}),
+    ("b1_pendulum_rk4", {"dofs": "b1_pendulum_rk4.every100.csv"}),
+    (
+        "d1_mixed_pendulum_explicit",
+        {
+            "Dof1": "d1_mixed_pendulum_explicit.Dof1.csv",
+            "Dof2": "d1_mixed_pendulum_explicit.Dof2_rigid.csv",
+            "Dof3": "d1_mixed_pendulum_explicit.Dof3.csv",
+        },
+    ),
+]
+
+
+@pytest.mark.parametrize(("name", "files"), CASES, ids=[c[0] for c in CASES])
+def test_matches_sofa_reference_trajectories(shared_dir: Path, name: str, files: dict[str, str]) -> None:
+    reference = shared_dir / "reference" / "sofa"
+    sim = sofac.load(reference / "scenes" / f"{name}.scn")
+    expected = {state: _reference(reference / "data" / file) for state, file in files.items()}
+    done = 0
+    for step in sorted(next(iter(expected.values()))):
+        sim.step(step - done)
+        done = step
+        for state, frames in expected.items():
+            s = sim[state]
+            width = s.position.shape[1]
+            got = np.hstack([s.position, s.velocity])
+            rows = frames[step]
+            assert got == pytest.approx(rows[:, : width + s.velocity.shape[1]], rel=1e-9, abs=1e-11), (
+                state,
+                step,
+            )
+
+
+def test_hybrid_pendulum_builder_gives_the_same_trajectory(tmp_path: Path) -> None:
+    out = tmp_path / "built.scn"
+    subprocess.run(
+        [sys.executable, str(REPO / "examples" / "hybrid_pendulum.py"), str(out)],
+        check=True,
+        capture_output=True,
+    )
+    bundled = sofac.load(REPO / "scenes" / "hybrid_pendulum.scn")
+    built = sofac.load(out)
+    bundled.step(300)
+    built.step(300)
+    for path in bundled.objects():
+        assert np.array_equal(bundled[path].position, built[path].position)
+    assert bundled["Dof2"].position[0, 1] < -0.5  # it fell
+
+
+def test_views_instances_and_parameters(tmp_path: Path) -> None:
+    path = scene(tmp_path, oscillator("<EulerExplicitSolver/>"), dt=1e-3)
+    compiled = compile_scene(path)
+    a, b = compiled.instantiate(), compiled.instantiate()
+    a["dofs"].position[1, 0] = 1.2  # writing into the view changes the simulation
+    a.param("/osc/spring.stiffness")[0] = 400.0  # no recompilation
+    a.step(10)
+    b.step(10)
+    # omega = 20 for a, 10 for b (untouched); symplectic Euler is within 1e-3 here
+    assert a["dofs"].position[1, 0] == pytest.approx(1 + 0.2 * math.cos(20 * 0.01), abs=1e-3)
+    assert b["dofs"].position[1, 0] == pytest.approx(1 + 0.1 * math.cos(10 * 0.01), abs=1e-3)
+    b.reset()
+    assert b.time == 0 and b["dofs"].position[1, 0] == 1.1
+    energy = b.energy()
+    assert energy.potential == pytest.approx(0.5 * 100 * 0.1**2) and energy.kinetic == 0
+
+
+def test_energy_is_conserved_by_rk4(tmp_path: Path) -> None:
+    sim = sofac.load(scene(tmp_path, oscillator("<RungeKutta4Solver/>"), dt=1e-3))
+    start = sim.energy().total
+    sim.step(2000)
+    assert sim.energy().total == pytest.approx(start, rel=1e-9)
+
+
+def test_cache_hit_and_corrupt_entry_is_rebuilt(tmp_path: Path) -> None:
+    path = scene(tmp_path, oscillator("<RungeKutta2Solver/>"), name="cache.scn")
+    compiled = compile_scene(path)
+    first = compiled.built
+    again = compile_scene(path).built
+    assert again.cached and again.library == first.library
+    data = first.library.read_bytes()
+    first.library.unlink()  # (the loaded copy stays mapped) replaced by a truncated file
+    first.library.write_bytes(data[:100])
+    rebuilt = build.build_scene(compiled.source)
+    assert not rebuilt.cached and rebuilt.library == first.library
+    assert first.library.read_bytes() == data
+
+
+def test_concurrent_compiles_of_one_scene(tmp_path: Path) -> None:
+    path = scene(tmp_path, oscillator('<EulerExplicitSolver symplectic="0"/>', damping=0.5), name="race.scn")
+    cache = tmp_path / "cache"
+    env = {**os.environ, "SOFAC_CACHE_DIR": str(cache)}
+    runs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "sofac", "compile", str(path)], env=env, stdout=subprocess.PIPE, text=True
+        )
+        for _ in range(2)
+    ]
+    outputs = [p.communicate(timeout=600)[0].strip() for p in runs]
+    assert [p.returncode for p in runs] == [0, 0]
+    assert outputs[0] == outputs[1] and Path(outputs[0]).is_file()
+
+
+def test_compiler_failure_is_a_sofac_error_with_a_log(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("CXX", "false")
+    monkeypatch.setenv("SOFAC_CACHE_DIR", str(tmp_path / "cache"))
+    with pytest.raises(build.BuildError) as failure:
+        build.build_scene("int main() {}\n")
+    assert failure.value.log is not None and failure.value.log.is_file()
+    assert not list((tmp_path / "cache" / "scenes").glob("*/*/manifest.json"))  # never cached
+
+
+def test_unsupported_component_names_itself_and_its_line(tmp_path: Path) -> None:
+    body = (
+        '<Node name="n">\n<EulerImplicitSolver/>\n<CGLinearSolver/>\n<MechanicalObject/>\n'
+        '<UniformMass vertexMass="1"/>\n</Node>'
+    )
+    with pytest.raises(sofac.SceneError) as failure:
+        sofac.load(scene(tmp_path, body))
+    first = failure.value.diagnostics[0]
+    assert first.code == "E222" and first.loc.line == 2
+    assert "unsupported component EulerImplicitSolver at line 2" in first.message
+
+
+def test_scene_text_never_reaches_the_code(tmp_path: Path) -> None:
+    hostile = "x&quot;);system(&quot;rm -rf /&quot;);//&#10;*/ evil"
+    body = oscillator("<EulerExplicitSolver/>").replace('name="dofs"', f'name="{hostile}"')
+    sim = sofac.load(scene(tmp_path, body))
+    source = sim.compiled.source
+    code = [line.split("//", 1)[0] for line in source.splitlines()]
+    assert not any("system" in part or "evil" in part for part in code)  # only in one-line comments
+    sim.step(5)
+    assert np.isfinite(sim[sim.objects()[0]].position).all()
+
+
+def test_divergence_is_reported(tmp_path: Path) -> None:
+    body = oscillator("<EulerExplicitSolver/>").replace("0 1 100 0.0 1", "0 1 1e9 0.0 1")
+    sim = sofac.load(scene(tmp_path, body, dt=0.01))
+    with pytest.raises(sofac.SimulationDiverged) as failure:
+        sim.step(10000)
+    assert failure.value.state == "/osc/dofs"
