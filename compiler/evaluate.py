@@ -106,12 +106,43 @@ def grid(ctx: Context) -> Outputs:
     ]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
     points = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
-    return {"position": points.ravel()}
+    return {"position": points.ravel(), **_grid_cells(counts)}
+
+
+def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
+    """The cells of a grid, corners in SOFA's order: hexahedra (3-D), quads (2-D) or edges (1-D)."""
+    nx, ny, nz = (int(c) for c in counts)
+
+    def index(i: np.ndarray, j: np.ndarray, k: np.ndarray) -> np.ndarray:
+        return i + nx * (j + ny * k)
+
+    live = [axis for axis, n in enumerate((nx, ny, nz)) if n > 1]
+    ranges = [np.arange(max(n - 1, 1)) if n > 1 else np.zeros(1, dtype=np.int64) for n in (nx, ny, nz)]
+    k, j, i = (a.ravel() for a in np.meshgrid(ranges[2], ranges[1], ranges[0], indexing="ij"))
+    steps = [np.array(d) for d in ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
+    if len(live) == 3:
+        corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+        cells = np.stack([index(i + a, j + b, k + c) for a, b, c in corners], axis=1)
+        return {"hexahedra": cells.astype(np.int64).ravel()}
+    if len(live) == 2:
+        u, v = (steps[a] for a in live)
+        corners = [0 * u, u, u + v, v]
+        cells = np.stack([index(i + c[0], j + c[1], k + c[2]) for c in corners], axis=1)
+        return {"quads": cells.astype(np.int64).ravel()}
+    if len(live) == 1:
+        u = steps[live[0]]
+        cells = np.stack([index(i, j, k), index(i + u[0], j + u[1], k + u[2])], axis=1)
+        return {"edges": cells.astype(np.int64).ravel()}
+    return {}
 
 
 def box_roi(ctx: Context) -> Outputs:
     """Indices of the input points inside any of the boxes (xmin ymin zmin xmax ymax zmax)."""
-    boxes = np.asarray(ctx.value("box"), dtype=float).reshape(-1, 6)
+    value = ctx.value("box")
+    if value is None or np.size(value) == 0 or np.size(value) % 6:
+        # No usable box (missing, or invalid and reported as such): the selection is not known.
+        raise UnknownInput("BoxROI has no valid box")
+    boxes = np.asarray(value, dtype=float).reshape(-1, 6)
     points = ctx.input_positions()
     if points is None:
         raise EvaluationError("BoxROI has no input positions", "position", code="E212")

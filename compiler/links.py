@@ -60,8 +60,10 @@ def resolve(
     origin: Component | Node,
     *,
     search_up: bool = True,
+    clamp_at_root: bool = False,
 ) -> Target | None:
-    """The node or component a link path names, seen from ``origin``; None if nothing matches."""
+    """The node or component a link path names, seen from ``origin``; None if nothing matches.
+    With ``clamp_at_root``, ``..`` at the root stays at the root (SOFA's ``Node::getObject``)."""
     node = origin.node if isinstance(origin, Component) else origin
     path = link.path
     index = _INDEX_FORM.match(path)
@@ -87,6 +89,8 @@ def resolve(
             continue
         if segment == "..":
             if current.parent is None:
+                if clamp_at_root:
+                    continue
                 return None
             current = current.parent
             continue
@@ -111,7 +115,9 @@ def resolve_src(text: str, origin: Component) -> Component | None:
     link = parse_link(text)
     if link is None or link.data is not None:
         return None
-    target = resolve(link, origin, search_up=False)
+    # SOFA finds src objects with DAGNode::getObject(path), where '../' at the root stays there
+    # (Demos/collisionMultiple.scn writes src="@../../../Loader-floor" two levels below the root).
+    target = resolve(link, origin, search_up=False, clamp_at_root=True)
     return target if isinstance(target, Component) else None
 
 

@@ -581,8 +581,51 @@ def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int
     _add_springs(planner, checked, springs, ends[0], ends[1], group)
 
 
+# MeshSpringForceField: (topology field, corners per element, stiffness/damping prefix), in the
+# order SOFA adds them; a vertex pair gets one spring, from the first element kind that has it.
+_MESH_ELEMENTS = (
+    ("edges", 2, "lines"),
+    ("triangles", 3, "triangles"),
+    ("quads", 4, "quads"),
+    ("tetrahedra", 4, "tetrahedra"),
+    ("hexahedra", 8, "cubes"),
+)
+
+
 def _lower_mesh_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    planner.unsupported(checked, "springs built from a topology are not compiled yet")
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    topology = checked.links.get("topology")
+    if not isinstance(topology, Component):
+        topology = planner.checked.resolver._singleton(component.node, "topology")
+    rest = planner.checked.positions(state.component)
+    if topology is None or rest is None:
+        planner.unsupported(checked, "it needs a topology whose elements are known at compile time")
+        return
+    both_k, both_d = planner.value(component, "stiffness"), planner.value(component, "damping")
+    seen: set[tuple[int, int]] = set()
+    rows: list[tuple[int, int, float, float, float]] = []
+    for field_name, corners, prefix in _MESH_ELEMENTS:
+        elements = planner.value(topology, field_name)
+        if elements is None or not np.size(elements):
+            continue
+        ks = float(both_k if both_k is not None else planner.value(component, f"{prefix}Stiffness") or 0.0)
+        kd = float(both_d if both_d is not None else planner.value(component, f"{prefix}Damping") or 0.0)
+        pairs = [(0, 1), (1, 2), (2, 0)] if corners == 3 else None
+        for element in np.asarray(elements, dtype=np.int64).reshape(-1, corners):
+            for a, b in pairs or [(p, q) for p in range(corners) for q in range(p + 1, corners)]:
+                i, j = sorted((int(element[a]), int(element[b])))
+                if (i, j) in seen or i == j:
+                    continue
+                seen.add((i, j))
+                length = float(np.linalg.norm(rest[j, :3] - rest[i, :3]))
+                if length > 1e-12:  # SOFA scales by the rest length (per unit length stiffness)
+                    rows.append((i, j, ks / length, kd / length, length))
+    springs = np.array(rows, dtype=float).reshape(-1, 5)
+    _add_springs(planner, checked, springs, state, state, group)
 
 
 def _lower_constant_force(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:

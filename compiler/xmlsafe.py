@@ -422,10 +422,16 @@ def scan(text: str, max_depth: int = MAX_DEPTH) -> _Scan:
 # --- reading -------------------------------------------------------------------------------------
 
 
-def _syntax_error(exc: Exception, *, repaired: bool) -> XMLReadError:
+def _last_line(text: str) -> int:
+    """The number of the file's last line (a final newline does not start another one)."""
+    return max(1, text.count("\n") + (0 if text.endswith("\n") else 1))
+
+
+def _syntax_error(exc: Exception, *, repaired: bool, last_line: int) -> XMLReadError:
     msg = str(getattr(exc, "msg", "") or exc)
     msg = _LXML_LOCATION_RE.sub("", msg.strip())
-    line = int(getattr(exc, "lineno", 0) or 0)
+    # libxml2 reports an error at the end of the data on the line after a final newline.
+    line = min(max(int(getattr(exc, "lineno", 0) or 0), 1), last_line)
     position = getattr(exc, "position", None)
     column = position[1] if isinstance(position, tuple) and len(position) == 2 else 0
     where = f" (column {column})" if column else ""
@@ -525,7 +531,7 @@ def read_xml(data: bytes | str, *, max_depth: int = MAX_DEPTH) -> XMLDocument:
         try:
             root = _parse_bytes(_to_utf8(text))
         except (etree.XMLSyntaxError, etree.LxmlError, ValueError) as exc:
-            failure = _syntax_error(exc, repaired=False)
+            failure = _syntax_error(exc, repaired=False, last_line=_last_line(text))
     if root is None:
         repairs = ([decode_problem] if decode_problem else []) + result.repairs
         if not repairs:
@@ -536,7 +542,7 @@ def read_xml(data: bytes | str, *, max_depth: int = MAX_DEPTH) -> XMLDocument:
         try:
             root = _parse_bytes(_to_utf8(result.apply(text)))
         except (etree.XMLSyntaxError, etree.LxmlError, ValueError) as exc:
-            raise _syntax_error(exc, repaired=True) from None
+            raise _syntax_error(exc, repaired=True, last_line=_last_line(text)) from None
     _check_tree(root)
     tags: dict[Any, StartTag] = {}
     elements = list(root.iter())

@@ -1,9 +1,12 @@
 #!/usr/bin/env bash
-# The main job on a bundled scene: install what is missing, check the scene, show its tree.
+# The main job on a bundled scene: install what is missing, check the hybrid pendulum, then
+# compile it (cached after the first time) and run 1 s of it, printing where its bodies are and
+# the compile and step times.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 bash scripts/setup.sh
 # shellcheck source=scripts/python.sh
 source scripts/python.sh
-sofac check scenes/hybrid_pendulum.scn && sofac inspect scenes/hybrid_pendulum.scn
+"$PYTHON" -m sofac check scenes/hybrid_pendulum.scn
+"$PYTHON" -m sofac run scenes/hybrid_pendulum.scn --steps 100 --mapped

@@ -61,10 +61,16 @@ def parse_ints(text: str, *, nonnegative: bool = True) -> np.ndarray:
     except (ValueError, OverflowError):
         for position, token in enumerate(tokens, start=1):
             try:
-                int(token)
+                number = int(token)
             except ValueError:
                 raise FieldValueError(
                     f"value {position} ({token!r}) is not an integer", hint="indices are whole numbers"
+                ) from None
+            if not -(2**63) <= number < 2**63:
+                shown = token if len(token) <= 24 else token[:21] + "..."
+                raise FieldValueError(
+                    f"value {position} ({shown}) does not fit in a 64-bit integer",
+                    hint="indices and counts are far smaller",
                 ) from None
         raise
     if nonnegative and values.size and (values < 0).any():

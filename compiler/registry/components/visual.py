@@ -324,8 +324,8 @@ OGL_LABEL = ComponentSpec(
     name="OglLabel",
     category=Category.RENDERING,
     module="Sofa.GL.Component.Rendering2D",
-    doc="2-D text in the viewport.",
-    unsupported_reason="OglLabel is not supported (rendering only)",
+    doc="2-D text in the viewport (rendering only: no part in the step).",
+    supported=True,
     effects=_VISUAL,
     fields=(
         FieldSpec("prefix", Text(), ""),
