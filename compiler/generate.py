@@ -13,7 +13,7 @@ from typing import Any
 import jinja2
 
 from . import __version__
-from .plan import Buffer, Group, Plan, StatePlan, origin_of
+from .plan import Buffer, Group, MappingOp, Plan, Projection, StatePlan, origin_of
 from .resources import resource_dir
 
 
@@ -46,10 +46,33 @@ class _StateView:
 
     def __init__(self, state: StatePlan) -> None:
         self.x, self.v, self.f, self.acc = state.x, state.v, state.f, state.acc
+        self.dx, self.df = state.dx, state.df
         self.size = state.size
         self.cpp_type = state.cpp_type
         self.stages = state.stages
         self.path_comment = _comment(state.path)
+
+
+class _MappingView:
+    def __init__(self, mapping: MappingOp) -> None:
+        self.origin = mapping.origin
+        self.apply = mapping.apply
+        parent, child = mapping.parent, mapping.child
+        self.jacobian_dx = mapping.jacobian(parent.dx, child.dx) if parent.dx and child.dx else ""
+        transpose = mapping.transpose
+        self.transpose_f = transpose(parent.f, child.f) if transpose else ""
+        self.transpose_df = transpose(parent.df, child.df) if transpose and parent.df and child.df else ""
+
+
+class _ProjectionView:
+    def __init__(self, projection: Projection) -> None:
+        state = projection.state
+        self.origin = projection.origin
+        self.velocity = projection.velocity
+        self.on_v = projection.project(state.v)
+        self.on_acc = projection.project(state.acc) if state.acc else ""
+        self.on_df = projection.project(state.df) if state.df else ""
+        self.on_r = projection.project(state.stages["r"]) if "r" in state.stages else ""
 
 
 class _GroupView:
@@ -60,12 +83,16 @@ class _GroupView:
         self.origin = origin_of(group.solver)
         self.states = [_StateView(s) for s in group.states]
         self.all_states = [_StateView(s) for s in (*group.states, *group.mapped)]
-        self.propagate = group.propagate
+        self.mappings = [_MappingView(m) for m in group.mappings]
+        self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
         self.forces = group.forces
-        self.map_forces_up = group.map_forces_up
         self.accelerations = group.accelerations
-        self.projections = group.projections
+        self.projections = [_ProjectionView(p) for p in group.projections]
+        self.mass_dx = group.mass_dx
+        self.stiffness_dx = group.stiffness_dx
         self.energy = group.energy
+        self.implicit = group.implicit
+        self.cg = group.cg
 
 
 def render(plan: Plan) -> str:

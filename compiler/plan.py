@@ -69,6 +69,28 @@ class Op:
 
 
 @dataclass
+class MappingOp:
+    """A mechanical mapping: how x and v go down, and J / Jᵀ for any pair of vectors."""
+
+    origin: str
+    parent: StatePlan
+    child: StatePlan
+    apply: list[str]  # x and v of the child from the parent's
+    jacobian: Callable[[Buffer, Buffer], str]  # (parent vector, child vector) -> child = J parent
+    transpose: Callable[[Buffer, Buffer], str] | None  # parent += Jᵀ child; None: mapForces="0"
+
+
+@dataclass
+class Projection:
+    """A projective constraint: zeroes the constrained part of a derivative-shaped vector."""
+
+    origin: str
+    state: StatePlan
+    project: Callable[[Buffer], str]
+    velocity: bool = False  # also projects the velocity after the update
+
+
+@dataclass
 class StatePlan:
     component: Component
     ident: str
@@ -80,7 +102,9 @@ class StatePlan:
     f: Buffer
     rest: Buffer
     simulated: bool = False  # an ODE solver in its node or above
-    acc: Buffer | None = None  # a = M⁻¹ f, independent states only
+    acc: Buffer | None = None  # a = M⁻¹ f (explicit) or Δv (implicit), independent states only
+    dx: Buffer | None = None  # implicit schemes: the vector a matrix-free product reads ...
+    df: Buffer | None = None  # ... and the one it writes
     mass: Any = None  # (Buffer, stride) of the mass acting on it, if any
     # Runge-Kutta stage vectors (x0, v0 and, for RK4, the sums dx, dv), only where a scheme needs them.
     stages: dict[str, Buffer] = field(default_factory=dict)
@@ -100,17 +124,21 @@ class Group:
 
     solver: Component
     ident: str
-    scheme: str  # "euler", "rk2", "rk4"
+    scheme: str  # "euler", "rk2", "rk4", "implicit"
     symplectic: bool
     states: list[StatePlan] = field(default_factory=list)  # independent
     mapped: list[StatePlan] = field(default_factory=list)  # parent → child order
-    propagate: list[Op] = field(default_factory=list)  # x and v down the mappings
+    mappings: list[MappingOp] = field(default_factory=list)  # parent → child order
     forces: list[Op] = field(default_factory=list)  # force fields and gravity
-    map_forces_up: list[Op] = field(default_factory=list)  # Jᵀ, child → parent
-    accelerations: list[Op] = field(default_factory=list)  # a = M⁻¹ f
-    projections: list[Op] = field(default_factory=list)  # on a
+    accelerations: list[Op] = field(default_factory=list)  # a = M⁻¹ f (explicit schemes)
+    projections: list[Projection] = field(default_factory=list)
+    mass_dx: list[Op] = field(default_factory=list)  # df += mfact M dx (implicit)
+    stiffness_dx: list[Op] = field(default_factory=list)  # df += kfact K dx (implicit)
     energy: list[Op] = field(default_factory=list)
-    scratch: list[Buffer] = field(default_factory=list)  # RK stages: x0, v0, dx, dv
+    # Implicit Euler: parameter buffers (rayleighStiffness, rayleighMass, vdamping) and the linear solver.
+    implicit: dict[str, Buffer] = field(default_factory=dict)
+    linear_solver: Component | None = None
+    cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
 
 
 @dataclass
@@ -305,7 +333,21 @@ class _Planner:
             owner[id(state.component)] = group
         self._attach_mapped(owner)
         for group in groups.values():
-            names = {"euler": (), "rk2": ("x0", "v0"), "rk4": ("x0", "v0", "dx", "dv")}[group.scheme]
+            if group.scheme == "implicit":
+                for state in (*group.states, *group.mapped):
+                    zeros = np.zeros_like(state.v.initial)
+                    state.dx = self.buffer(
+                        state.component, "dx", zeros, columns=state.v.columns, role="scratch"
+                    )
+                    state.df = self.buffer(
+                        state.component, "df", zeros, columns=state.v.columns, role="scratch"
+                    )
+            names = {
+                "euler": (),
+                "rk2": ("x0", "v0"),
+                "rk4": ("x0", "v0", "dx", "dv"),
+                "implicit": ("r", "p"),  # conjugate gradient residual and direction (q is df)
+            }[group.scheme]
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -322,11 +364,53 @@ class _Planner:
 
     def _new_group(self, solver: CheckedComponent, index: int) -> Group | None:
         kernel = solver.spec.kernel if solver.spec else ""
-        scheme = {"euler_explicit": "euler", "runge_kutta2": "rk2", "runge_kutta4": "rk4"}.get(kernel)
+        scheme = {
+            "euler_explicit": "euler",
+            "runge_kutta2": "rk2",
+            "runge_kutta4": "rk4",
+            "euler_implicit": "implicit",
+        }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
         symplectic = bool(self.value(solver.component, "symplectic")) if scheme == "euler" else False
-        return Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
+        group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
+        if scheme == "implicit" and not self._plan_implicit(solver, group):
+            return None
+        return group
+
+    def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
+        """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
+        component = solver.component
+        if self.value(component, "trapezoidalScheme") or self.value(component, "firstOrder"):
+            self.unsupported(solver, "trapezoidalScheme and firstOrder are not compiled yet")
+            return False
+        for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+            group.implicit[name] = self.buffer(
+                component, name, [float(self.value(component, name) or 0.0)], role="param"
+            )
+        linear = solver.links.get("linearSolver")
+        if not isinstance(linear, Component):
+            linear = self.checked.resolver._linear_solver_below(component.node)
+        checked_linear = self.checked.of(linear) if linear is not None else None
+        if checked_linear is None or checked_linear.spec is None:
+            return False  # E221, reported by the checker
+        if checked_linear.spec.kernel != "cg":
+            self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
+            return False
+        group.linear_solver = linear
+        group.cg = {
+            "iterations": self.buffer(
+                linear, "iterations", [int(self.value(linear, "iterations") or 25)], "i64"
+            ),
+            "tolerance": self.buffer(
+                linear, "tolerance", [float(self.value(linear, "tolerance"))], role="param"
+            ),
+            "threshold": self.buffer(
+                linear, "threshold", [float(self.value(linear, "threshold"))], role="param"
+            ),
+            "solves": self.buffer(linear, "solves", [0], "i64", role="scratch"),
+        }
+        return True
 
     def _attach_mapped(self, owner: dict[int, Group]) -> None:
         """Mapped states join their input's group, parents before children."""
@@ -469,7 +553,11 @@ def _add_mass(
             ],
         )
     )
-    if state.acc is not None:
+    if group.scheme == "implicit":
+        group.mass_dx.append(
+            Op(origin, [_call(f"mass_multiply<{t}>", state.df, state.dx, n, buffer, stride_value, "mfact")])
+        )
+    elif state.acc is not None:
         state.mass = (buffer, stride_value)
         group.accelerations.append(
             Op(
@@ -539,12 +627,26 @@ def _add_springs(
     )
     types = f"{first.cpp_type}, {second.cpp_type}"
     origin = origin_of(component)
+    jacobians = "nullptr"
+    if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
+        dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
+        blocks = planner.buffer(component, "dfdx", np.zeros(count * dim * dim), role="scratch")
+        jacobians = _ptr(blocks)
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    f"sofac::spring_dforces<{types}>({table}, {jacobians}, "
+                    f"{_ptr(first.dx)}, {_ptr(first.df)}, {_ptr(second.dx)}, {_ptr(second.df)}, kfact);"
+                ],
+            )
+        )
     group.forces.append(
         Op(
             origin,
             [
                 f"sofac::spring_forces<{types}>({table}, {_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
-                f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)});"
+                f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)}, {jacobians});"
             ],
         )
     )
@@ -683,6 +785,10 @@ def _lower_rest_shape(planner: _Planner, checked: CheckedComponent, owner: dict[
             [_call(f"rest_shape_forces<{t}>", state.f, state.x, state.rest, arguments)],
         )
     )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(origin, [_call(f"rest_shape_dforces<{t}>", state.df, state.dx, arguments, "kfact")])
+        )
     group.energy.append(
         Op(
             origin,
@@ -703,13 +809,20 @@ def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, 
         return
     state, group = found
     if state.acc is None:
-        planner.ignored.append((checked.component, "on a mapped state: no effect on an explicit step"))
+        planner.ignored.append(
+            (checked.component, "on a mapped state: projections act on independent states")
+        )
         return
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
-    code = [_call(f"project_fixed<{state.cpp_type}>", state.acc, indices, _count(indices))]
-    if planner.value(checked.component, "activate_projectVelocity"):
-        code.append(_call(f"project_fixed<{state.cpp_type}>", state.v, indices, _count(indices)))
-    group.projections.append(Op(origin_of(checked.component), code))
+    t = state.cpp_type
+    group.projections.append(
+        Projection(
+            origin_of(checked.component),
+            state,
+            lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
+            bool(planner.value(checked.component, "activate_projectVelocity")),
+        )
+    )
 
 
 def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -718,7 +831,9 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
         return
     state, group = found
     if state.acc is None:
-        planner.ignored.append((checked.component, "on a mapped state: no effect on an explicit step"))
+        planner.ignored.append(
+            (checked.component, "on a mapped state: projections act on independent states")
+        )
         return
     width = state.datatype.deriv_size
     directions = planner.value(checked.component, "fixedDirections")
@@ -728,12 +843,18 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
         flags[: given.size] = given
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
     mask = planner.buffer(checked.component, "fixedDirections", flags, "i64")
-    code = [_call(f"project_partial<{state.cpp_type}>", state.acc, indices, _count(indices), mask)]
-    if planner.value(checked.component, "projectVelocity") or planner.value(
+    t = state.cpp_type
+    velocity = planner.value(checked.component, "projectVelocity") or planner.value(
         checked.component, "activate_projectVelocity"
-    ):
-        code.append(_call(f"project_partial<{state.cpp_type}>", state.v, indices, _count(indices), mask))
-    group.projections.append(Op(origin_of(checked.component), code))
+    )
+    group.projections.append(
+        Projection(
+            origin_of(checked.component),
+            state,
+            lambda vector: _call(f"project_partial<{t}>", vector, indices, _count(indices), mask),
+            bool(velocity),
+        )
+    )
 
 
 def _mapping_ends(
@@ -786,23 +907,22 @@ def _lower_rigid_mapping(planner: _Planner, checked: CheckedComponent, owner: di
     prefix = "rigid" if dim == 3 else "rigid2"
     n = len(points)
     origin = origin_of(component)
-    group.propagate.append(
-        Op(
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
             origin,
+            parent,
+            child,
             [
                 _call(f"{prefix}_apply", parent.x, child.x, local_buffer, frame_buffer, offset, n),
                 _call(f"{prefix}_apply_j", parent.v, child.v, frame_buffer, offset, n),
             ],
+            lambda up, down: _call(f"{prefix}_apply_j", up, down, frame_buffer, offset, n),
+            (lambda up, down: _call(f"{prefix}_apply_jt", up, down, frame_buffer, offset, n))
+            if maps_forces
+            else None,
         )
     )
-    if planner.value(component, "mapForces") is not False:
-        group.map_forces_up.insert(
-            0,
-            Op(
-                origin,
-                [_call(f"{prefix}_apply_jt", parent.f, child.f, frame_buffer, offset, n)],
-            ),
-        )
 
 
 def _to_local(frames: np.ndarray, frame_of: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -851,23 +971,20 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
     t, n = parent.cpp_type, indices.size
     coord, deriv = parent.datatype.coord_size, parent.datatype.deriv_size
     origin = origin_of(component)
-    group.propagate.append(
-        Op(
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
             origin,
+            parent,
+            child,
             [
-                f"sofac::subset_apply<{t}>({_ptr(parent.x)}, {_ptr(child.x)}, {_ptr(buffer)}, {n}, {coord});",
-                f"sofac::subset_apply<{t}>({_ptr(parent.v)}, {_ptr(child.v)}, {_ptr(buffer)}, {n}, {deriv});",
+                _call(f"subset_apply<{t}>", parent.x, child.x, buffer, n, coord),
+                _call(f"subset_apply<{t}>", parent.v, child.v, buffer, n, deriv),
             ],
+            lambda up, down: _call(f"subset_apply<{t}>", up, down, buffer, n, deriv),
+            (lambda up, down: _call(f"subset_apply_jt<{t}>", up, down, buffer, n)) if maps_forces else None,
         )
     )
-    if planner.value(component, "mapForces") is not False:
-        group.map_forces_up.insert(
-            0,
-            Op(
-                origin,
-                [f"sofac::subset_apply_jt<{t}>({_ptr(parent.f)}, {_ptr(child.f)}, {_ptr(buffer)}, {n});"],
-            ),
-        )
 
 
 LOWERINGS: dict[str, Lowering] = {
@@ -901,6 +1018,7 @@ def format_schedule(plan: Plan) -> str:
             "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
             "rk2": "RK2 (midpoint)",
             "rk4": "RK4",
+            "implicit": "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
         lines.append(
@@ -912,15 +1030,26 @@ def format_schedule(plan: Plan) -> str:
                 "  mapped states: "
                 + ", ".join(f"{s.path} <{s.datatype.name}> x{s.size}" for s in group.mapped)
             )
-        for title, ops in (
-            ("propagate x, v down the mappings", group.propagate),
-            ("reset forces, accumulate forces and gravity", group.forces),
-            ("map forces up (J^T)", group.map_forces_up),
-            ("a = M^-1 f", group.accelerations),
-            ("project constraints on a", group.projections),
-        ):
+        sections: list[tuple[str, list[str]]] = [
+            ("propagate x, v down the mappings", [m.origin for m in group.mappings]),
+            ("reset forces, accumulate forces and gravity", [op.origin for op in group.forces]),
+            ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
+        ]
+        if group.scheme == "implicit":
+            sections += [
+                ("b = h (f - rm M v + (h + rk) K v), projected; M dx", [op.origin for op in group.mass_dx]),
+                ("K dx", [op.origin for op in group.stiffness_dx]),
+                (
+                    f"solve ((1 + h rm) M - h (h + rk) K) dv = b with CG ({origin_of(group.linear_solver)})",
+                    [],
+                ),
+            ]
+        else:
+            sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))
+        sections.append(("project constraints", [p.origin for p in group.projections]))
+        for title, origins in sections:
             lines.append(f"  {title}:")
-            lines.extend(f"    - {op.origin}" for op in ops)
+            lines.extend(f"    - {origin}" for origin in origins)
         lines.append("  update x, v; propagate again")
     idle = [s for s in plan.states if not s.mapped and not any(s in g.states for g in plan.groups)]
     for state in idle:

@@ -73,6 +73,26 @@ inline void mass_acceleration(double* a, const double* f, Index n, const double*
     }
 }
 
+// df += mfact M dx.
+template <class DT>
+inline void mass_multiply(double* df, const double* dx, Index n, const double* mass, Index mass_stride,
+                          double mfact) {
+    for (Index i = 0; i < n; ++i) {
+        const double* mi = mass + i * mass_stride;
+        if constexpr (DT::rigid && DT::coord == 7) {
+            linear<DT>(df, i) += mfact * mi[0] * linear<DT>(dx, i);
+            const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> inertia(mi + 1);
+            angular(df, i) += mfact * (inertia * angular(dx, i));
+        } else if constexpr (DT::rigid) {
+            df[3 * i] += mfact * mi[0] * dx[3 * i];
+            df[3 * i + 1] += mfact * mi[0] * dx[3 * i + 1];
+            df[3 * i + 2] += mfact * mi[1] * dx[3 * i + 2];
+        } else {
+            for (int d = 0; d < DT::deriv; ++d) df[DT::deriv * i + d] += mfact * mi[0] * dx[DT::deriv * i + d];
+        }
+    }
+}
+
 // Kinetic energy 1/2 v.M.v and gravity's potential -m g.x.
 template <class DT>
 inline void mass_energy(const double* x, const double* v, Index n, const double* mass, Index mass_stride,
@@ -107,22 +127,53 @@ struct Springs {
     Index count;
 };
 
+// With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces:
+// (ks - F/d) n n^T + (F/d) I, with F the whole intensity (elastic and damping), as SOFA does.
 template <class D1, class D2>
 inline void spring_forces(const Springs& s, const double* x1, const double* v1, double* f1, const double* x2,
-                          const double* v2, double* f2) {
+                          const double* v2, double* f2, double* jacobians) {
     static_assert(D1::spatial == D2::spatial, "springs join points of the same dimension");
     constexpr int S = D1::spatial;
+    using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
     for (Index k = 0; k < s.count; ++k) {
-        if (!s.enabled[k]) continue;
         const Index a = s.a[k], b = s.b[k];
-        const VecN<S> u = point<D2>(x2, b) - point<D1>(x1, a);
+        VecN<S> u = point<D2>(x2, b) - point<D1>(x1, a);
         const double d = u.norm();
-        if (d < 1.0e-9 || (s.elongation_only[k] && d < s.rest_length[k])) continue;
-        const VecN<S> dir = u / d;
-        const double relative_speed = (linear<D2>(v2, b) - linear<D1>(v1, a)).dot(dir);
-        const double intensity = s.stiffness[k] * (d - s.rest_length[k]) + s.damping[k] * relative_speed;
-        linear<D1>(f1, a) += intensity * dir;
-        linear<D2>(f2, b) -= intensity * dir;
+        if (!s.enabled[k] || !(d > 1.0e-9) || (s.elongation_only[k] && !(d > s.rest_length[k]))) {
+            if (jacobians) Eigen::Map<Block>(jacobians + S * S * k).setZero();
+            continue;
+        }
+        const double inverse_length = 1.0 / d;
+        u *= inverse_length;
+        const double elongation = d - s.rest_length[k];
+        const double relative_speed = u.dot(linear<D2>(v2, b) - linear<D1>(v1, a));
+        const double intensity = s.stiffness[k] * elongation + s.damping[k] * relative_speed;
+        const VecN<S> force = u * intensity;
+        linear<D1>(f1, a) += force;
+        linear<D2>(f2, b) -= force;
+        if (jacobians) {
+            const double tangent = intensity * inverse_length;
+            Eigen::Map<Block> m(jacobians + S * S * k);
+            for (int i = 0; i < S; ++i) {
+                for (int j = 0; j < S; ++j) m(i, j) = (s.stiffness[k] - tangent) * u[i] * u[j];
+                m(i, i) += tangent;
+            }
+        }
+    }
+}
+
+// df_a += kfact dF/dx (dx_b - dx_a), df_b -= the same, with the blocks of the last force pass.
+template <class D1, class D2>
+inline void spring_dforces(const Springs& s, const double* jacobians, const double* dx1, double* df1,
+                           const double* dx2, double* df2, double kfact) {
+    constexpr int S = D1::spatial;
+    using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
+    for (Index k = 0; k < s.count; ++k) {
+        const Index a = s.a[k], b = s.b[k];
+        const Eigen::Map<const Block> m(jacobians + S * S * k);
+        const VecN<S> dforce = m * (linear<D2>(dx2, b) - linear<D1>(dx1, a)) * kfact;
+        linear<D1>(df1, a) += dforce;
+        linear<D2>(df2, b) -= dforce;
     }
 }
 
@@ -154,6 +205,17 @@ inline void rest_shape_forces(double* f, const double* x, const double* rest, co
         const Index i = indices[k];
         const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
         linear<DT>(f, i) -= ks * (point<DT>(x, i) - point<DT>(rest, i));
+    }
+}
+
+// K = -k I on the listed points: df -= kfact k dx.
+template <class DT>
+inline void rest_shape_dforces(double* df, const double* dx, const Index* indices, const double* stiffness,
+                               Index stiffness_count, Index count, double kfact) {
+    for (Index k = 0; k < count; ++k) {
+        const Index i = indices[k];
+        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        linear<DT>(df, i) -= kfact * ks * linear<DT>(dx, i);
     }
 }
 
@@ -260,6 +322,18 @@ template <class DT>
 inline void subset_apply_jt(double* in_f, const double* out_f, const Index* indices, Index n) {
     for (Index k = 0; k < n; ++k)
         for (int d = 0; d < DT::deriv; ++d) in_f[DT::deriv * indices[k] + d] += out_f[DT::deriv * k + d];
+}
+
+// ---- linear algebra on flat vectors (conjugate gradient) ---------------------------------------
+
+inline double dot(const double* a, const double* b, Index size) {
+    double sum = 0.0;
+    for (Index k = 0; k < size; ++k) sum += a[k] * b[k];
+    return sum;
+}
+
+inline void scale(double* a, double factor, Index size) {
+    for (Index k = 0; k < size; ++k) a[k] *= factor;
 }
 
 // ---- guards ------------------------------------------------------------------------------------

@@ -43,6 +43,7 @@ _VERBOSE_LOG = FieldSpec("verbose", Bool(), doc="alias of printLog", sets=("prin
 
 CG_LINEAR_SOLVER = ComponentSpec(
     name="CGLinearSolver",
+    kernel="cg",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="Unpreconditioned conjugate gradient; matrix-free with GraphScattered (default).",

@@ -39,6 +39,7 @@ _VDAMPING = FieldSpec(
 
 EULER_IMPLICIT_SOLVER = ComponentSpec(
     name="EulerImplicitSolver",
+    kernel="euler_implicit",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Linearised backward Euler (one linear solve per step, no Newton iterations).",

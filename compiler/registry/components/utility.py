@@ -41,7 +41,7 @@ TASK_SCHEDULER_SETTINGS = ComponentSpec(
     category=Category.UTILITY,
     module="Sofa.Simulation.Core",
     doc="Configures the global task scheduler (threads).",
-    unsupported_reason="multithreading settings (TaskSchedulerSettings) are not supported",
+    supported=True,  # no part in the step: accepted and ignored by the compiler
     fields=TASK_SCHEDULER_FIELDS,
 )
 
@@ -50,7 +50,7 @@ CONSTRAINT_ATTACH_BUTTON_SETTING = ComponentSpec(
     category=Category.UTILITY,
     module="Sofa.GUI.Component",
     doc="GUI setting: mouse picking attaches objects with Lagrangian constraints.",
-    unsupported_reason="GUI mouse interaction settings are not supported",
+    supported=True,  # no part in the step: accepted and ignored by the compiler
     fields=(FieldSpec("button", Text(), doc="mouse button"),),
 )
 

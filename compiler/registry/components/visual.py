@@ -307,7 +307,7 @@ LINE_AXIS = ComponentSpec(
     category=Category.RENDERING,
     module=_VISUAL_MODULE,
     doc="Draws the world axes as lines.",
-    unsupported_reason="LineAxis is not supported (rendering only)",
+    supported=True,  # no part in the step: accepted and ignored by the compiler
     effects=_VISUAL,
     fields=(
         FieldSpec("axis", Text(), "xyz", "axes drawn"),
@@ -346,7 +346,7 @@ VISUAL_3D_TEXT = ComponentSpec(
     category=Category.RENDERING,
     module=_VISUAL_MODULE,
     doc="3-D text facing the camera.",
-    unsupported_reason="Visual3DText is not supported (rendering only)",
+    supported=True,  # no part in the step: accepted and ignored by the compiler
     effects=_VISUAL,
     fields=(
         FieldSpec("text", Text()),
