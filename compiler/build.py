@@ -35,7 +35,17 @@ from .resources import resource_dir
 
 CACHE_ENV = "SOFAC_CACHE_DIR"
 COMPILER_ENV = "CXX"
-SCENE_FLAGS = ("-std=c++17", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-DNDEBUG", "-w")
+# No fused multiply-adds: SOFA's reference results are computed without them (bit-exact CG).
+SCENE_FLAGS = (
+    "-std=c++17",
+    "-O2",
+    "-ffp-contract=off",
+    "-shared",
+    "-fPIC",
+    "-fvisibility=hidden",
+    "-DNDEBUG",
+    "-w",
+)
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3", "/opt/homebrew/include/eigen3")
 
 

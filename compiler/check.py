@@ -23,7 +23,7 @@ from .model import Component, Node, Scene
 from .registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from .registry.components.common import MATRIX_TEMPLATE_ALIASES
 from .registry.datatypes import DATATYPES, canonical_datatype, split_template
-from .registry.fields import Coords, FieldValueError, Link, LinkList, Springs
+from .registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, Springs
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -148,6 +148,9 @@ class _Checker:
             if checked.spec is not None:
                 self._check_indices(checked)
         self._check_plugins()
+        for checked in self.checked:
+            if checked.spec is not None and checked.spec.name == "UniformMass":
+                self._check_rigid_inertia(checked)
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)
         return self.checked
@@ -261,6 +264,17 @@ class _Checker:
                 value = field_spec.type.parse(attribute.value)
             except FieldValueError as error:
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
+                continue
+            if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
+                # Only the mass itself: a rigid mass's volume and inertia terms may be 0 (or negative
+                # off the diagonal).
+                self.diags.add(
+                    "E207",
+                    attribute.loc,
+                    f"{owner}: {name}={attribute.value.strip()[:40]!r}: the mass (its first number) "
+                    "must be > 0",
+                    "use a physically meaningful value",
+                )
                 continue
             if field_spec.valid is not None and not self._valid(value, field_spec):
                 self.diags.add(
@@ -452,8 +466,13 @@ class _Checker:
                 continue
             if not (checked.category.acts_on_state or checked.category is Category.COLLISION_MODEL):  # type: ignore[union-attr]
                 continue
-            if checked.links.get("object1") is not None or checked.links.get("object2") is not None:
-                continue  # acts between the two states it links (e.g. BilateralLagrangianConstraint)
+            first, second = checked.links.get("object1"), checked.links.get("object2")
+            if first is not None or second is not None:
+                # Acts between the two states it links (e.g. BilateralLagrangianConstraint); when both
+                # are one state (MeshSpringForceField's default "@./" twice), it acts on that state.
+                if first is second and isinstance(first, Component) and self._is(first, Category.STATE):
+                    checked.state = first
+                continue
             explicit = checked.links.get("mstate")
             state = explicit if isinstance(explicit, Component) else None
             if state is None:
@@ -850,6 +869,90 @@ class _Checker:
                 "to this node or an ancestor",
             )
 
+    # --- rigid inertia -----------------------------------------------------------------------
+    def _check_rigid_inertia(self, checked: CheckedComponent) -> None:
+        """W230: an anisotropic inertia on a Rigid3d body that can rotate.
+
+        SOFA's UniformMass<Rigid3d> applies the inertia matrix as given, in world axes: it is not
+        turned with the body (R I R^T) and the gyroscopic term w x (I w) is left out. This is exact
+        only for an isotropic inertia (a multiple of the identity) or a body that never rotates.
+        """
+        state = checked.state
+        if state is None or checked.template != "Rigid3d" or not self._is(state, Category.STATE):
+            return
+        vertex = self.value(checked, "vertexMass")
+        values = np.asarray(vertex if vertex is not None else (), dtype=float).ravel()
+        if values.size != 11 or not np.isfinite(values).all():
+            return  # the default inertia (identity), or a count error reported elsewhere
+        inertia = values[2:].reshape(3, 3)
+        if np.allclose(inertia, inertia[0, 0] * np.eye(3), rtol=1e-9, atol=0.0):
+            return
+        if self.checked.solver_of(state.node) is None:
+            return  # never integrated: W220 says so when it matters
+        size = self.state_size(state)
+        if size is not None and self._fixed_dofs(state) >= set(range(size)):
+            return
+        why = self._rotation_cause(state)
+        if why is None:
+            return
+        owner = f"UniformMass {checked.component.label!r}"
+        principal = np.linalg.eigvalsh((inertia + inertia.T) / 2)
+        self.diags.add(
+            "W230",
+            checked.component.attribute_loc(self._attribute_name(checked, "vertexMass")),
+            f"{owner}: the inertia of {state.label!r} is anisotropic (principal values per unit mass "
+            f"{', '.join(f'{v:.4g}' for v in principal)}) and the body can rotate ({why}); SOFA (and "
+            "sofac, to match it) applies the inertia in world axes, without turning it with the body and "
+            "without the gyroscopic term w x Iw, so a spinning anisotropic body moves wrongly",
+            "results match SOFA, not rigid-body mechanics: where the body turns far from its initial "
+            "orientation, use an isotropic inertia (a multiple of the identity) or check the motion "
+            "against an exact rigid-body model",
+        )
+
+    def _fixed_dofs(self, state: Component) -> set[int]:
+        """The DOFs of ``state`` that a FixedProjectiveConstraint holds."""
+        fixed: set[int] = set()
+        for other in self.checked:
+            if other.state is not state or other.spec is None or other.spec.kernel != "fixed":
+                continue
+            if self.value(other, "fixAll"):
+                return set(range(self.state_size(state) or 0))
+            indices = self.value(other, "indices")
+            if indices is not None:
+                fixed.update(int(i) for i in np.ravel(indices))
+        return fixed
+
+    def _rotation_cause(self, state: Component) -> str | None:
+        """Why a rigid state can rotate: an initial spin, or something that can apply a torque."""
+        velocity = self.value(self.checked.of(state), "velocity")
+        if velocity is not None and np.size(velocity) and np.size(velocity) % 6 == 0:
+            spins = np.asarray(velocity, dtype=float).reshape(-1, 6)[:, 3:]
+            if np.any(spins != 0):
+                return "it starts with an angular velocity"
+        acting = (
+            Category.FORCEFIELD,
+            Category.INTERACTION_FORCEFIELD,
+            Category.LAGRANGIAN_CONSTRAINT,
+            Category.COLLISION_MODEL,
+        )
+        for other in self.checked:
+            if other.spec is None:
+                continue
+            label = f"{other.spec.name} {other.component.label!r}"
+            if other.category in acting and (
+                other.state is state or state in (other.links.get("object1"), other.links.get("object2"))
+            ):
+                return f"{label} acts on it"
+            if other.category in (Category.MAPPING, Category.MULTI_MAPPING):
+                inputs = [other.links.get("input"), *other.link_lists.get("input", ())]
+                output = other.links.get("output")
+                outputs = [output, *other.link_lists.get("output", ())]
+                if any(i is state for i in inputs) and any(
+                    isinstance(o, Component) and self._is(o, Category.STATE) for o in outputs
+                ):
+                    return f"{label} maps it to a mechanical state whose forces give it torques"
+        return None
+
     # --- indices -----------------------------------------------------------------------------
     def _check_indices(self, checked: CheckedComponent) -> None:
         spec = checked.spec
@@ -862,6 +965,8 @@ class _Checker:
             value = self.value(checked, field_spec.name)
             if value is None or np.size(value) == 0:
                 continue
+            if field_spec.name == "rigidIndexPerPoint" and np.size(value) != self._mapped_points(checked):
+                continue  # SOFA ignores it then (and uses `index` for every point)
             attribute = self._attribute_name(checked, field_spec.name)
             loc = checked.component.attribute_loc(attribute)
             owner = f"{spec.name} {checked.component.label!r}"
@@ -875,6 +980,22 @@ class _Checker:
             else:
                 state = self._indexed_state(checked, field_spec.indexes or "state")
                 self._report_range(owner, field_spec.name, loc, np.asarray(value, dtype=np.int64), state)
+
+    def _mapped_points(self, checked: CheckedComponent) -> int | None:
+        """How many points a mapping maps: its output's positions (state or visual model), if known."""
+        output = checked.links.get("output")
+        if not isinstance(output, Component):
+            return None
+        target = self.checked.components.get(id(output))
+        if target is None or target.spec is None or target.spec.field("position") is None:
+            return None
+        if target.category is Category.STATE:
+            return self.state_size(output)
+        value = self.value(target, "position")
+        width = (target.datatype or DATATYPES["Vec3d"]).coord_size
+        if value is None or np.size(value) == 0 or np.size(value) % width:
+            return None
+        return int(np.size(value)) // width
 
     def _indexed_state(self, checked: CheckedComponent, role: str) -> Component | None:
         if role == "state":
@@ -996,6 +1117,12 @@ class _EvalContext:
 
     def file(self, name: str) -> Path | None:
         return self.checker.file_of(self.checked, name)
+
+    def linked(self, link: str, name: str) -> Any:
+        target = self.checked.links.get(link)
+        if not isinstance(target, Component):
+            return None
+        return self.checker.value(self.checker.checked.of(target), name)
 
     def input_positions(self) -> np.ndarray | None:
         if self.is_set("position"):

@@ -41,6 +41,10 @@ class Context(Protocol):
 
     def input_positions(self) -> np.ndarray | None: ...
 
+    def linked(self, link: str, name: str) -> Any:
+        """The value of field ``name`` of the component the link field ``link`` points to."""
+        ...
+
 
 Outputs = dict[str, np.ndarray]
 
@@ -93,20 +97,23 @@ def grid(ctx: Context) -> Outputs:
         counts = np.asarray(ctx.value("n"), dtype=np.int64)
     legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
     if all(ctx.is_set(name) for name in legacy_bounds):
-        bounds = np.array([float(ctx.value(name)) for name in legacy_bounds])
+        # SOFA reads the legacy bounds as single-precision floats.
+        bounds = np.array([float(np.float32(ctx.value(name))) for name in legacy_bounds])
         low, high = bounds[:3], bounds[3:]
     else:
         low = np.asarray(ctx.value("min"), dtype=float)
         high = np.asarray(ctx.value("max"), dtype=float)
     if (counts < 1).any():
         raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
-    axes = [
-        np.linspace(low[a], high[a], int(counts[a])) if counts[a] > 1 else np.array([low[a]])
-        for a in range(3)
-    ]
-    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
-    points = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
-    return {"position": points.ravel(), **_grid_cells(counts)}
+    from .barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
+
+    lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    return {
+        "position": lattice.points().ravel(),
+        "resolution": counts.astype(np.int64),
+        "bounds": np.concatenate([low, high]).astype(float),
+        **_grid_cells(counts),
+    }
 
 
 def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
@@ -156,7 +163,36 @@ def box_roi(ctx: Context) -> Outputs:
     return {"indices": np.flatnonzero(inside).astype(np.int64)}
 
 
+def hexa_to_tetra(ctx: Context) -> Outputs:
+    """Hexa2TetraTopologicalMapping: 6 tetrahedra per input hexahedron, in SOFA's patterns; with
+    ``swapping`` the corners are mirrored by the cell's grid parity (a conforming mesh)."""
+    from .fem_topology import HEXA_X_EDGES, HEXA_Y_EDGES, HEXA_Z_EDGES, TETRA_SPLIT
+
+    hexahedra = ctx.linked("input", "hexahedra")
+    if hexahedra is None or not np.size(hexahedra):
+        raise UnknownInput("the input topology's hexahedra are not known at compile time")
+    cells = np.asarray(hexahedra, dtype=np.int64).reshape(-1, 8).copy()
+    resolution = ctx.linked("input", "resolution")
+    nx, ny = (int(resolution[0]) - 1, int(resolution[1]) - 1) if resolution is not None else (2, 1)
+    swaps = np.zeros(len(cells), dtype=np.int64)
+    if ctx.value("swapping"):
+        index = np.arange(len(cells))
+        for mask, edges in (
+            ((index % max(nx, 1)) % 2 == 0, HEXA_X_EDGES),
+            (((index // max(nx, 1)) % max(ny, 1)) % 2 == 1, HEXA_Y_EDGES),
+            ((index // max(nx * ny, 1)) % 2 == 1, HEXA_Z_EDGES),
+        ):
+            for a, b in edges:
+                cells[mask, a], cells[mask, b] = cells[mask, b].copy(), cells[mask, a].copy()
+            swaps += mask
+    straight = np.array(TETRA_SPLIT, dtype=np.int64)
+    mirrored = straight[:, [0, 1, 3, 2]]  # SOFA's swapped pattern: the last two corners exchanged
+    tetrahedra = np.where((swaps % 2 == 1)[:, None, None], cells[:, mirrored], cells[:, straight])
+    return {"tetrahedra": tetrahedra.reshape(-1)}
+
+
 EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
+    "hexa_to_tetra": hexa_to_tetra,
     "mesh_loader": mesh_loader,
     "sphere_loader": sphere_loader,
     "grid": grid,

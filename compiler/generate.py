@@ -48,6 +48,7 @@ class _StateView:
         self.x, self.v, self.f, self.acc = state.x, state.v, state.f, state.acc
         self.dx, self.df = state.dx, state.df
         self.size = state.size
+        self.width = state.datatype.deriv_size
         self.cpp_type = state.cpp_type
         self.stages = state.stages
         self.path_comment = _comment(state.path)
@@ -82,6 +83,7 @@ class _GroupView:
         self.symplectic = group.symplectic
         self.origin = origin_of(group.solver)
         self.states = [_StateView(s) for s in group.states]
+        self.mapped = [_StateView(s) for s in group.mapped]
         self.all_states = [_StateView(s) for s in (*group.states, *group.mapped)]
         self.mappings = [_MappingView(m) for m in group.mappings]
         self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
@@ -91,6 +93,7 @@ class _GroupView:
         self.mass_dx = group.mass_dx
         self.stiffness_dx = group.stiffness_dx
         self.energy = group.energy
+        self.init = group.init
         self.implicit = group.implicit
         self.cg = group.cg
 

@@ -135,6 +135,7 @@ class Group:
     mass_dx: list[Op] = field(default_factory=list)  # df += mfact M dx (implicit)
     stiffness_dx: list[Op] = field(default_factory=list)  # df += kfact K dx (implicit)
     energy: list[Op] = field(default_factory=list)
+    init: list[Op] = field(default_factory=list)  # once, when an instance is created or reset
     # Implicit Euler: parameter buffers (rayleighStiffness, rayleighMass, vdamping) and the linear solver.
     implicit: dict[str, Buffer] = field(default_factory=dict)
     linear_solver: Component | None = None
@@ -244,12 +245,19 @@ class _Planner:
     def _screen(self) -> None:
         """Every component that takes part in the step must have a lowering."""
         has_pipeline = any(c.category is Category.COLLISION_PIPELINE for c in self.checked)
+        contacts = has_pipeline and self._contacts_possible()
         for checked in self.checked:
             spec = checked.spec
             if spec is None:
                 continue
-            if checked.category is Category.COLLISION_MODEL and has_pipeline:
+            if checked.category is Category.COLLISION_MODEL and contacts:
                 self.unsupported(checked, "collision detection and response are not compiled yet")
+            elif checked.category is Category.TOPOLOGICAL_MAPPING and self._feeds_a_state(checked):
+                self.unsupported(checked, "its output topology sizes a MechanicalObject; not evaluated yet")
+            elif checked.category is Category.COLLISION_MODEL:
+                self.ignored.append(
+                    (checked.component, "no other collision model to touch: no contact possible")
+                )
             elif checked.category in _STEP_CATEGORIES and not spec.kernel:
                 if self._is_visual_mapping(checked):
                     self.ignored.append((checked.component, "visual mapping: computed only for rendering"))
@@ -257,6 +265,21 @@ class _Planner:
                 self.unsupported(checked, f"sofac cannot compile {spec.name} yet")
             elif checked.category not in _STEP_CATEGORIES:
                 self.ignored.append((checked.component, f"{checked.category.value}: no part in the step"))
+
+    def _feeds_a_state(self, checked: CheckedComponent) -> bool:
+        """Its output topology is what sizes a MechanicalObject (whose points are then unknown)."""
+        output = checked.links.get("output")
+        node = output.node if isinstance(output, Component) else None
+        return node is not None and any(
+            self.checked.of(c).category is Category.STATE and self.checked.positions(c) is None
+            for c in node.objects
+        )
+
+    def _contacts_possible(self) -> bool:
+        """SOFA tests pairs of collision models of different nodes (of one node: selfCollision)."""
+        models = [c for c in self.checked if c.category is Category.COLLISION_MODEL]
+        nodes = {id(c.component.node) for c in models}
+        return len(nodes) > 1 or any(self.value(c.component, "selfCollision") for c in models)
 
     def _is_visual_mapping(self, checked: CheckedComponent) -> bool:
         output = checked.links.get("output")
@@ -507,7 +530,53 @@ def _lower_uniform_mass(planner: _Planner, checked: CheckedComponent, owner: dic
     _add_mass(planner, checked, state, group, buffer, 0)
 
 
+_CELL_KINDS = ("edges", "triangles", "quads", "tetrahedra", "hexahedra")
+
+
+def _topology_of(planner: _Planner, checked: CheckedComponent) -> Component | None:
+    """The topology a component uses: its ``topology`` link, else the one in its context."""
+    topology = checked.links.get("topology")
+    if isinstance(topology, Component):
+        return topology
+    return planner.checked.resolver._singleton(checked.component.node, "topology")
+
+
+def _topology_cells(planner: _Planner, checked: CheckedComponent) -> dict[str, np.ndarray] | None:
+    """The elements of the topology a component uses."""
+    topology = _topology_of(planner, checked)
+    if topology is None:
+        return None
+    cells: dict[str, np.ndarray] = {}
+    for kind in (*_CELL_KINDS, "resolution"):
+        value = planner.value(topology, kind)
+        if value is not None and np.size(value):
+            cells[kind] = np.asarray(value, dtype=np.int64).ravel()
+    for other in planner.checked:  # elements written into it by a topological mapping
+        if other.category is Category.TOPOLOGICAL_MAPPING and other.links.get("output") is topology:
+            for kind in _CELL_KINDS:
+                value = planner.value(other.component, kind)
+                if kind not in cells and value is not None and np.size(value):
+                    cells[kind] = np.asarray(value, dtype=np.int64).ravel()
+    return cells
+
+
+def _split_hexahedra(cells: dict[str, np.ndarray]) -> np.ndarray | None:
+    """TetrahedronFEMForceField on hexahedra (a grid, a hexahedral mesh): 6 tetrahedra per cell, as
+    SOFA splits them (mirrored by the cell's parity on a grid)."""
+    from .fem_topology import tetrahedra_from_grid, tetrahedra_from_hexahedra
+
+    if "resolution" in cells and (cells["resolution"] > 1).all():
+        return np.asarray(tetrahedra_from_grid(cells["resolution"].tolist()), dtype=np.int64).ravel()
+    if "hexahedra" in cells:
+        return np.asarray(
+            tetrahedra_from_hexahedra(cells["hexahedra"].reshape(-1, 8)), dtype=np.int64
+        ).ravel()
+    return None
+
+
 def _lower_diagonal_mass(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    from . import masses
+
     found = _target(planner, checked, owner)
     if found is None:
         return
@@ -515,12 +584,219 @@ def _lower_diagonal_mass(planner: _Planner, checked: CheckedComponent, owner: di
     if state.datatype.rigid:
         planner.unsupported(checked, "DiagonalMass on rigid frames is not compiled yet")
         return
-    masses = planner.value(checked.component, "vertexMass")
-    if masses is None or np.size(masses) != state.size:
-        planner.unsupported(checked, "DiagonalMass computed from a topology is not compiled yet")
+    component = checked.component
+    vertex = planner.value(component, "vertexMass")
+    if component.get("totalMass") is None and component.get("massDensity") is None and vertex is not None:
+        values = np.asarray(vertex, dtype=float).ravel()
+    else:
+        cells = _topology_cells(planner, checked) or {}
+        rest = planner.checked.positions(state.component)
+        try:
+            values = masses.diagonal_mass(
+                rest,
+                edges=cells.get("edges"),
+                triangles=cells.get("triangles"),
+                quads=cells.get("quads"),
+                tetrahedra=cells.get("tetrahedra"),
+                hexahedra=cells.get("hexahedra"),
+                mass_density=_written_float(planner, component, "massDensity"),
+                total_mass=_written_float(planner, component, "totalMass"),
+                vertex_mass=vertex,
+            )
+        except ValueError as error:
+            planner.unsupported(checked, f"its masses cannot be computed: {error}")
+            return
+    if values.size != state.size:
+        planner.unsupported(checked, f"it gives {values.size} masses for {state.size} DOFs")
         return
-    buffer = planner.buffer(checked.component, "vertexMass", masses, role="param")
+    buffer = planner.buffer(component, "vertexMass", values, role="param")
     _add_mass(planner, checked, state, group, buffer, 1)
+
+
+def _written_float(planner: _Planner, component: Component, name: str) -> float | None:
+    """A field's value when the scene sets it (or links it), else None (SOFA's isSet())."""
+    if component.get(name) is None:
+        return None
+    value = planner.value(component, name)
+    return None if value is None else float(np.asarray(value, dtype=float).ravel()[0])
+
+
+def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    from . import masses
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.rigid:
+        planner.unsupported(checked, "MeshMatrixMass on rigid frames is not compiled yet")
+        return
+    lumping = bool(planner.value(component, "lumping"))
+    if group.scheme != "implicit" and not lumping:
+        planner.unsupported(
+            checked, "a consistent mass with an explicit solver (a linear solve) is not compiled yet"
+        )
+        return
+    cells = _topology_cells(planner, checked) or {}
+    density = planner.value(component, "massDensity") if component.get("massDensity") is not None else None
+    try:
+        data = masses.mesh_matrix_mass(
+            planner.checked.positions(state.component),
+            edges=cells.get("edges"),
+            triangles=cells.get("triangles"),
+            quads=cells.get("quads"),
+            tetrahedra=cells.get("tetrahedra"),
+            hexahedra=cells.get("hexahedra"),
+            mass_density=density,
+            total_mass=_written_float(planner, component, "totalMass"),
+            lumping=lumping,
+        )
+    except ValueError as error:
+        planner.unsupported(checked, f"its masses cannot be computed: {error}")
+        return
+    width, n = state.datatype.deriv_size, state.size
+    vertex = planner.buffer(component, "vertexMass", data.vertex_mass, role="param")
+    edges = planner.buffer(component, "edges", data.edges, "i64", columns=2)
+    edge_mass = planner.buffer(component, "edgeMass", data.edge_mass, role="param")
+    coefficient = repr(float(data.lumping_coefficient)) if lumping else "1.0"
+    lumped_factor = repr(float(data.lumping_coefficient))
+    origin = origin_of(component)
+    g = planner.gravity
+    group.forces.append(
+        Op(origin, [_call("mesh_matrix_mass_gravity", state.f, vertex, n, lumped_factor, g, width)])
+    )
+    if group.scheme == "implicit":
+        if lumping:
+            code = _call(
+                "mesh_matrix_mass_multiply_lumped", state.df, state.dx, vertex, n, coefficient, "mfact", width
+            )
+        else:
+            code = _call(
+                "mesh_matrix_mass_multiply",
+                state.df,
+                state.dx,
+                vertex,
+                n,
+                edges,
+                edge_mass,
+                _count(edge_mass),
+                "mfact",
+                width,
+            )
+        group.mass_dx.append(Op(origin, [code]))
+    elif state.acc is not None:
+        group.accelerations.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "mesh_matrix_mass_acceleration_lumped",
+                        state.acc,
+                        state.f,
+                        vertex,
+                        n,
+                        coefficient,
+                        width,
+                    )
+                ],
+            )
+        )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "kinetic += "
+                + _call(
+                    "mesh_matrix_mass_kinetic_energy",
+                    state.v,
+                    vertex,
+                    n,
+                    edges,
+                    edge_mass,
+                    _count(edge_mass),
+                    "true" if lumping else "false",
+                    coefficient,
+                    width,
+                ),
+                "potential += "
+                + _call(f"gravity_potential<{state.cpp_type}>", state.x, n, vertex, g, lumped_factor),
+            ],
+        )
+    )
+
+
+_FEM_METHODS = {"small": 0, "large": 1, "polar": 2, "svd": 3}
+# (kernel prefix, element kind, corners, data size per element by method)
+_FEM_KINDS = {
+    "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
+    "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
+    "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
+}
+
+
+def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    assert checked.spec is not None
+    prefix, kind, corners, sizes = _FEM_KINDS[checked.spec.kernel]
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
+        return
+    method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), 1)
+    if prefix != "tetra_fem" and method == 3:
+        method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
+    topology = _topology_cells(planner, checked) or {}
+    cells = topology.get(kind)
+    if (cells is None or not cells.size) and prefix == "tetra_fem":
+        cells = _split_hexahedra(topology)
+    if cells is None or not cells.size:
+        planner.unsupported(checked, f"it needs {kind} known at compile time")
+        return
+    count = cells.size // corners
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, kind, cells, "i64", columns=corners)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+    )
+    data = planner.buffer(component, "elements", np.zeros(count * sizes[method]), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"{prefix}_init",
+                    elements,
+                    count,
+                    state.rest,
+                    young_buffer,
+                    _count(young_buffer),
+                    poisson_buffer,
+                    _count(poisson_buffer),
+                    method,
+                    data,
+                )
+            ],
+        )
+    )
+    group.forces.append(
+        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call(f"{prefix}_add_dforce", elements, count, state.dx, state.df, "kfact", data, method)],
+            )
+        )
 
 
 def _add_mass(
@@ -987,7 +1263,82 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
     )
 
 
+def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    from .barycentric import RegularGrid, barycentric_map, mapper_for
+
+    ends = _mapping_ends(planner, checked, owner)
+    if ends is None:
+        return
+    parent, child, group = ends
+    component = checked.component
+    if parent.datatype.name != "Vec3d" or child.datatype.name != "Vec3d":
+        planner.unsupported(checked, "BarycentricMapping other than Vec3d,Vec3d is not compiled yet")
+        return
+    # The input's topology: input_topology when given, else the one in the input state's context.
+    given = checked.links.get("input_topology")
+    probe = CheckedComponent(
+        parent.component, None, links={"topology": given} if isinstance(given, Component) else {}
+    )
+    cells = _topology_cells(planner, probe) or {}
+    # The input topology's class decides which of SOFA's mappers embeds the points.
+    topology = _topology_of(planner, probe)
+    topology_spec = planner.checked.of(topology).spec if topology is not None else None
+    mode = mapper_for(topology_spec.name if topology_spec else "")
+    grid = None
+    if mode == "regular_grid" and topology is not None:
+        bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
+        grid = RegularGrid(tuple(int(c) for c in cells["resolution"]), tuple(bounds[:3]), tuple(bounds[3:]))
+    elif mode == "sparse_grid":
+        planner.unsupported(checked, "a BarycentricMapping on a SparseGridTopology is not compiled yet")
+        return
+    rest = planner.checked.positions(parent.component)
+    points = planner.checked.positions(child.component)
+    if rest is None or points is None:
+        planner.unsupported(checked, "its input or output positions are not known at compile time")
+        return
+    try:
+        indices, weights = barycentric_map(
+            rest,
+            points,
+            tetrahedra=cells.get("tetrahedra"),
+            hexahedra=cells.get("hexahedra"),
+            triangles=cells.get("triangles"),
+            quads=cells.get("quads"),
+            edges=cells.get("edges"),
+            grid=grid,
+            topology="dynamic" if mode == "dynamic" else "mesh",
+        )
+    except ValueError as error:
+        planner.unsupported(checked, f"it cannot embed its points: {error}")
+        return
+    n, k = indices.shape
+    index_buffer = planner.buffer(component, "indices", indices, "i64", columns=k)
+    weight_buffer = planner.buffer(component, "weights", weights, columns=k)
+    maps_forces = planner.value(component, "mapForces") is not False
+
+    def jacobian(up: Buffer, down: Buffer) -> str:
+        return _call("linear_map_apply", up, down, index_buffer, weight_buffer, n, k, 3)
+
+    group.mappings.append(
+        MappingOp(
+            origin_of(component),
+            parent,
+            child,
+            [jacobian(parent.x, child.x), jacobian(parent.v, child.v)],
+            jacobian,
+            (lambda up, down: _call("linear_map_apply_jt", up, down, index_buffer, weight_buffer, n, k, 3))
+            if maps_forces
+            else None,
+        )
+    )
+
+
 LOWERINGS: dict[str, Lowering] = {
+    "mesh_matrix_mass": _lower_mesh_matrix_mass,
+    "tetra_fem": _lower_fem,
+    "tetracorot_fem": _lower_fem,
+    "hexa_fem": _lower_fem,
+    "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,
     "diagonal_mass": _lower_diagonal_mass,
     "springs": _lower_springs,

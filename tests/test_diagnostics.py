@@ -62,6 +62,19 @@ PART = """\
 </Node>
 """
 
+# A node "body" (line 6) with two rigid frames (line 7), a mass (line 8) and mapped points (line 11).
+RIGID_BODY = """\
+    <Node name="body">
+        <MechanicalObject template="Rigid3d" name="frame" position="0 0 0 0 0 0 1  1 0 0 0 0 0 1"/>
+        <UniformMass {mass}/>
+        <Node name="pts">
+            <MechanicalObject position="{points}"/>
+            <RigidMapping rigidIndexPerPoint="{per_point}"/>
+        </Node>
+    </Node>
+"""
+ANISOTROPIC = 'vertexMass="1 1 [1 0 0, 0 2 0, 0 0 3]"'
+
 CASES = [
     # --- reading files
     Case("malformed", "E101", "<Node>\n    <A>\n    </B>\n</Node>\n", 3),
@@ -218,6 +231,20 @@ CASES = [
         6,
         "youngModulus",
     ),
+    Case("vertex-mass-zero", "E207", dyn('    <UniformMass vertexMass="0"/>\n'), 6, "vertexMass"),
+    Case(
+        "rigid-vertex-mass-negative",
+        "E207",
+        dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1"/>
+        <UniformMass vertexMass="-2 1 [1 0 0, 0 1 0, 0 0 1]"/>
+    </Node>
+"""),
+        8,
+        "vertexMass",
+        hint="meaningful",
+    ),
     Case("dt-zero", "E207", '<Node name="root"\n      dt="0">\n</Node>\n', 2, "dt"),
     Case("dt-negative", "E207", '<Node name="root" dt="-0.01">\n</Node>\n', 1, "dt"),
     # --- templates and states
@@ -357,6 +384,13 @@ CASES = [
     Case("negative-index", "E218", dyn('    <FixedProjectiveConstraint indices="-1"/>\n'), 6, "indices"),
     Case("spring-end", "E218", dyn('    <SpringForceField spring="0 7 10 0.1 1"/>\n'), 6, "spring"),
     Case(
+        "rigid-index-per-point",
+        "E218",
+        dyn(RIGID_BODY.format(mass='vertexMass="1"', points="0 0 0  1 0 0", per_point="0 2")),
+        11,
+        "rigidIndexPerPoint",
+    ),
+    Case(
         "boxroi-result",
         "E218",
         dyn("""\
@@ -420,6 +454,26 @@ CASES = [
         6,
         "filename",
     ),
+    Case(
+        "anisotropic-inertia-spinning",
+        "W230",
+        dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1" velocity="0 0 0 0 0 1"/>
+        <UniformMass vertexMass="1 1 [1 0 0, 0 2 0, 0 0 3]"/>
+    </Node>
+"""),
+        8,
+        "vertexMass",
+        hint="isotropic",
+    ),
+    Case(
+        "anisotropic-inertia-torque-from-mapped-point",
+        "W230",
+        dyn(RIGID_BODY.format(mass=ANISOTROPIC, points="0 0 0  1 0 0", per_point="0 1")),
+        8,
+        "vertexMass",
+    ),
 ]
 
 # Codes tested by the dedicated tests further down (they need another entry point than check_file).
@@ -474,6 +528,46 @@ CLEAN = {
         <Node name="b">
             <OglModel src="@../../../loader"/>
         </Node>
+    </Node>
+"""),
+    # SOFA uses rigidIndexPerPoint only with one entry per mapped point, else `index` for all of
+    # them (corpus: Component/SolidMechanics/Spring/JointSpringForceField.scn:35): 2 is not checked.
+    "rigid-index-per-point-ignored": dyn(
+        RIGID_BODY.format(mass='vertexMass="1"', points="0 0 0  1 0 0", per_point="0 2 2")
+    ),
+    # A rigid mass: only the mass must be > 0; a zero volume, negative off-diagonal inertia terms.
+    "rigid-inertia-off-diagonal": dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1"/>
+        <UniformMass vertexMass="2 0 [1 -0.2 0, -0.2 1 0, 0 0 1]"/>
+    </Node>
+"""),
+    # W230 only where the body can rotate: an isotropic inertia spinning, an anisotropic one that
+    # only falls (gravity gives no torque), one with every DOF fixed, a 2D body (scalar inertia).
+    "isotropic-inertia-spinning": dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1" velocity="0 0 0 1 2 3"/>
+        <UniformMass vertexMass="1 1 [2 0 0, 0 2 0, 0 0 2]"/>
+        <ConstantForceField forces="0 0 0 1 0 0"/>
+    </Node>
+"""),
+    "anisotropic-inertia-falling": dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1" velocity="1 0 0 0 0 0"/>
+        <UniformMass vertexMass="1 1 [1 0 0, 0 2 0, 0 0 3]"/>
+    </Node>
+"""),
+    "anisotropic-inertia-fixed": dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1" velocity="0 0 0 0 0 1"/>
+        <UniformMass vertexMass="1 1 [1 0 0, 0 2 0, 0 0 3]"/>
+        <FixedProjectiveConstraint fixAll="true"/>
+    </Node>
+"""),
+    "rigid2d-spinning": dyn("""\
+    <Node name="r">
+        <MechanicalObject template="Rigid2d" position="0 0 0" velocity="0 0 1"/>
+        <UniformMass vertexMass="1 1 0.3"/>
     </Node>
 """),
     # A BoxROI without a box: nothing to evaluate, no crash.

@@ -112,6 +112,15 @@ inline void mass_energy(const double* x, const double* v, Index n, const double*
     }
 }
 
+// Gravity's potential -sum m_i g.x_i of per-point masses (times `factor`).
+template <class DT>
+inline double gravity_potential(const double* x, Index n, const double* mass, const double* g, double factor) {
+    double potential = 0.0;
+    for (Index i = 0; i < n; ++i)
+        for (int d = 0; d < DT::spatial; ++d) potential -= mass[i] * factor * g[d] * x[DT::coord * i + d];
+    return potential;
+}
+
 // ---- force fields ------------------------------------------------------------------------------
 
 // Springs between point a of state 1 and point b of state 2 (may be the same state):
@@ -326,9 +335,14 @@ inline void subset_apply_jt(double* in_f, const double* out_f, const Index* indi
 
 // ---- linear algebra on flat vectors (conjugate gradient) ---------------------------------------
 
-inline double dot(const double* a, const double* b, Index size) {
+// a.b over n derivatives of `width` numbers, summed per derivative first, as SOFA's vector dot.
+inline double dot(const double* a, const double* b, Index n, int width) {
     double sum = 0.0;
-    for (Index k = 0; k < size; ++k) sum += a[k] * b[k];
+    for (Index i = 0; i < n; ++i) {
+        double block = a[width * i] * b[width * i];
+        for (int d = 1; d < width; ++d) block += a[width * i + d] * b[width * i + d];
+        sum += block;
+    }
     return sum;
 }
 

@@ -31,6 +31,7 @@ _GATHER = (
 
 TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedronFEMForceField",
+    kernel="tetra_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Linear tetrahedra (constant strain), small or corotational (large/polar/svd). Uses the "
@@ -85,6 +86,7 @@ TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
 
 TETRAHEDRAL_COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedralCorotationalFEMForceField",
+    kernel="tetracorot_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Corotational linear tetrahedra on a dynamic TetrahedronSetTopology (same physics as "
@@ -146,6 +148,7 @@ _HEXAHEDRON_FIELDS = (
 
 HEXAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
     name="HexahedronFEMForceField",
+    kernel="hexa_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Trilinear hexahedra (8-node bricks), small or corotational, on the topology's hexahedra.",

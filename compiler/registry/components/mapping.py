@@ -20,6 +20,7 @@ _GEOMETRIC_STIFFNESS = FieldSpec(
 
 BARYCENTRIC_MAPPING = ComponentSpec(
     name="BarycentricMapping",
+    kernel="barycentric_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child points embedded in the cells of the parent's topology (grid cells, tetrahedra, "

@@ -83,6 +83,7 @@ DIAGONAL_MASS = ComponentSpec(
 
 MESH_MATRIX_MASS = ComponentSpec(
     name="MeshMatrixMass",
+    kernel="mesh_matrix_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="Consistent finite-element mass matrix (vertex and edge terms) from the node's topology; "

@@ -337,13 +337,16 @@ _TOPO_LINKS = (
 )
 
 
-def _topological_mapping(name: str, doc: str, *extra: FieldSpec, module: str = _MAPPING) -> ComponentSpec:
+def _topological_mapping(
+    name: str, doc: str, *extra: FieldSpec, module: str = _MAPPING, compute: str = ""
+) -> ComponentSpec:
     return ComponentSpec(
         name=name,
         category=Category.TOPOLOGICAL_MAPPING,
         module=module,
         doc=doc,
         supported=True,
+        compute=compute,
         effects=_TOPOLOGY,
         fields=(*extra, *_TOPO_LINKS),
     )
@@ -353,6 +356,7 @@ HEXA2TETRA = _topological_mapping(
     "Hexa2TetraTopologicalMapping",
     "Splits each input hexahedron into tetrahedra written to the output container.",
     FieldSpec("swapping", Bool(), False, "alternate the split with the grid position (conforming mesh)"),
+    compute="hexa_to_tetra",
 )
 HEXA2QUAD = _topological_mapping(
     "Hexa2QuadTopologicalMapping",

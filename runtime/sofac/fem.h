@@ -1,0 +1,1018 @@
+// Finite-element force fields of SOFA's Sofa.Component.SolidMechanics.FEM.Elastic, Vec3d only:
+// TetrahedronFEMForceField, TetrahedralCorotationalFEMForceField, HexahedronFEMForceField.
+//
+// The formulas and, where it matters for bit-level agreement, the order of the floating-point
+// operations follow SOFA (commit 2a278d89, the corpus commit). Written from a reading of SOFA's
+// sources; no SOFA code is included. Notes on the conventions: see the comments of each section.
+//
+// Conventions shared by all kernels
+// - Positions and forces are flat Vec3d arrays (3 doubles per point).
+// - Elements are flat index arrays (4 per tetrahedron, 8 per hexahedron), in the topology's order.
+// - `method`: 0 = small, 1 = large, 2 = polar, 3 = svd (tetrahedra only). SOFA maps an unknown
+//   method string to "large".
+// - Everything an element needs is precomputed by *_init into `element_data`, a caller-owned array
+//   of n_elements * *_data_size(method) doubles (element e at offset e * *_data_size(method)).
+//   *_add_force also writes the element's current rotation there (SOFA's `rotations[i]`), which
+//   *_add_dforce reads; so add_dforce linearizes around the positions of the last add_force, as SOFA.
+// - add_force: f += f(x) (internal elastic force, f = -K (x - x0) for small displacements).
+//   add_dforce: df += kfactor * (df/dx) dx, with SOFA's df/dx (see below); kfactor is SOFA's
+//   kFactorIncludingRayleighDamping = mparams.kFactor + mparams.bFactor * rayleighStiffness, where
+//   rayleighStiffness is the force field's own data (default 0), not the solver's.
+// - No allocation, no exceptions; functions are inline and not thread-safe per element_data.
+//
+// Material parameters (BaseLinearElasticityFEMForceField): youngModulus / poissonRatio are lists;
+// element i uses list[i] if the list has more than i values, else list[0]; an empty list uses the
+// default (5000 / 0.45). SOFA's init replaces a negative Young's modulus by 5000 and a Poisson ratio
+// outside [0, 0.5) by 0.45 (with a warning); these kernels do the same.
+//
+// Not reproduced: plasticity (plasticMaxThreshold > 0), updateStiffnessMatrix=true,
+// computeGlobalMatrix=true (assembled-in-addForce path), von Mises stress, topological changes.
+#pragma once
+
+#include <cfloat>
+#include <cmath>
+
+#include "types.h"
+
+namespace sofac {
+
+namespace fem_detail {
+
+// Row-major 3x3 matrix and 3-vector with SOFA's evaluation order (no Eigen: Eigen is free to
+// reorder sums and products, which would change the last bits).
+struct M3 {
+    double a[3][3];
+    double& operator()(int i, int j) { return a[i][j]; }
+    double operator()(int i, int j) const { return a[i][j]; }
+};
+struct V3 {
+    double v[3];
+    double& operator[](int i) { return v[i]; }
+    double operator[](int i) const { return v[i]; }
+};
+
+inline V3 load(const double* p) { return V3{{p[0], p[1], p[2]}}; }
+inline V3 sub(const V3& a, const V3& b) { return V3{{a[0] - b[0], a[1] - b[1], a[2] - b[2]}}; }
+inline V3 cross(const V3& a, const V3& b) {
+    return V3{{a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]}};
+}
+inline double dot3(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline double norm(const V3& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+// SOFA's Vec::normalize: divides by the norm unless it is <= machine epsilon (then unchanged).
+inline void normalize(V3& a) {
+    const double n = norm(a);
+    if (n > DBL_EPSILON) {
+        a[0] /= n;
+        a[1] /= n;
+        a[2] /= n;
+    }
+}
+// SOFA's Mat * Vec: r_i = ((m_i0 v0 + m_i1 v1) + m_i2 v2).
+inline V3 mul(const M3& m, const V3& v) {
+    V3 r;
+    for (int i = 0; i < 3; ++i) r[i] = m(i, 0) * v[0] + m(i, 1) * v[1] + m(i, 2) * v[2];
+    return r;
+}
+// SOFA's Mat::multTranspose(Vec): r_i = sum_j m_ji v_j.
+inline V3 mul_t(const M3& m, const V3& v) {
+    V3 r;
+    for (int i = 0; i < 3; ++i) r[i] = m(0, i) * v[0] + m(1, i) * v[1] + m(2, i) * v[2];
+    return r;
+}
+// SOFA's 3x3 Mat * Mat.
+inline M3 mul(const M3& a, const M3& b) {
+    M3 r;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r(i, j) = a(i, 0) * b(0, j) + a(i, 1) * b(1, j) + a(i, 2) * b(2, j);
+    return r;
+}
+// a^T b (SOFA's 3x3 multTranspose(Mat, Mat)).
+inline M3 mul_tn(const M3& a, const M3& b) {
+    M3 r;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r(i, j) = a(0, i) * b(0, j) + a(1, i) * b(1, j) + a(2, i) * b(2, j);
+    return r;
+}
+// a b^T (SOFA's Mat::multTransposed).
+inline M3 mul_nt(const M3& a, const M3& b) {
+    M3 r;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r(i, j) = a(i, 0) * b(j, 0) + a(i, 1) * b(j, 1) + a(i, 2) * b(j, 2);
+    return r;
+}
+inline M3 transposed(const M3& m) {
+    M3 r;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) r(i, j) = m(j, i);
+    return r;
+}
+inline M3 identity() { return M3{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}}; }
+inline M3 from_rows(const V3& x, const V3& y, const V3& z) {
+    return M3{{{x[0], x[1], x[2]}, {y[0], y[1], y[2]}, {z[0], z[1], z[2]}}};
+}
+inline M3 load_m(const double* p) {
+    return M3{{{p[0], p[1], p[2]}, {p[3], p[4], p[5]}, {p[6], p[7], p[8]}}};
+}
+inline void store_m(double* p, const M3& m) {
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) p[3 * i + j] = m(i, j);
+}
+inline double determinant(const M3& m) {
+    return m(0, 0) * m(1, 1) * m(2, 2) + m(1, 0) * m(2, 1) * m(0, 2) + m(2, 0) * m(0, 1) * m(1, 2) -
+           m(0, 0) * m(2, 1) * m(1, 2) - m(1, 0) * m(0, 1) * m(2, 2) - m(2, 0) * m(1, 1) * m(0, 2);
+}
+// SOFA's invertMatrix (3x3): cofactors divided by the determinant. Returns false if det == 0.
+inline bool invert(M3& r, const M3& m) {
+    const double det = determinant(m);
+    if (det == 0.0) return false;
+    r(0, 0) = (m(1, 1) * m(2, 2) - m(2, 1) * m(1, 2)) / det;
+    r(1, 0) = (m(1, 2) * m(2, 0) - m(2, 2) * m(1, 0)) / det;
+    r(2, 0) = (m(1, 0) * m(2, 1) - m(2, 0) * m(1, 1)) / det;
+    r(0, 1) = (m(2, 1) * m(0, 2) - m(0, 1) * m(2, 2)) / det;
+    r(1, 1) = (m(2, 2) * m(0, 0) - m(0, 2) * m(2, 0)) / det;
+    r(2, 1) = (m(2, 0) * m(0, 1) - m(0, 0) * m(2, 1)) / det;
+    r(0, 2) = (m(0, 1) * m(1, 2) - m(1, 1) * m(0, 2)) / det;
+    r(1, 2) = (m(0, 2) * m(1, 0) - m(1, 2) * m(0, 0)) / det;
+    r(2, 2) = (m(0, 0) * m(1, 1) - m(1, 0) * m(0, 1)) / det;
+    return true;
+}
+inline double one_norm(const M3& m) {  // max column sum of |m_ij|
+    double best = 0.0;
+    for (int j = 0; j < 3; ++j) {
+        const double s = std::fabs(m(0, j)) + std::fabs(m(1, j)) + std::fabs(m(2, j));
+        if (s > best) best = s;
+    }
+    return best;
+}
+inline double inf_norm(const M3& m) {  // max row sum of |m_ij|
+    double best = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const double s = std::fabs(m(i, 0)) + std::fabs(m(i, 1)) + std::fabs(m(i, 2));
+        if (s > best) best = s;
+    }
+    return best;
+}
+
+// Orthogonal factor Q of the polar decomposition M = Q S, by SOFA's helper::Decompose::
+// polarDecomposition (Shoemake/Higham scaled Newton iteration on M^T, Barbic's variant):
+// Mk <- gamma/2 Mk + 1/(2 gamma det) adj(Mk)^T with gamma = ((|adj|_1 |adj|_inf)/(|Mk|_1 |Mk|_inf))^(1/4)
+// / sqrt|det|, until |Mk - Mk_prev|_1 <= 1e-8 |Mk|_1; Q = Mk^T. For det(M) < 0 the result is an
+// improper orthogonal matrix (a reflection), as in SOFA. Stops (keeping Mk) on a zero determinant.
+inline M3 polar_rotation(const M3& m) {
+    M3 mk = transposed(m);
+    double m_one = one_norm(mk);
+    double m_inf = inf_norm(mk);
+    double e_one = 0.0;
+    do {
+        M3 adj;
+        const V3 r0{{mk(0, 0), mk(0, 1), mk(0, 2)}};
+        const V3 r1{{mk(1, 0), mk(1, 1), mk(1, 2)}};
+        const V3 r2{{mk(2, 0), mk(2, 1), mk(2, 2)}};
+        adj = from_rows(cross(r1, r2), cross(r2, r0), cross(r0, r1));
+        const double det = mk(0, 0) * adj(0, 0) + mk(0, 1) * adj(0, 1) + mk(0, 2) * adj(0, 2);
+        if (det == 0.0) break;
+        const double adj_one = one_norm(adj);
+        const double adj_inf = inf_norm(adj);
+        const double gamma = std::sqrt(std::sqrt((adj_one * adj_inf) / (m_one * m_inf)) / std::fabs(det));
+        const double g1 = gamma * 0.5;
+        const double g2 = 0.5 / (gamma * det);
+        M3 ek = mk;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) mk(i, j) = mk(i, j) * g1 + adj(i, j) * g2;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) ek(i, j) -= mk(i, j);
+        e_one = one_norm(ek);
+        m_one = one_norm(mk);
+        m_inf = inf_norm(mk);
+    } while (e_one > m_one * 1e-8);
+    return transposed(mk);
+}
+
+// Symmetric 3x3 eigen decomposition as SOFA's Decompose::eigenDecomposition_iterative: one
+// Householder step to tridiagonal form, then the implicit QL iteration (at most 32 sweeps per
+// eigenvalue). Eigenvectors are the columns of v, eigenvalues in diag (unsorted).
+inline void eigen_symmetric(const M3& m, M3& v, V3& diag) {
+    V3 sub{{0.0, 0.0, 0.0}};
+    double m01 = m(0, 1);
+    double m02 = m(0, 2);
+    const double m00 = m(0, 0), m11 = m(1, 1), m12 = m(1, 2), m22 = m(2, 2);
+    diag[0] = m00;
+    sub[2] = 0.0;
+    if (m02 != 0.0) {
+        const double length = std::sqrt(m01 * m01 + m02 * m02);
+        const double inv_length = 1.0 / length;
+        m01 *= inv_length;
+        m02 *= inv_length;
+        const double q = 2.0 * m01 * m12 + m02 * (m22 - m11);
+        diag[1] = m11 + m02 * q;
+        diag[2] = m22 - m02 * q;
+        sub[0] = length;
+        sub[1] = m12 - m01 * q;
+        v = M3{{{1.0, 0.0, 0.0}, {0.0, m01, m02}, {0.0, m02, -m01}}};
+    } else {
+        diag[1] = m11;
+        diag[2] = m22;
+        sub[0] = m01;
+        sub[1] = m12;
+        v = identity();
+    }
+    constexpr int max_sweeps = 32;
+    for (int i0 = 0; i0 < 3; ++i0) {
+        int sweep = 0;
+        for (; sweep < max_sweeps; ++sweep) {
+            int i2 = i0;
+            for (; i2 <= 1; ++i2) {  // find a negligible off-diagonal entry
+                const double t = std::fabs(diag[i2]) + std::fabs(diag[i2 + 1]);
+                if (std::fabs(sub[i2]) + t == t) break;
+            }
+            if (i2 == i0) break;
+            double g = (diag[i0 + 1] - diag[i0]) / (2.0 * sub[i0]);
+            double r = std::sqrt(g * g + 1.0);
+            if (g < 0.0)
+                g = diag[i2] - diag[i0] + sub[i0] / (g - r);
+            else
+                g = diag[i2] - diag[i0] + sub[i0] / (g + r);
+            double s = 1.0, c = 1.0, p = 0.0;
+            for (int i3 = i2 - 1; i3 >= i0; --i3) {
+                double f = s * sub[i3];
+                const double b = c * sub[i3];
+                if (std::fabs(f) >= std::fabs(g)) {
+                    c = g / f;
+                    r = std::sqrt(c * c + 1.0);
+                    sub[i3 + 1] = f * r;
+                    s = 1.0 / r;
+                    c *= s;
+                } else {
+                    s = f / g;
+                    r = std::sqrt(s * s + 1.0);
+                    sub[i3 + 1] = g * r;
+                    c = 1.0 / r;
+                    s *= c;
+                }
+                g = diag[i3 + 1] - p;
+                r = (diag[i3] - g) * s + 2.0 * b * c;
+                p = s * r;
+                diag[i3 + 1] = g + p;
+                g = c * r - b;
+                for (int k = 0; k < 3; ++k) {
+                    f = v(k, i3 + 1);
+                    v(k, i3 + 1) = s * v(k, i3) + c * f;
+                    v(k, i3) = c * v(k, i3) - s * f;
+                }
+            }
+            diag[i0] -= p;
+            sub[i0] = g;
+            sub[i2] = 0.0;
+        }
+        if (sweep == max_sweeps) return;
+    }
+}
+
+// Rotation of SOFA's Decompose::polarDecomposition_stable: Q = U V^T from SVD_stable (F^T F = V S^2
+// V^T, U = F V S^-1), made a proper rotation for inverted elements (the column of the smallest
+// singular value flipped) and completed for flat (1 null value), linear (2) or collapsed (3) ones.
+inline M3 svd_stable_rotation(const M3& f) {
+    const M3 ftf = mul_tn(f, f);
+    M3 v;
+    V3 s;
+    eigen_symmetric(ftf, v, s);
+    if (determinant(v) < 0.0)
+        for (int i = 0; i < 3; ++i) v(i, 0) = -v(i, 0);
+    int degenerated = 0;
+    V3 s_inv;
+    for (int i = 0; i < 3; ++i) {
+        if (s[i] < 1e-8) {
+            ++degenerated;
+            s[i] = 0.0;
+            s_inv[i] = 1.0;
+        } else {
+            s[i] = std::sqrt(s[i]);
+            s_inv[i] = 1.0 / s[i];
+        }
+    }
+    int order[3];  // indices of the singular values, ascending (SOFA's decision tree)
+    if (s[0] < s[1]) {
+        if (s[0] < s[2]) {
+            order[0] = 0;
+            if (s[1] < s[2]) {
+                order[1] = 1;
+                order[2] = 2;
+            } else {
+                order[1] = 2;
+                order[2] = 1;
+            }
+        } else {
+            order[0] = 2;
+            order[1] = 0;
+            order[2] = 1;
+        }
+    } else {
+        if (s[1] < s[2]) {
+            order[0] = 1;
+            if (s[0] < s[2]) {
+                order[1] = 0;
+                order[2] = 2;
+            } else {
+                order[1] = 2;
+                order[2] = 0;
+            }
+        } else {
+            order[0] = 2;
+            order[1] = 1;
+            order[2] = 0;
+        }
+    }
+    M3 vs;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) vs(i, j) = v(i, j) * s_inv[j];
+    M3 u = mul(f, vs);
+    if (degenerated == 1) {
+        const V3 c = cross(V3{{u(0, order[1]), u(1, order[1]), u(2, order[1])}},
+                           V3{{u(0, order[2]), u(1, order[2]), u(2, order[2])}});
+        for (int i = 0; i < 3; ++i) u(i, order[0]) = c[i];
+    } else if (degenerated == 2) {
+        // SOFA builds the kept edge from mixed columns (row 0 of the largest, rows 1-2 of the
+        // smallest singular vector); reproduced as is.
+        const V3 edge2{{u(0, order[2]), u(1, order[0]), u(2, order[0])}};
+        const double a0 = std::fabs(edge2[0]), a1 = std::fabs(edge2[1]), a2 = std::fabs(edge2[2]);
+        V3 edge0;
+        if (a0 > a1)
+            edge0 = a0 > a2 ? V3{{0, 1, 0}} : V3{{1, 0, 0}};
+        else
+            edge0 = a1 > a2 ? V3{{0, 0, 1}} : V3{{1, 0, 0}};
+        V3 edge1 = cross(edge2, edge0);
+        normalize(edge1);
+        edge0 = cross(edge1, edge2);
+        for (int i = 0; i < 3; ++i) {
+            u(i, order[0]) = edge0[i];
+            u(i, order[1]) = edge1[i];
+        }
+    } else if (degenerated == 3) {
+        u = identity();
+    }
+    if (determinant(u) < 0.0)
+        for (int i = 0; i < 3; ++i) u(i, order[0]) *= -1.0;
+    return mul_nt(u, v);
+}
+
+// Material parameters of element i (BaseLinearElasticityFEMForceField::getVecRealInElement and
+// the checks of its init).
+inline double element_value(const double* list, Index n, Index i, double fallback) {
+    if (n > i) return list[i];
+    if (n > 0) return list[0];
+    return fallback;
+}
+inline double young_in(const double* young, Index n, Index i) {
+    const double e = element_value(young, n, i, 5000.0);
+    return e < 0.0 ? 5000.0 : e;
+}
+inline double poisson_in(const double* poisson, Index n, Index i) {
+    const double nu = element_value(poisson, n, i, 0.45);
+    return (nu < 0.0 || nu >= 0.5) ? 0.45 : nu;
+}
+
+// ---- tetrahedra: SOFA's element quantities --------------------------------------------------
+
+// SOFA's 2x3 "pseudo determinant" of rows (p, q): the cofactor of the 3 points' coordinates.
+inline double pseudo_det(double p0, double p1, double p2, double q0, double q1, double q2) {
+    return p1 * q2 - q1 * p2 - p0 * q2 + q0 * p2 + p0 * q1 - q0 * p1;
+}
+
+// Strain-displacement cofactors (SOFA's computeStrainDisplacement), compacted: SOFA's 12x6 matrix J
+// has for node n (rows 3n..3n+2) three distinct values alpha_n, beta_n, gamma_n (6 V times the
+// shape function gradient dN_n/dx, dN_n/dy, dN_n/dz, up to the orientation sign):
+//   J(3n,0)=J(3n+1,3)=J(3n+2,5)=alpha_n  J(3n,3)=J(3n+1,1)=J(3n+2,4)=beta_n
+//   J(3n,5)=J(3n+1,4)=J(3n+2,2)=gamma_n, all other entries 0; Voigt order xx yy zz xy yz zx.
+// Stored as j[3n + {0,1,2}] = {alpha_n, beta_n, gamma_n}.
+inline void strain_displacement(double* j, const V3& a, const V3& b, const V3& c, const V3& d) {
+    const V3* pts[4] = {&a, &b, &c, &d};
+    for (int n = 0; n < 4; ++n) {
+        const V3& p = *pts[(n + 1) % 4];
+        const V3& q = *pts[(n + 2) % 4];
+        const V3& r = *pts[(n + 3) % 4];
+        const double sign = (n % 2 == 0) ? -1.0 : 1.0;  // -,+,- for nodes 0 and 2; +,-,+ for 1 and 3
+        const double yz = pseudo_det(p[1], q[1], r[1], p[2], q[2], r[2]);
+        const double xz = pseudo_det(p[0], q[0], r[0], p[2], q[2], r[2]);
+        const double xy = pseudo_det(p[0], q[0], r[0], p[1], q[1], r[1]);
+        j[3 * n + 0] = sign < 0 ? -yz : yz;
+        j[3 * n + 1] = sign < 0 ? xz : -xz;
+        j[3 * n + 2] = sign < 0 ? -xy : xy;
+    }
+}
+
+// SOFA's computeForce for tetrahedra: F = J (K (J^T D)) exploiting the zeros, with an optional
+// factor applied to K J^T D (the addDForce variant). mat = {K00, K01, K33} (K11 = K22 = K00,
+// off-diagonal normal terms = K01, shear terms = K33), already divided by 36 V.
+inline void tetra_compute_force(double* F, const double* D, const double* j, const double* mat, double fact,
+                                bool scale) {
+    const double a0 = j[0], b0 = j[1], g0 = j[2];
+    const double a1 = j[3], b1 = j[4], g1 = j[5];
+    const double a2 = j[6], b2 = j[7], g2 = j[8];
+    const double a3 = j[9], b3 = j[10], g3 = j[11];
+    double e[6];
+    e[0] = a0 * D[0] + a1 * D[3] + a2 * D[6] + a3 * D[9];
+    e[1] = b0 * D[1] + b1 * D[4] + b2 * D[7] + b3 * D[10];
+    e[2] = g0 * D[2] + g1 * D[5] + g2 * D[8] + g3 * D[11];
+    e[3] = b0 * D[0] + a0 * D[1] + b1 * D[3] + a1 * D[4] + b2 * D[6] + a2 * D[7] + b3 * D[9] + a3 * D[10];
+    e[4] = g0 * D[1] + b0 * D[2] + g1 * D[4] + b1 * D[5] + g2 * D[7] + b2 * D[8] + g3 * D[10] + b3 * D[11];
+    e[5] = g0 * D[0] + a0 * D[2] + g1 * D[3] + a1 * D[5] + g2 * D[6] + a2 * D[8] + g3 * D[9] + a3 * D[11];
+    const double kd = mat[0], ko = mat[1], ks = mat[2];
+    double s[6];
+    s[0] = kd * e[0] + ko * e[1] + ko * e[2];
+    s[1] = ko * e[0] + kd * e[1] + ko * e[2];
+    s[2] = ko * e[0] + ko * e[1] + kd * e[2];
+    s[3] = ks * e[3];
+    s[4] = ks * e[4];
+    s[5] = ks * e[5];
+    if (scale)
+        for (double& v : s) v *= fact;
+    for (int n = 0; n < 4; ++n) {
+        const double a = j[3 * n], b = j[3 * n + 1], g = j[3 * n + 2];
+        F[3 * n + 0] = a * s[0] + b * s[3] + g * s[5];
+        F[3 * n + 1] = b * s[1] + a * s[3] + g * s[4];
+        F[3 * n + 2] = g * s[2] + b * s[4] + a * s[5];
+    }
+}
+
+// Gram-Schmidt frame of SOFA's computeRotationLarge: x along edge a->b, z normal to (a->b, a->c),
+// y = z x x. Rows of the result are the frame axes (a world -> local rotation).
+inline M3 tetra_frame(const V3& a, const V3& b, const V3& c) {
+    V3 ex = sub(b, a);
+    normalize(ex);
+    V3 ey = sub(c, a);
+    V3 ez = cross(ex, ey);
+    normalize(ez);
+    ey = cross(ez, ex);
+    return from_rows(ex, ey, ez);
+}
+
+inline M3 edge_rows(const V3& a, const V3& b, const V3& c, const V3& d) {
+    return from_rows(sub(b, a), sub(c, a), sub(d, a));
+}
+
+// Per-element layout (offsets in doubles).
+constexpr int TJ = 0;     // 12 strain-displacement cofactors
+constexpr int TMAT = 12;  // 3 material values {K00, K01, K33} / (36 V)
+constexpr int TSMALL_REST = 15;  // small: 9 = rest edges X0[b]-X0[a], X0[c]-X0[a], X0[d]-X0[a]
+constexpr int TROT = 15;  // large/polar/svd: 9 = SOFA's rotations[i] (local -> world), row-major
+constexpr int TREST = 24;  // large: 6 = rotated rest (r1x, r2x, r2y, r3x, r3y, r3z); polar/svd: 12
+constexpr int TINITROT = 36;  // svd: 9 = SOFA's _initialRotations[i] (R_0_1^T)
+constexpr int TINITINV = 45;  // svd: 9 = SOFA's _initialTransformation[i] (inverse rest edge rows)
+
+}  // namespace fem_detail
+
+// ================================================================================================
+// TetrahedronFEMForceField (Vec3d)
+// ================================================================================================
+//
+// Element data, doubles per element (see fem_detail offsets):
+//   small 24 = J cofactors 12 + material 3 + rest edges 9
+//   large 30 = J 12 + material 3 + rotation 9 + rotated rest edges 6
+//   polar 36 = J 12 + material 3 + rotation 9 + rotated rest points 12
+//   svd   54 = polar 36 + initial rotation 9 + inverse rest edge matrix 9
+constexpr int tetra_fem_data_size(int method) {
+    return method == 0 ? 24 : method == 1 ? 30 : method == 2 ? 36 : 54;
+}
+
+// Precomputes per element what SOFA's reinit does: material stiffness (isotropic Hooke, divided by
+// 36 |V0|), strain-displacement cofactors in the element's rest frame (world frame for small; the
+// Gram-Schmidt frame of edges 0->1, 0->2 for large; the polar rotation of the rest edge rows for
+// polar/svd), the rotated rest positions, and the initial rotation (current rotation = initial).
+// young/poisson: per-element lists (see the header comment). local_stiffness_factor (optional,
+// SOFA's `localStiffnessFactor`, M values): element i uses factor[i * M / n_tetra] * E_i.
+inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest_x, const double* young,
+                           Index n_young, const double* poisson, Index n_poisson, int method,
+                           double* element_data, const double* local_stiffness_factor = nullptr,
+                           Index n_factor = 0) {
+    using namespace fem_detail;
+    const int stride = tetra_fem_data_size(method);
+    for (Index i = 0; i < n_tetra; ++i) {
+        double* e = element_data + i * stride;
+        const Index* t = tetra + 4 * i;
+        const V3 a = load(rest_x + 3 * t[0]), b = load(rest_x + 3 * t[1]);
+        const V3 c = load(rest_x + 3 * t[2]), d = load(rest_x + 3 * t[3]);
+
+        // computeMaterialStiffness
+        const double factor = n_factor > 0 ? local_stiffness_factor[i * n_factor / n_tetra] : 1.0;
+        const double E = factor * young_in(young, n_young, i);
+        const double nu = poisson_in(poisson, n_poisson, i);
+        const double scale = (E * (1 - nu)) / ((1 + nu) * (1 - 2 * nu));
+        const double volume = std::fabs(dot3(cross(sub(b, a), sub(c, a)), sub(d, a)) / 6.0);
+        const double div = volume * 36;
+        e[TMAT + 0] = (1.0 * scale) / div;
+        e[TMAT + 1] = ((nu / (1 - nu)) * scale) / div;
+        e[TMAT + 2] = (((1 - 2 * nu) / (2 * (1 - nu))) * scale) / div;
+
+        if (method == 0) {
+            strain_displacement(e + TJ, a, b, c, d);
+            const V3 edges[3] = {sub(b, a), sub(c, a), sub(d, a)};
+            for (int k = 0; k < 3; ++k)
+                for (int m = 0; m < 3; ++m) e[TSMALL_REST + 3 * k + m] = edges[k][m];
+        } else if (method == 1) {
+            const M3 r01 = tetra_frame(a, b, c);
+            store_m(e + TROT, transposed(r01));
+            const V3 r0 = mul(r01, a);
+            const V3 r1 = sub(mul(r01, b), r0), r2 = sub(mul(r01, c), r0), r3 = sub(mul(r01, d), r0);
+            strain_displacement(e + TJ, V3{{0.0, 0.0, 0.0}}, r1, r2, r3);
+            e[TREST + 0] = r1[0];
+            e[TREST + 1] = r2[0];
+            e[TREST + 2] = r2[1];
+            e[TREST + 3] = r3[0];
+            e[TREST + 4] = r3[1];
+            e[TREST + 5] = r3[2];
+        } else {
+            const M3 A = edge_rows(a, b, c, d);
+            const M3 r01 = polar_rotation(A);
+            store_m(e + TROT, transposed(r01));
+            const V3 r[4] = {mul(r01, a), mul(r01, b), mul(r01, c), mul(r01, d)};
+            strain_displacement(e + TJ, r[0], r[1], r[2], r[3]);
+            for (int k = 0; k < 4; ++k)
+                for (int m = 0; m < 3; ++m) e[TREST + 3 * k + m] = r[k][m];
+            if (method == 3) {
+                store_m(e + TINITROT, transposed(r01));
+                M3 inv = identity();
+                invert(inv, A);  // SOFA asserts invertibility; a flat rest element keeps identity here
+                store_m(e + TINITINV, inv);
+            }
+        }
+    }
+}
+
+// f += internal force at positions x; stores each element's current rotation (large/polar/svd).
+inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
+                                int method) {
+    using namespace fem_detail;
+    const int stride = tetra_fem_data_size(method);
+    for (Index i = 0; i < n; ++i) {
+        double* e = element_data + i * stride;
+        const Index* t = tetra + 4 * i;
+        double D[12];
+        double F[12];
+        if (method == 0) {
+            const double* p0 = x + 3 * t[0];
+            D[0] = D[1] = D[2] = 0.0;
+            for (int k = 1; k < 4; ++k) {
+                const double* pk = x + 3 * t[k];
+                for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
+            }
+            tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+            for (int k = 0; k < 4; ++k)
+                for (int m = 0; m < 3; ++m) f[3 * t[k] + m] += F[3 * k + m];
+            continue;
+        }
+        const V3 p[4] = {load(x + 3 * t[0]), load(x + 3 * t[1]), load(x + 3 * t[2]), load(x + 3 * t[3])};
+        M3 r02;  // world -> local
+        if (method == 1) {
+            r02 = tetra_frame(p[0], p[1], p[2]);
+        } else if (method == 2) {
+            r02 = polar_rotation(edge_rows(p[0], p[1], p[2], p[3]));
+        } else {
+            const M3 A = edge_rows(p[0], p[1], p[2], p[3]);
+            const M3 defo = mul(A, load_m(e + TINITINV));
+            if (determinant(defo) < 1e-6)  // inverted or flat element: SVD with degenerate handling
+                r02 = mul_nt(svd_stable_rotation(defo), load_m(e + TINITROT));
+            else
+                r02 = polar_rotation(A);
+        }
+        const M3 rot = transposed(r02);
+        store_m(e + TROT, rot);
+        V3 q[4];
+        for (int k = 0; k < 4; ++k) q[k] = mul(r02, p[k]);
+        if (method == 1) {
+            // SOFA subtracts node 0 only where the local coordinates are not zero by construction
+            // and sets the displacement of those to exactly 0.
+            q[1][0] -= q[0][0];
+            q[2][0] -= q[0][0];
+            q[2][1] -= q[0][1];
+            q[3] = sub(q[3], q[0]);
+            const double* r = e + TREST;
+            D[0] = D[1] = D[2] = 0.0;
+            D[3] = r[0] - q[1][0];
+            D[4] = 0.0;
+            D[5] = 0.0;
+            D[6] = r[1] - q[2][0];
+            D[7] = r[2] - q[2][1];
+            D[8] = 0.0;
+            D[9] = r[3] - q[3][0];
+            D[10] = r[4] - q[3][1];
+            D[11] = r[5] - q[3][2];
+        } else {
+            for (int k = 0; k < 4; ++k)
+                for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TREST + 3 * k + m] - q[k][m];
+        }
+        tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+        for (int k = 0; k < 4; ++k) {
+            const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
+            for (int m = 0; m < 3; ++m) f[3 * t[k] + m] += fk[m];
+        }
+    }
+}
+
+// df += kfactor * (df/dx) dx with SOFA's df/dx = -R (J K J^T) R^T, R the rotation of the last
+// add_force (the initial rotation before any add_force); small: -J K J^T. The derivative of the
+// rotation is neglected, as in SOFA (exact at zero strain, an approximation elsewhere).
+inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                 const double* element_data, int method) {
+    using namespace fem_detail;
+    const int stride = tetra_fem_data_size(method);
+    for (Index i = 0; i < n; ++i) {
+        const double* e = element_data + i * stride;
+        const Index* t = tetra + 4 * i;
+        double X[12];
+        double F[12];
+        if (method == 0) {
+            for (int k = 0; k < 4; ++k)
+                for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
+            tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
+            for (int k = 0; k < 4; ++k)
+                for (int m = 0; m < 3; ++m) df[3 * t[k] + m] += -F[3 * k + m];
+            continue;
+        }
+        const M3 rot = load_m(e + TROT);
+        for (int k = 0; k < 4; ++k) {
+            const V3 l = mul_t(rot, load(dx + 3 * t[k]));
+            for (int m = 0; m < 3; ++m) X[3 * k + m] = l[m];
+        }
+        tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
+        for (int k = 0; k < 4; ++k) {
+            const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
+            for (int m = 0; m < 3; ++m) df[3 * t[k] + m] -= fk[m];
+        }
+    }
+}
+
+// SOFA's getPotentialEnergy: 1/2 sum_e D_e . (J K J^T D_e) for the small method; SOFA returns 0 for
+// large, polar and svd (not implemented there), and so does this function.
+inline double tetra_fem_energy(const Index* tetra, Index n, const double* x, const double* element_data,
+                               int method) {
+    using namespace fem_detail;
+    if (method != 0) return 0.0;
+    const int stride = tetra_fem_data_size(method);
+    double energy = 0.0;
+    for (Index i = 0; i < n; ++i) {
+        const double* e = element_data + i * stride;
+        const Index* t = tetra + 4 * i;
+        double D[12];
+        double F[12];
+        const double* p0 = x + 3 * t[0];
+        D[0] = D[1] = D[2] = 0.0;
+        for (int k = 1; k < 4; ++k) {
+            const double* pk = x + 3 * t[k];
+            for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
+        }
+        tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+        for (int k = 0; k < 4; ++k)
+            energy += F[3 * k] * -D[3 * k] + F[3 * k + 1] * -D[3 * k + 1] + F[3 * k + 2] * -D[3 * k + 2];
+    }
+    return energy / -2.0;
+}
+
+// Element stiffness of element e as SOFA assembles it (computeStiffnessMatrix / buildStiffnessMatrix):
+// out (12x12, row-major, node-major blocks) = R (J K J^T) R^T with R the stored rotation (identity
+// for small); the force Jacobian block of nodes (a, b) is -out[3a.., 3b..], and addKToMatrix adds
+// -k * out. Products are evaluated in SOFA's order (generic Mat products over all 12/6 entries).
+inline void tetra_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
+    using namespace fem_detail;
+    const double* d = element_data + e * tetra_fem_data_size(method);
+    double J[12][6] = {};
+    for (int n = 0; n < 4; ++n) {
+        const double a = d[TJ + 3 * n], b = d[TJ + 3 * n + 1], g = d[TJ + 3 * n + 2];
+        J[3 * n][0] = a;
+        J[3 * n + 1][3] = a;
+        J[3 * n + 2][5] = a;
+        J[3 * n][3] = b;
+        J[3 * n + 1][1] = b;
+        J[3 * n + 2][4] = b;
+        J[3 * n][5] = g;
+        J[3 * n + 1][4] = g;
+        J[3 * n + 2][2] = g;
+    }
+    double K[6][6] = {};
+    K[0][0] = K[1][1] = K[2][2] = d[TMAT];
+    K[0][1] = K[0][2] = K[1][0] = K[1][2] = K[2][0] = K[2][1] = d[TMAT + 1];
+    K[3][3] = K[4][4] = K[5][5] = d[TMAT + 2];
+    double JK[12][6] = {};
+    for (int i = 0; i < 12; ++i)
+        for (int k = 0; k < 6; ++k)
+            for (int j = 0; j < 6; ++j) JK[i][j] += J[i][k] * K[k][j];
+    double JKJt[12][12] = {};
+    for (int i = 0; i < 12; ++i)
+        for (int k = 0; k < 6; ++k)
+            for (int j = 0; j < 12; ++j) JKJt[i][j] += JK[i][k] * J[j][k];
+    const M3 R = method == 0 ? identity() : load_m(d + TROT);
+    double RR[12][12] = {};
+    for (int b = 0; b < 4; ++b)
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) RR[3 * b + i][3 * b + j] = R(i, j);
+    double S[12][12] = {};
+    for (int i = 0; i < 12; ++i)
+        for (int k = 0; k < 12; ++k)
+            for (int j = 0; j < 12; ++j) S[i][j] += RR[i][k] * JKJt[k][j];
+    for (int i = 0; i < 12; ++i)
+        for (int j = 0; j < 12; ++j) {
+            double s = 0.0;
+            for (int k = 0; k < 12; ++k) s += S[i][k] * RR[j][k];
+            out[12 * i + j] = s;
+        }
+}
+
+// ================================================================================================
+// TetrahedralCorotationalFEMForceField (Vec3d), methods small (0), large (1), polar (2)
+// ================================================================================================
+// Numerically identical to TetrahedronFEMForceField for these methods (same material matrix,
+// strain-displacement, Gram-Schmidt / polar rotations, computeForce and addDForce; its addDForce
+// writes f += R (-F) where TetrahedronFEMForceField writes f -= R F, the same IEEE result). The
+// differences are elsewhere: no svd method, no hexahedron->tetrahedron split (it needs tetrahedra
+// in the topology), no plasticity, getPotentialEnergy returns 0 for every method, and its
+// rotation is left zero until the first addForce (irrelevant: solvers call addForce first).
+constexpr int tetracorot_fem_data_size(int method) { return tetra_fem_data_size(method); }
+
+inline void tetracorot_fem_init(const Index* tetra, Index n_tetra, const double* rest_x, const double* young,
+                                Index n_young, const double* poisson, Index n_poisson, int method,
+                                double* element_data, const double* local_stiffness_factor = nullptr,
+                                Index n_factor = 0) {
+    tetra_fem_init(tetra, n_tetra, rest_x, young, n_young, poisson, n_poisson, method, element_data,
+                   local_stiffness_factor, n_factor);
+}
+inline void tetracorot_fem_add_force(const Index* tetra, Index n, const double* x, double* f,
+                                     double* element_data, int method) {
+    tetra_fem_add_force(tetra, n, x, f, element_data, method);
+}
+inline void tetracorot_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df,
+                                      double kfactor, const double* element_data, int method) {
+    tetra_fem_add_dforce(tetra, n, dx, df, kfactor, element_data, method);
+}
+inline void tetracorot_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
+    tetra_fem_element_matrix(element_data, e, method, out);
+}
+
+// ================================================================================================
+// HexahedronFEMForceField (Vec3d), methods small (0), large (1), polar (2)
+// ================================================================================================
+//
+// Node order (SOFA's topologies and the force field alike): 0 (0,0,0) 1 (1,0,0) 2 (1,1,0)
+// 3 (0,1,0) 4 (0,0,1) 5 (1,0,1) 6 (1,1,1) 7 (0,1,1) in the element's reference coordinates.
+//
+// Element data, 609 doubles per element for every method:
+//   [0, 576)   element stiffness Ke (24x24, row-major, node-major, symmetric), times the optional
+//              per-element stiffness coefficient (SparseGridTopology::getStiffnessCoef; 1 otherwise)
+//   [576, 600) rest positions of the 8 nodes in the rest frame (R0 X0, not translated)
+//   [600, 609) current rotation R (world -> local, rows = local axes; SOFA's _rotations[i])
+constexpr int hexa_fem_data_size(int /*method*/ = 1) { return 609; }
+
+namespace fem_detail {
+
+constexpr int HK = 0;
+constexpr int HREST = 576;
+constexpr int HROT = 600;
+
+// SOFA's _coef: the reference coordinates (+-1) of the 8 nodes.
+constexpr int hexa_coef[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                                 {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+
+// Mean edge directions, summed left to right as SOFA writes them.
+inline V3 hexa_sum(const V3* n, int a0, int b0, int a1, int b1, int a2, int b2, int a3, int b3) {
+    V3 r;
+    for (int m = 0; m < 3; ++m)
+        r[m] = (n[a0][m] - n[b0][m] + n[a1][m] - n[b1][m] + n[a2][m] - n[b2][m] + n[a3][m] - n[b3][m]) * .25;
+    return r;
+}
+inline V3 hexa_x(const V3* n) { return hexa_sum(n, 1, 0, 2, 3, 5, 4, 6, 7); }
+inline V3 hexa_y(const V3* n) { return hexa_sum(n, 3, 0, 2, 1, 7, 4, 6, 5); }
+inline V3 hexa_z(const V3* n) { return hexa_sum(n, 4, 0, 5, 1, 7, 3, 6, 2); }
+
+// large: x = mean x-edge (normalized), z = x cross mean y-edge (normalized), y = z cross x.
+inline M3 hexa_rotation_large(const V3* n) {
+    V3 ex = hexa_x(n);
+    const V3 ey0 = hexa_y(n);
+    normalize(ex);
+    V3 ez = cross(ex, ey0);
+    normalize(ez);
+    const V3 ey = cross(ez, ex);
+    return from_rows(ex, ey, ez);
+}
+// polar: orthogonal factor of the matrix whose rows are the three mean edges.
+inline M3 hexa_rotation_polar(const V3* n) { return polar_rotation(from_rows(hexa_x(n), hexa_y(n), hexa_z(n))); }
+
+// SOFA's computeElementStiffness (the GENERIC_STIFFNESS_MATRIX path that SOFA keeps): 2x2x2 Gauss
+// quadrature (points +-1/sqrt(3), weight 1) of Bi^T M Bj det(J), with a constant Jacobian when the
+// nodes form a parallelepiped (tolerance 1e-3 relative on the edges), else J per Gauss point.
+// U = M00, V = M01, W = M33 of the (undivided) Hooke matrix.
+inline void hexa_element_stiffness(double* K, const V3* nodes, double U, double V, double W, double factor) {
+    for (int i = 0; i < 576; ++i) K[i] = 0.0;
+    M3 J{}, Jinv{};
+    double detJ = 1.0;
+    const V3 lx = sub(nodes[1], nodes[0]);
+    const V3 ly = sub(nodes[3], nodes[0]);
+    const V3 lz = sub(nodes[4], nodes[0]);
+    auto off = [](const V3& a, const V3& l, const V3& b) {  // |a + l - b|
+        V3 r;
+        for (int m = 0; m < 3; ++m) r[m] = a[m] + l[m] - b[m];
+        return norm(r);
+    };
+    const bool parallel = off(nodes[3], lx, nodes[2]) < norm(lx) * 0.001 &&
+                          off(nodes[0], lz, nodes[4]) < norm(lz) * 0.001 &&
+                          off(nodes[1], lz, nodes[5]) < norm(lz) * 0.001 &&
+                          off(nodes[2], lz, nodes[6]) < norm(lz) * 0.001 &&
+                          off(nodes[3], lz, nodes[7]) < norm(lz) * 0.001;
+    if (parallel) {
+        for (int c = 0; c < 3; ++c) {
+            J(c, 0) = lx[c] / 2;
+            J(c, 1) = ly[c] / 2;
+            J(c, 2) = lz[c] / 2;
+        }
+        detJ = determinant(J);
+        invert(Jinv, J);
+    }
+    const double g = 1.0 / std::sqrt(3.0);
+    for (int gx1 = -1; gx1 <= 1; gx1 += 2)
+        for (int gx2 = -1; gx2 <= 1; gx2 += 2)
+            for (int gx3 = -1; gx3 <= 1; gx3 += 2) {
+                const double x1 = gx1 * g, x2 = gx2 * g, x3 = gx3 * g;
+                if (!parallel) {
+                    for (int c = 0; c < 3; ++c) {
+                        const auto d = [&](int a, int b) { return nodes[a][c] - nodes[b][c]; };
+                        J(c, 0) = d(1, 0) * (1 - x2) * (1 - x3) / 8 + d(2, 3) * (1 + x2) * (1 - x3) / 8 +
+                                  d(5, 4) * (1 - x2) * (1 + x3) / 8 + d(6, 7) * (1 + x2) * (1 + x3) / 8;
+                        J(c, 1) = d(3, 0) * (1 - x1) * (1 - x3) / 8 + d(2, 1) * (1 + x1) * (1 - x3) / 8 +
+                                  d(7, 4) * (1 - x1) * (1 + x3) / 8 + d(6, 5) * (1 + x1) * (1 + x3) / 8;
+                        J(c, 2) = d(4, 0) * (1 - x1) * (1 - x2) / 8 + d(5, 1) * (1 + x1) * (1 - x2) / 8 +
+                                  d(6, 2) * (1 + x1) * (1 + x2) / 8 + d(7, 3) * (1 - x1) * (1 + x2) / 8;
+                    }
+                    detJ = determinant(J);
+                    invert(Jinv, J);
+                }
+                double qx[8], qy[8], qz[8];
+                for (int i = 0; i < 8; ++i) {
+                    const int c0 = hexa_coef[i][0], c1 = hexa_coef[i][1], c2 = hexa_coef[i][2];
+                    const double d1 = c0 * (1 + c1 * x2) * (1 + c2 * x3) / 8.0;
+                    const double d2 = (1 + c0 * x1) * c1 * (1 + c2 * x3) / 8.0;
+                    const double d3 = (1 + c0 * x1) * (1 + c1 * x2) * c2 / 8.0;
+                    qx[i] = d1 * Jinv(0, 0) + d2 * Jinv(1, 0) + d3 * Jinv(2, 0);
+                    qy[i] = d1 * Jinv(0, 1) + d2 * Jinv(1, 1) + d3 * Jinv(2, 1);
+                    qz[i] = d1 * Jinv(0, 2) + d2 * Jinv(1, 2) + d3 * Jinv(2, 2);
+                }
+                for (int i = 0; i < 8; ++i) {
+                    // M Bi (6x3); zero entries omitted
+                    const double m00 = U * qx[i], m01 = V * qy[i], m02 = V * qz[i];
+                    const double m10 = V * qx[i], m11 = U * qy[i], m12 = V * qz[i];
+                    const double m20 = V * qx[i], m21 = V * qy[i], m22 = U * qz[i];
+                    const double m30 = W * qy[i], m31 = W * qx[i];
+                    const double m41 = W * qz[i], m42 = W * qy[i];
+                    const double m50 = W * qz[i], m52 = W * qx[i];
+                    for (int j = i; j < 8; ++j) {
+                        double k[3][3];  // Bj^T M Bi
+                        k[0][0] = qx[j] * m00 + qy[j] * m30 + qz[j] * m50;
+                        k[0][1] = qx[j] * m01 + qy[j] * m31;
+                        k[0][2] = qx[j] * m02 + qz[j] * m52;
+                        k[1][0] = qy[j] * m10 + qx[j] * m30;
+                        k[1][1] = qy[j] * m11 + qx[j] * m31 + qz[j] * m41;
+                        k[1][2] = qy[j] * m12 + qz[j] * m42;
+                        k[2][0] = qz[j] * m20 + qx[j] * m50;
+                        k[2][1] = qz[j] * m21 + qy[j] * m41;
+                        k[2][2] = qz[j] * m22 + qy[j] * m42 + qx[j] * m52;
+                        for (auto& row : k)
+                            for (double& v : row) v *= detJ;
+                        for (int m = 0; m < 3; ++m)
+                            for (int l = 0; l < 3; ++l) K[24 * (3 * i + m) + 3 * j + l] += k[l][m];
+                    }
+                }
+            }
+    for (int i = 0; i < 24; ++i)
+        for (int j = i + 1; j < 24; ++j) K[24 * j + i] = K[24 * i + j];
+    for (int i = 0; i < 576; ++i) K[i] *= factor;
+}
+
+// F = Ke D (SOFA's Mat<24,24> * Vec<24>, summed left to right).
+inline void hexa_mul(double* F, const double* K, const double* D) {
+    for (int i = 0; i < 24; ++i) {
+        double s = K[24 * i] * D[0];
+        for (int j = 1; j < 24; ++j) s += K[24 * i + j] * D[j];
+        F[i] = s;
+    }
+}
+
+// Local displacement D = R0 X0 - R x and local force F = Ke D of an element at positions x;
+// returns the rotation (computed from x for large/polar, identity for small).
+inline M3 hexa_local(const Index* h, const double* x, const double* e, int method, double* D, double* F) {
+    V3 nodes[8];
+    for (int w = 0; w < 8; ++w) nodes[w] = load(x + 3 * h[w]);
+    const M3 R = method == 1 ? hexa_rotation_large(nodes) : method == 2 ? hexa_rotation_polar(nodes) : identity();
+    for (int w = 0; w < 8; ++w) {
+        const V3 q = method == 0 ? nodes[w] : mul(R, nodes[w]);
+        for (int m = 0; m < 3; ++m) D[3 * w + m] = e[HREST + 3 * w + m] - q[m];
+    }
+    hexa_mul(F, e + HK, D);
+    return R;
+}
+
+}  // namespace fem_detail
+
+// Precomputes per element (SOFA's reinit): the rest rotation R0 (large: mean-edge Gram-Schmidt;
+// polar: polar factor of the mean-edge matrix; small: identity), the rest positions in that frame,
+// and Ke integrated on them with the element's Hooke matrix (Young E_i, Poisson nu_i; no division by
+// the volume) times stiffness_coef[i] (optional; SparseGridTopology's per-cell coefficient).
+inline void hexa_fem_init(const Index* hexa, Index n_hexa, const double* rest_x, const double* young,
+                          Index n_young, const double* poisson, Index n_poisson, int method, double* element_data,
+                          const double* stiffness_coef = nullptr) {
+    using namespace fem_detail;
+    const int stride = hexa_fem_data_size(method);
+    for (Index i = 0; i < n_hexa; ++i) {
+        double* e = element_data + i * stride;
+        const Index* h = hexa + 8 * i;
+        const double nu = poisson_in(poisson, n_poisson, i);
+        const double scale = (young_in(young, n_young, i) * (1 - nu)) / ((1 + nu) * (1 - 2 * nu));
+        const double U = 1.0 * scale;
+        const double V = (nu / (1 - nu)) * scale;
+        const double W = ((1 - 2 * nu) / (2 * (1 - nu))) * scale;
+        V3 nodes[8];
+        for (int w = 0; w < 8; ++w) nodes[w] = load(rest_x + 3 * h[w]);
+        const M3 R = method == 1 ? hexa_rotation_large(nodes) : method == 2 ? hexa_rotation_polar(nodes) : identity();
+        store_m(e + HROT, R);
+        V3 rotated[8];
+        for (int w = 0; w < 8; ++w) {
+            rotated[w] = mul(R, nodes[w]);
+            for (int m = 0; m < 3; ++m) e[HREST + 3 * w + m] = rotated[w][m];
+        }
+        hexa_element_stiffness(e + HK, rotated, U, V, W, stiffness_coef ? stiffness_coef[i] : 1.0);
+    }
+}
+
+// f += internal force at x (f_node += R^T (Ke (R0 X0 - R x))_node); stores R.
+inline void hexa_fem_add_force(const Index* hexa, Index n, const double* x, double* f, double* element_data,
+                               int method) {
+    using namespace fem_detail;
+    const int stride = hexa_fem_data_size(method);
+    for (Index i = 0; i < n; ++i) {
+        double* e = element_data + i * stride;
+        const Index* h = hexa + 8 * i;
+        double D[24], F[24];
+        const M3 R = hexa_local(h, x, e, method, D, F);
+        store_m(e + HROT, R);
+        for (int w = 0; w < 8; ++w) {
+            const V3 fw = method == 0 ? V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}}
+                                      : mul_t(R, V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}});
+            for (int m = 0; m < 3; ++m) f[3 * h[w] + m] += fw[m];
+        }
+    }
+}
+
+// df += kfactor * (df/dx) dx with SOFA's df/dx = -R^T Ke R (rotation of the last add_force;
+// SOFA multiplies by kfactor after rotating back: df_node -= (R^T (Ke R dx)_node) * kfactor).
+inline void hexa_fem_add_dforce(const Index* hexa, Index n, const double* dx, double* df, double kfactor,
+                                const double* element_data, int method) {
+    using namespace fem_detail;
+    const int stride = hexa_fem_data_size(method);
+    for (Index i = 0; i < n; ++i) {
+        const double* e = element_data + i * stride;
+        const Index* h = hexa + 8 * i;
+        const M3 R = load_m(e + HROT);
+        double X[24], F[24];
+        for (int w = 0; w < 8; ++w) {
+            const V3 l = mul(R, load(dx + 3 * h[w]));
+            for (int m = 0; m < 3; ++m) X[3 * w + m] = l[m];
+        }
+        hexa_mul(F, e + HK, X);
+        for (int w = 0; w < 8; ++w) {
+            const V3 fw = mul_t(R, V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}});
+            for (int m = 0; m < 3; ++m) df[3 * h[w] + m] -= fw[m] * kfactor;
+        }
+    }
+}
+
+// SOFA's getPotentialEnergy returns the value accumulated by the last addForce:
+// 1/2 sum_e D_e . (Ke D_e) with D_e the local displacement. This recomputes it at x (the rotation
+// from x), without touching element_data; call it with the positions of the last add_force to get
+// SOFA's number.
+inline double hexa_fem_energy(const Index* hexa, Index n, const double* x, const double* element_data,
+                              int method) {
+    using namespace fem_detail;
+    const int stride = hexa_fem_data_size(method);
+    double energy = 0.0;
+    for (Index i = 0; i < n; ++i) {
+        double D[24], F[24];
+        hexa_local(hexa + 8 * i, x, element_data + i * stride, method, D, F);
+        for (int w = 0; w < 8; ++w)
+            energy += F[3 * w] * -D[3 * w] + F[3 * w + 1] * -D[3 * w + 1] + F[3 * w + 2] * -D[3 * w + 2];
+    }
+    return energy / -2.0;
+}
+
+// Element stiffness as SOFA assembles it (addKToMatrix / buildStiffnessMatrix): node block (a, b) of
+// out (24x24, row-major) = R^T Ke_ab R with the stored rotation; the force Jacobian block is -out_ab.
+inline void hexa_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
+    using namespace fem_detail;
+    const double* d = element_data + e * hexa_fem_data_size(method);
+    const M3 R = load_m(d + HROT);
+    for (int a = 0; a < 8; ++a)
+        for (int b = 0; b < 8; ++b) {
+            M3 kb;
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) kb(i, j) = d[HK + 24 * (3 * a + i) + 3 * b + j];
+            const M3 r = mul(mul_tn(R, kb), R);
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) out[24 * (3 * a + i) + 3 * b + j] = r(i, j);
+        }
+}
+
+}  // namespace sofac
