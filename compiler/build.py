@@ -118,7 +118,15 @@ def _valid_entry(entry: Path, key: str, name: str) -> bool:
         return False
 
 
-def build(source: str, *, kind: str, name: str, flags: tuple[str, ...], includes: tuple[Path, ...]) -> Built:
+def build(
+    source: str,
+    *,
+    kind: str,
+    name: str,
+    flags: tuple[str, ...],
+    includes: tuple[Path, ...],
+    libraries: tuple[str, ...] = (),
+) -> Built:
     """Compile ``source`` into ``name`` in the cache (or reuse a valid entry)."""
     command = compiler()
     identity = {
@@ -127,6 +135,7 @@ def build(source: str, *, kind: str, name: str, flags: tuple[str, ...], includes
         "compiler": _compiler_identity(command),
         "flags": list(flags),
         "includes": [str(p) for p in includes],
+        "libraries": list(libraries),
         "sofac": __version__,
     }
     key = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
@@ -142,7 +151,7 @@ def build(source: str, *, kind: str, name: str, flags: tuple[str, ...], includes
         staging = Path(tempfile.mkdtemp(prefix="build-", dir=root))
         try:
             (staging / "source.cpp").write_text(source)
-            arguments = [command, *flags, *(f"-I{p}" for p in includes), "source.cpp", "-o", name]
+            arguments = [command, *flags, *(f"-I{p}" for p in includes), "source.cpp", "-o", name, *libraries]
             try:
                 result = subprocess.run(
                     arguments, cwd=staging, capture_output=True, text=True, timeout=900, check=False
@@ -167,10 +176,24 @@ def build(source: str, *, kind: str, name: str, flags: tuple[str, ...], includes
         return Built(entry / name, key, False, time.perf_counter() - started)
 
 
-def build_scene(source: str) -> Built:
-    """A generated scene's library."""
-    includes = (resource_dir("runtime"), eigen_include())
-    return build(source, kind="scenes", name="scene.so", flags=SCENE_FLAGS, includes=includes)
+SUITESPARSE_INCLUDE = Path("/usr/include/suitesparse")
+
+
+def build_scene(source: str, *, direct_solver: bool = False) -> Built:
+    """A generated scene's library (linked with CHOLMOD when it uses a sparse direct solver)."""
+    includes: tuple[Path, ...] = (resource_dir("runtime"), eigen_include())
+    libraries: tuple[str, ...] = ()
+    if direct_solver:
+        if not (SUITESPARSE_INCLUDE / "cholmod.h").is_file():
+            raise BuildError(
+                "SuiteSparse is not installed: run `bash scripts/setup.sh` "
+                "(apt-get install libsuitesparse-dev)"
+            )
+        includes += (SUITESPARSE_INCLUDE,)
+        libraries = ("-lcholmod",)
+    return build(
+        source, kind="scenes", name="scene.so", flags=SCENE_FLAGS, includes=includes, libraries=libraries
+    )
 
 
 def build_host() -> Built:

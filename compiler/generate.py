@@ -29,10 +29,24 @@ def _size(buffer: Buffer) -> str:
     return f"Index(S.{buffer.ident}.size())"
 
 
+def _bytecode_cache() -> jinja2.BytecodeCache | None:
+    from .build import cache_dir
+
+    folder = cache_dir() / "templates"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return None  # a read-only cache folder: compile the templates each time
+    return jinja2.FileSystemBytecodeCache(str(folder))
+
+
 @functools.lru_cache(maxsize=1)
 def _environment() -> jinja2.Environment:
     return jinja2.Environment(
         loader=jinja2.FileSystemLoader(str(resource_dir("templates"))),
+        # Compiled templates are kept next to the build cache: loading a cached scene in a new
+        # process then skips Jinja2's template compilation (tens of milliseconds).
+        bytecode_cache=_bytecode_cache(),
         trim_blocks=True,
         lstrip_blocks=True,
         keep_trailing_newline=True,
@@ -94,6 +108,15 @@ class _GroupView:
         self.stiffness_dx = group.stiffness_dx
         self.energy = group.energy
         self.init = group.init
+        self.direct = group.direct
+        self.assemble = group.assemble
+        self.system_size = group.system_size
+        self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
+        self.marks = [
+            p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and group.direct
+        ]
+        for view, state in zip(self.states, group.states, strict=True):
+            view.offset = group.offset(state)
         self.implicit = group.implicit
         self.cg = group.cg
 
@@ -109,6 +132,7 @@ def render(plan: Plan) -> str:
         scene_file=_comment(plan.scene_file),
         buffers=buffers,
         groups=[_GroupView(g) for g in plan.groups],
+        any_direct=any(g.direct for g in plan.groups),
         dt=plan.dt,
         ptr=_ptr,
         size=_size,

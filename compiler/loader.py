@@ -216,7 +216,8 @@ def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = ()) -> Compi
 def compile_checked(checked: Any, diagnostics: Any = None) -> Compiled:
     scene_plan = plan.plan_scene(checked, diagnostics)
     source = generate.render(scene_plan)
-    return Compiled(scene_plan, source, build.build_scene(source))
+    direct = any(g.direct for g in scene_plan.groups)
+    return Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
 
 
 def load(path: str | Path, *, dt: float | None = None, data_roots: Sequence[Path] = ()) -> Simulation:

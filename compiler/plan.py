@@ -88,6 +88,8 @@ class Projection:
     state: StatePlan
     project: Callable[[Buffer], str]
     velocity: bool = False  # also projects the velocity after the update
+    # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (state offset -> code).
+    mark: Callable[[int], str] | None = None
 
 
 @dataclass
@@ -140,6 +142,21 @@ class Group:
     implicit: dict[str, Buffer] = field(default_factory=dict)
     linear_solver: Component | None = None
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
+    direct: bool = False  # a sparse direct solver: A is assembled (assemble) and factorised
+    assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
+
+    def offset(self, state: StatePlan) -> int | None:
+        """Where an independent state's DOFs start in the assembled system (None: mapped)."""
+        start = 0
+        for other in self.states:
+            if other is state:
+                return start
+            start += other.size * other.datatype.deriv_size
+        return None
+
+    @property
+    def system_size(self) -> int:
+        return sum(s.size * s.datatype.deriv_size for s in self.states)
 
 
 @dataclass
@@ -417,10 +434,13 @@ class _Planner:
         checked_linear = self.checked.of(linear) if linear is not None else None
         if checked_linear is None or checked_linear.spec is None:
             return False  # E221, reported by the checker
-        if checked_linear.spec.kernel != "cg":
+        if checked_linear.spec.kernel not in ("cg", "direct"):
             self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
             return False
         group.linear_solver = linear
+        if checked_linear.spec.kernel == "direct":
+            group.direct = True
+            return True
         group.cg = {
             "iterations": self.buffer(
                 linear, "iterations", [int(self.value(linear, "iterations") or 25)], "i64"
@@ -483,6 +503,7 @@ def _target(
 ) -> tuple[StatePlan, Group] | None:
     state = planner.state_of(checked)
     if state is None:
+        planner.ignored.append((checked.component, "no MechanicalObject to act on"))
         return None
     group = owner.get(id(state.component))
     if group is None:
@@ -685,6 +706,25 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
                 width,
             )
         group.mass_dx.append(Op(origin, [code]))
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(
+                "assemble_mesh_matrix_mass",
+                "A",
+                offset,
+                vertex,
+                n,
+                edges,
+                edge_mass,
+                _count(edge_mass) if not lumping else 0,
+                coefficient,
+                "mfact",
+                width,
+            ),
+        )
     elif state.acc is not None:
         group.accelerations.append(
             Op(
@@ -797,6 +837,23 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                 [_call(f"{prefix}_add_dforce", elements, count, state.dx, state.df, "kfact", data, method)],
             )
         )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(
+                f"assemble_elements<{corners}>",
+                "A",
+                elements,
+                count,
+                data,
+                method,
+                offset,
+                "kfact",
+                f"sofac::{prefix}_element_matrix",
+            ),
+        )
 
 
 def _add_mass(
@@ -832,6 +889,13 @@ def _add_mass(
     if group.scheme == "implicit":
         group.mass_dx.append(
             Op(origin, [_call(f"mass_multiply<{t}>", state.df, state.dx, n, buffer, stride_value, "mfact")])
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(f"assemble_mass<{t}>", "A", offset, n, buffer, stride_value, "mfact"),
         )
     elif state.acc is not None:
         state.mass = (buffer, stride_value)
@@ -908,6 +972,17 @@ def _add_springs(
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
         blocks = planner.buffer(component, "dfdx", np.zeros(count * dim * dim), role="scratch")
         jacobians = _ptr(blocks)
+        if group.direct:
+            offset1, offset2 = group.offset(first), group.offset(second)
+            if offset1 is None or offset2 is None:
+                planner.unsupported(
+                    checked, "a direct solver with springs on mapped states is not compiled yet"
+                )
+            else:
+                code = (
+                    f"sofac::assemble_springs<{types}>(A, {table}, {jacobians}, {offset1}, {offset2}, kfact);"
+                )
+                group.assemble.append(Op(origin, [code]))
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -932,6 +1007,21 @@ def _add_springs(
             [f"potential += sofac::spring_energy<{types}>({table}, {_ptr(first.x)}, {_ptr(second.x)});"],
         )
     )
+
+
+def _assemble(
+    planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[int], str]
+) -> None:
+    """A direct solver's share of a component: its blocks of A, at the state's offset."""
+    if not group.direct:
+        return
+    offset = group.offset(state)
+    if offset is None:
+        planner.unsupported(
+            checked, "a direct solver with forces or masses on mapped states is not compiled yet"
+        )
+        return
+    group.assemble.append(Op(origin_of(checked.component), [code(offset)]))
 
 
 def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -1065,6 +1155,13 @@ def _lower_rest_shape(planner: _Planner, checked: CheckedComponent, owner: dict[
         group.stiffness_dx.append(
             Op(origin, [_call(f"rest_shape_dforces<{t}>", state.df, state.dx, arguments, "kfact")])
         )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(f"assemble_rest_shape<{t}>", "A", offset, arguments, "kfact"),
+        )
     group.energy.append(
         Op(
             origin,
@@ -1097,6 +1194,7 @@ def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, 
             state,
             lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
             bool(planner.value(checked.component, "activate_projectVelocity")),
+            lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices)),
         )
     )
 
@@ -1129,6 +1227,7 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
             state,
             lambda vector: _call(f"project_partial<{t}>", vector, indices, _count(indices), mask),
             bool(velocity),
+            lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices), mask),
         )
     )
 

@@ -62,7 +62,9 @@ inline void mass_acceleration(double* a, const double* f, Index n, const double*
         if constexpr (DT::rigid && DT::coord == 7) {
             linear<DT>(a, i) = linear<DT>(f, i) / mi[0];
             const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> inertia(mi + 1);
-            angular(a, i) = inertia.ldlt().solve(Vec3(angular(f, i)));
+            // SOFA multiplies by the inverse of (inertia * m); a closed-form 3x3 inverse also keeps
+            // the compile time down (Eigen's LDLT instantiates much more code).
+            angular(a, i) = Mat3(inertia).inverse() * Vec3(angular(f, i));
         } else if constexpr (DT::rigid) {
             a[3 * i] = f[3 * i] / mi[0];
             a[3 * i + 1] = f[3 * i + 1] / mi[0];

@@ -101,6 +101,7 @@ MIN_RES_LINEAR_SOLVER = ComponentSpec(
 
 SPARSE_LDL_SOLVER = ComponentSpec(
     name="SparseLDLSolver",
+    kernel="direct",
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
     doc="Direct sparse L D L^T factorisation of the assembled matrix, every step.",
@@ -118,6 +119,7 @@ SPARSE_LDL_SOLVER = ComponentSpec(
 
 SPARSE_CHOLESKY_SOLVER = ComponentSpec(
     name="SparseCholeskySolver",
+    kernel="direct",
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
     doc="Direct sparse Cholesky (L L^T) factorisation. Moved out of SOFA's main repository into the "
@@ -133,6 +135,7 @@ SPARSE_CHOLESKY_SOLVER = ComponentSpec(
 def _eigen(name: str, what: str) -> ComponentSpec:
     return ComponentSpec(
         name=name,
+        kernel="direct",
         category=Category.LINEAR_SOLVER,
         module=_DIRECT,
         doc=f"Direct sparse {what} factorisation (Eigen) of the assembled matrix.",
