@@ -559,7 +559,13 @@ def _topology_of(planner: _Planner, checked: CheckedComponent) -> Component | No
     topology = checked.links.get("topology")
     if isinstance(topology, Component):
         return topology
-    return planner.checked.resolver._singleton(checked.component.node, "topology")
+    # A node holds one topology link: the last topology added to it (SOFA's NodeSingle), searched
+    # from the component's node up.
+    for node in (checked.component.node, *checked.component.node.ancestors()):
+        found = [c for c in node.objects if planner.checked.of(c).category is Category.TOPOLOGY]
+        if found:
+            return found[-1]
+    return None
 
 
 def _topology_cells(planner: _Planner, checked: CheckedComponent) -> dict[str, np.ndarray] | None:
@@ -659,7 +665,13 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
             checked, "a consistent mass with an explicit solver (a linear solve) is not compiled yet"
         )
         return
+    from .barycentric import mapper_for
+
     cells = _topology_cells(planner, checked) or {}
+    topology = _topology_of(planner, checked)
+    spec = planner.checked.of(topology).spec if topology is not None else None
+    if spec is not None and mapper_for(spec.name) == "dynamic":
+        cells.pop("edges", None)  # a dynamic container builds its whole edge array from its elements
     density = planner.value(component, "massDensity") if component.get("massDensity") is not None else None
     try:
         data = masses.mesh_matrix_mass(
