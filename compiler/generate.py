@@ -86,6 +86,7 @@ class _ProjectionView:
         self.velocity = projection.velocity
         self.on_v = projection.project(state.v)
         self.on_acc = projection.project(state.acc) if state.acc else ""
+        self.on_f = projection.project(state.f)
         self.on_df = projection.project(state.df) if state.df else ""
         self.on_r = projection.project(state.stages["r"]) if "r" in state.stages else ""
 

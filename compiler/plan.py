@@ -142,7 +142,8 @@ class Group:
     implicit: dict[str, Buffer] = field(default_factory=dict)
     linear_solver: Component | None = None
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
-    direct: bool = False  # a sparse direct solver: A is assembled (assemble) and factorised
+    assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
+    direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
 
     def offset(self, state: StatePlan) -> int | None:
@@ -416,6 +417,13 @@ class _Planner:
         group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
         if scheme == "implicit" and not self._plan_implicit(solver, group):
             return None
+        if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
+            linear = solver.links.get("linearSolver")
+            if not isinstance(linear, Component):
+                linear = self.checked.resolver._linear_solver_below(solver.component.node)
+            spec = self.checked.of(linear).spec if linear is not None else None
+            if spec is not None and spec.kernel == "direct":
+                group.linear_solver, group.assembled = linear, True
         return group
 
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
@@ -439,7 +447,7 @@ class _Planner:
             return False
         group.linear_solver = linear
         if checked_linear.spec.kernel == "direct":
-            group.direct = True
+            group.assembled = group.direct = True
             return True
         group.cg = {
             "iterations": self.buffer(
@@ -661,10 +669,12 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
         return
     lumping = bool(planner.value(component, "lumping"))
     if group.scheme != "implicit" and not lumping:
-        planner.unsupported(
-            checked, "a consistent mass with an explicit solver (a linear solve) is not compiled yet"
-        )
-        return
+        if group.scheme != "euler" or not group.assembled:
+            planner.unsupported(
+                checked, "a consistent mass with this solver needs a sparse direct linear solver"
+            )
+            return
+        group.direct = True  # explicit Euler solves M a = f
     from .barycentric import mapper_for
 
     cells = _topology_cells(planner, checked) or {}
@@ -699,6 +709,25 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
     group.forces.append(
         Op(origin, [_call("mesh_matrix_mass_gravity", state.f, vertex, n, lumped_factor, g, width)])
     )
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        lambda offset: _call(
+            "assemble_mesh_matrix_mass",
+            "A",
+            offset,
+            vertex,
+            n,
+            edges,
+            edge_mass,
+            _count(edge_mass) if not lumping else 0,
+            coefficient,
+            "mfact",
+            width,
+        ),
+    )
     if group.scheme == "implicit":
         if lumping:
             code = _call(
@@ -718,26 +747,7 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
                 width,
             )
         group.mass_dx.append(Op(origin, [code]))
-        _assemble(
-            planner,
-            checked,
-            group,
-            state,
-            lambda offset: _call(
-                "assemble_mesh_matrix_mass",
-                "A",
-                offset,
-                vertex,
-                n,
-                edges,
-                edge_mass,
-                _count(edge_mass) if not lumping else 0,
-                coefficient,
-                "mfact",
-                width,
-            ),
-        )
-    elif state.acc is not None:
+    elif state.acc is not None and lumping:
         group.accelerations.append(
             Op(
                 origin,
@@ -898,16 +908,16 @@ def _add_mass(
             ],
         )
     )
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        lambda offset: _call(f"assemble_mass<{t}>", "A", offset, n, buffer, stride_value, "mfact"),
+    )
     if group.scheme == "implicit":
         group.mass_dx.append(
             Op(origin, [_call(f"mass_multiply<{t}>", state.df, state.dx, n, buffer, stride_value, "mfact")])
-        )
-        _assemble(
-            planner,
-            checked,
-            group,
-            state,
-            lambda offset: _call(f"assemble_mass<{t}>", "A", offset, n, buffer, stride_value, "mfact"),
         )
     elif state.acc is not None:
         state.mass = (buffer, stride_value)
@@ -1025,7 +1035,7 @@ def _assemble(
     planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[int], str]
 ) -> None:
     """A direct solver's share of a component: its blocks of A, at the state's offset."""
-    if not group.direct:
+    if not group.assembled:
         return
     offset = group.offset(state)
     if offset is None:
