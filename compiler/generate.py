@@ -110,12 +110,13 @@ class _GroupView:
         self.energy = group.energy
         self.init = group.init
         self.direct = group.direct
+        self.pcg = group.pcg
+        self.preconditioner = group.preconditioner
+        self.matrix = group.direct or bool(group.preconditioner)  # an assembled system matrix
         self.assemble = group.assemble
         self.system_size = group.system_size
         self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
-        self.marks = [
-            p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and group.direct
-        ]
+        self.marks = [p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and self.matrix]
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
         self.implicit = group.implicit
@@ -133,7 +134,7 @@ def render(plan: Plan) -> str:
         scene_file=_comment(plan.scene_file),
         buffers=buffers,
         groups=[_GroupView(g) for g in plan.groups],
-        any_direct=any(g.direct for g in plan.groups),
+        any_direct=any(g.direct or g.preconditioner for g in plan.groups),
         dt=plan.dt,
         ptr=_ptr,
         size=_size,

@@ -216,7 +216,7 @@ def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = ()) -> Compi
 def compile_checked(checked: Any, diagnostics: Any = None) -> Compiled:
     scene_plan = plan.plan_scene(checked, diagnostics)
     source = generate.render(scene_plan)
-    direct = any(g.direct for g in scene_plan.groups)
+    direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     return Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
 
 

@@ -144,6 +144,9 @@ class Group:
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
     assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
+    # PCGLinearSolver: iterations, tolerance; preconditioner block size (0: none, 1: Jacobi, 3: block)
+    pcg: dict[str, Buffer] = field(default_factory=dict)
+    preconditioner: int = 0
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
 
     def offset(self, state: StatePlan) -> int | None:
@@ -387,7 +390,7 @@ class _Planner:
                 "euler": (),
                 "rk2": ("x0", "v0"),
                 "rk4": ("x0", "v0", "dx", "dv"),
-                "implicit": ("r", "p"),  # conjugate gradient residual and direction (q is df)
+                "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
             }[group.scheme]
             for state in group.states:
                 for name in names:
@@ -426,6 +429,30 @@ class _Planner:
                 group.linear_solver, group.assembled = linear, True
         return group
 
+    def _plan_pcg(self, linear: CheckedComponent, group: Group) -> bool:
+        """SOFA's PCGLinearSolver: warm-started CG, optionally (block) Jacobi preconditioned."""
+        component = linear.component
+        group.linear_solver = component
+        group.pcg = {
+            "iterations": self.buffer(
+                component, "iterations", [int(self.value(component, "iterations") or 25)], "i64"
+            ),
+            "tolerance": self.buffer(
+                component, "tolerance", [float(self.value(component, "tolerance"))], role="param"
+            ),
+        }
+        preconditioner = linear.links.get("preconditioner")
+        if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
+            spec = self.checked.of(preconditioner).spec
+            block = {"jacobi": 1, "block_jacobi": 3}.get(spec.kernel if spec else "")
+            if block is None:
+                self.unsupported(
+                    self.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
+                )
+                return False
+            group.preconditioner, group.assembled = block, True
+        return True
+
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
         """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
         component = solver.component
@@ -442,6 +469,8 @@ class _Planner:
         checked_linear = self.checked.of(linear) if linear is not None else None
         if checked_linear is None or checked_linear.spec is None:
             return False  # E221, reported by the checker
+        if checked_linear.spec.kernel == "pcg":
+            return self._plan_pcg(checked_linear, group)
         if checked_linear.spec.kernel not in ("cg", "direct"):
             self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
             return False
@@ -1454,7 +1483,222 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
     )
 
 
+def _element_cells(
+    planner: _Planner, checked: CheckedComponent, state: StatePlan
+) -> tuple[str, int, np.ndarray] | None:
+    """Element-based FEM (runtime/sofac/element_fem.h): the element type of a "Vec3d,Element"
+    template, its nodes per element and the cells of the topology the component uses."""
+    from . import element_fem
+
+    element = element_fem.element_of(checked.template)
+    if state.datatype.name != "Vec3d" or element not in element_fem.ELEMENTS:
+        planner.unsupported(
+            checked,
+            f"template {checked.template!r} is not compiled yet (Vec3d with Tetrahedron or Hexahedron)",
+        )
+        return None
+    corners, kind = element_fem.ELEMENTS[element]
+    cells = (_topology_cells(planner, checked) or {}).get(kind)
+    if cells is None or not cells.size or cells.size % corners:
+        planner.unsupported(checked, f"it needs {kind} known at compile time")
+        return None
+    if cells.min() < 0 or cells.max() >= state.size:
+        planner.unsupported(checked, f"its {kind} index points outside its state of {state.size}")
+        return None
+    return element, corners, cells
+
+
+def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """CorotationalFEMForceField and LinearSmallStrainFEMForceField on tetrahedra or hexahedra."""
+    from . import element_fem
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    geometry = _element_cells(planner, checked, state)
+    if geometry is None:
+        return
+    element, corners, cells = geometry
+    if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
+        return
+    corotational = checked.spec is not None and checked.spec.name == "CorotationalFEMForceField"
+    method = 0
+    if corotational:
+        name = planner.value(component, "rotationMethod")
+        code = element_fem.rotation_method(name, element)
+        if code is None:
+            planner.unsupported(checked, f"rotationMethod {name!r} does not exist for {element}")
+            return
+        method = code
+    count, size = cells.size // corners, 3 * corners
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, element_fem.ELEMENTS[element][1], cells, "i64", columns=corners)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else []), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else []), role="param"
+    )
+    stiffness = planner.buffer(
+        component, "elementStiffness", np.zeros(count * size * size), columns=size * size, role="scratch"
+    )
+    origin = origin_of(component)
+    n = corners
+    init = [
+        _call(
+            f"element_fem_stiffness_init<{n}>",
+            elements,
+            count,
+            state.rest,
+            young_buffer,
+            _count(young_buffer),
+            poisson_buffer,
+            _count(poisson_buffer),
+            stiffness,
+        )
+    ]
+    rotations = None
+    if corotational:
+        rotations = planner.buffer(component, "rotations", np.zeros(count * 18), columns=18, role="scratch")
+        init.append(_call(f"element_corot_init<{n}>", elements, count, state.rest, method, rotations))
+        force = _call(
+            f"element_corot_add_force<{n}>",
+            elements,
+            count,
+            state.x,
+            state.rest,
+            stiffness,
+            method,
+            rotations,
+            state.f,
+        )
+    else:
+        force = _call(
+            f"element_linear_add_force<{n}>", elements, count, state.x, state.rest, stiffness, state.f
+        )
+    group.init.append(Op(origin, init))
+    group.forces.append(Op(origin, [force]))
+    if group.scheme != "implicit":
+        return
+    if rotations is not None:
+        dforce = _call(
+            f"element_corot_add_dforce<{n}>",
+            elements,
+            count,
+            state.dx,
+            state.df,
+            "kfact",
+            stiffness,
+            rotations,
+        )
+    else:
+        dforce = _call(
+            f"element_linear_add_dforce<{n}>", elements, count, state.dx, state.df, "kfact", stiffness
+        )
+    group.stiffness_dx.append(Op(origin, [dforce]))
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        lambda offset: _call(
+            f"element_fem_assemble<{n}>",
+            "A",
+            elements,
+            count,
+            stiffness,
+            _ptr(rotations) if rotations is not None else "nullptr",
+            offset,
+            "kfact",
+        ),
+    )
+
+
+def _nodal_mass_density(planner: _Planner, checked: CheckedComponent) -> Component | None:
+    """FEMMass's density: its nodalMassDensity link, else the first NodalMassDensity of its context."""
+    linked = checked.links.get("nodalMassDensity")
+    if isinstance(linked, Component):
+        return linked
+    for node in (checked.component.node, *checked.component.node.ancestors()):
+        for candidate in node.objects:
+            spec = planner.checked.of(candidate).spec
+            if spec is not None and spec.name == "NodalMassDensity":
+                return candidate
+    return None
+
+
+def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FEMMass: the consistent scalar mass matrix of the elements, from a NodalMassDensity."""
+    from . import element_fem
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    geometry = _element_cells(planner, checked, state)
+    if geometry is None:
+        return
+    _, corners, cells = geometry
+    if group.scheme != "implicit":
+        planner.unsupported(checked, "FEMMass needs an implicit solver (SOFA cannot invert it: accFromF)")
+        return
+    source = _nodal_mass_density(planner, checked)
+    if source is None:
+        planner.unsupported(checked, "no NodalMassDensity in its context (SOFA marks it invalid)")
+        return
+    pattern = element_fem.mass_pattern(cells.reshape(-1, corners), state.size)
+    count, n = cells.size // corners, corners
+    elements = planner.buffer(component, "elements", cells, "i64", columns=corners)
+    density = planner.buffer(
+        source, "property", element_fem.node_densities(planner.value(source, "property")), role="param"
+    )
+    rows = planner.buffer(component, "rowBegin", pattern.row_begin, "i64")
+    cols = planner.buffer(component, "colsIndex", pattern.cols, "i64")
+    values = planner.buffer(component, "colsValue", np.zeros(pattern.nonzeros), role="scratch")
+    csr = (rows, cols, values, state.size)
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"fem_mass_init<{n}>",
+                    elements,
+                    count,
+                    state.rest,
+                    density,
+                    _count(density),
+                    *csr[:2],
+                    state.size,
+                    values,
+                )
+            ],
+        )
+    )
+    group.forces.append(Op(origin, [_call("fem_mass_gravity", state.f, *csr, planner.gravity)]))
+    group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+    _assemble(
+        planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
+    )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "kinetic += " + _call("fem_mass_kinetic_energy", state.v, *csr),
+                "potential += " + _call("fem_mass_potential_energy", state.x, *csr, planner.gravity),
+            ],
+        )
+    )
+
+
 LOWERINGS: dict[str, Lowering] = {
+    "element_fem": _lower_element_fem,
+    "fem_mass": _lower_fem_mass,
     "mesh_matrix_mass": _lower_mesh_matrix_mass,
     "tetra_fem": _lower_fem,
     "tetracorot_fem": _lower_fem,

@@ -10,6 +10,7 @@
 #include <Eigen/CholmodSupport>
 #include <Eigen/Sparse>
 #include <algorithm>
+#include <limits>
 #include <vector>
 
 #include "kernels.h"
@@ -78,23 +79,70 @@ struct DirectSolver {
     Eigen::VectorXd rhs, solution;
     bool ok = true;
 
+    DirectSolver() { factorization.cholmod().print = 0; }  // failures are reported, not printed
+
     void resize(Index n) {
         fixed.assign(static_cast<std::size_t>(n), 0);
         rhs.resize(n);
         solution.resize(n);
     }
 
-    // After the values are assembled: apply the projection, factorise (symbolic analysis once).
-    void factor(bool first) {
+    // Once, on the recorded pattern: CHOLMOD's symbolic analysis (ordering, elimination tree).
+    void analyze() { factorization.analyzePattern(matrix); }
+
+    // Projective constraints: rows and columns of constrained DOFs cleared, diagonal 1.
+    void project() {
         for (int col = 0; col < matrix.outerSize(); ++col)
             for (Eigen::SparseMatrix<double>::InnerIterator it(matrix, col); it; ++it)
                 if (fixed[it.row()] || fixed[it.col()]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
-        if (first) factorization.analyzePattern(matrix);
+    }
+
+    // After the values are assembled: the projection, then the numeric factorisation.
+    void factor() {
+        project();
         factorization.factorize(matrix);
         ok = factorization.info() == Eigen::Success;
     }
 
-    void solve() { solution = factorization.solve(rhs); }
+    // A failed factorisation yields NaN, which the step's divergence guard reports.
+    void solve() {
+        if (ok) solution = factorization.solve(rhs);
+        else solution.setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+};
+
+// (Block) Jacobi preconditioner of PCGLinearSolver: z = D^-1 r with D the diagonal (block size 1)
+// or the 3x3 diagonal blocks (block size 3) of the assembled, projected system matrix.
+struct JacobiPreconditioner {
+    int block = 1;
+    std::vector<double> inverse;  // n values (block 1) or n/3 row-major 3x3 inverses (block 3)
+
+    void update(const Eigen::SparseMatrix<double>& matrix) {
+        const Index n = matrix.rows();
+        if (block == 1) {
+            inverse.resize(static_cast<std::size_t>(n));
+            for (Index i = 0; i < n; ++i) inverse[i] = 1.0 / matrix.coeff(i, i);
+            return;
+        }
+        inverse.resize(static_cast<std::size_t>(3 * n));
+        for (Index b = 0; b < n / 3; ++b) {
+            Mat3 m;
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) m(i, j) = matrix.coeff(3 * b + i, 3 * b + j);
+            Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(inverse.data() + 9 * b) = m.inverse();
+        }
+    }
+
+    void apply(const double* r, double* z, Index n) const {
+        if (block == 1) {
+            for (Index i = 0; i < n; ++i) z[i] = inverse[i] * r[i];
+            return;
+        }
+        for (Index b = 0; b < n / 3; ++b) {
+            const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> m(inverse.data() + 9 * b);
+            Eigen::Map<Vec3>(z + 3 * b) = m * Eigen::Map<const Vec3>(r + 3 * b);
+        }
+    }
 };
 
 // ---- contributions --------------------------------------------------------------------------

@@ -274,6 +274,7 @@ _ELEMENT_FEM_FIELDS = (
 
 COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="CorotationalFEMForceField",
+    kernel="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Corotational linear elasticity for one element type, chosen by the second template "
@@ -282,11 +283,20 @@ COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     default_template=ELEMENT_TEMPLATES[0],
     supported=True,
     effects=_FEM_EFFECTS,
-    fields=_ELEMENT_FEM_FIELDS,
+    fields=(
+        FieldSpec(
+            "rotationMethod",
+            Enum(values=("stable_polar", "polar", "identity", "triangle", "hexahedron"), case_sensitive=True),
+            doc="how element rotations are found (default: triangle for triangles and tetrahedra, "
+            "hexahedron for hexahedra, stable_polar otherwise)",
+        ),
+        *_ELEMENT_FEM_FIELDS,
+    ),
 )
 
 LINEAR_SMALL_STRAIN_FEM_FORCE_FIELD = ComponentSpec(
     name="LinearSmallStrainFEMForceField",
+    kernel="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Small-strain linear elasticity for one element type, chosen by the second template argument.",

@@ -69,6 +69,7 @@ CG_LINEAR_SOLVER = ComponentSpec(
 
 PCG_LINEAR_SOLVER = ComponentSpec(
     name="PCGLinearSolver",
+    kernel="pcg",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="Preconditioned conjugate gradient (matrix-free), preconditioned by another linear solver.",
@@ -212,6 +213,7 @@ PRECOMPUTED_LINEAR_SOLVER = ComponentSpec(
 
 JACOBI_PRECONDITIONER = ComponentSpec(
     name="JacobiPreconditioner",
+    kernel="jacobi",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Diagonal (Jacobi) preconditioner.",
@@ -225,6 +227,7 @@ JACOBI_PRECONDITIONER = ComponentSpec(
 
 BLOCK_JACOBI_PRECONDITIONER = ComponentSpec(
     name="BlockJacobiPreconditioner",
+    kernel="block_jacobi",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Block-diagonal (3x3 blocks) Jacobi preconditioner.",
@@ -383,7 +386,7 @@ PRECONDITIONED_MATRIX_FREE_SYSTEM = ComponentSpec(
     doc="Matrix-free system whose preconditioner matrix is assembled every assemblingRate steps.",
     templates=(GRAPH_SCATTERED,),
     default_template=GRAPH_SCATTERED,
-    unsupported_reason="PreconditionedMatrixFreeSystem is not implemented yet",
+    supported=True,  # the matrix-free system of PCGLinearSolver: how sofac always works
     effects=_SOLVE,
     fields=(
         FieldSpec(

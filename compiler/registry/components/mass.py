@@ -110,12 +110,15 @@ MESH_MATRIX_MASS = ComponentSpec(
 
 FEM_MASS = ComponentSpec(
     name="FEMMass",
+    kernel="fem_mass",
     category=Category.MASS,
     module=_MODULE,
-    doc="Finite-element mass matrix per element type, from a NodalMassDensity.",
+    doc='Consistent finite-element mass matrix of one element type (template "Vec3d,Tetrahedron" or '
+    '"Vec3d,Hexahedron" compiled), integrated with the density of a NodalMassDensity (its link, '
+    "else the first one in its context) interpolated from the nodes; needs an implicit solver.",
     templates=ELEMENT_TEMPLATES,
     default_template=ELEMENT_TEMPLATES[0],
-    unsupported_reason="FEMMass (element-based mass with NodalMassDensity) is not implemented yet",
+    supported=True,
     effects=_MASS_EFFECTS,
     fields=(
         FieldSpec("nodalMassDensity", Link("object"), doc="NodalMassDensity giving the density per node"),
@@ -128,10 +131,10 @@ NODAL_MASS_DENSITY = ComponentSpec(
     name="NodalMassDensity",
     category=Category.UTILITY,
     module=_MODULE,
-    doc="A mass density value per node, read by FEMMass.",
-    unsupported_reason="NodalMassDensity only feeds FEMMass, which is not implemented yet",
+    doc="A mass density value per node, read by FEMMass (a node beyond the list takes its last value).",
+    supported=True,
     effects=frozenset({Effect.DATA}),
-    fields=(FieldSpec("property", Reals(), doc="density per node (one value, or one per node)"),),
+    fields=(FieldSpec("property", Reals(), (1.0,), "density per node (one value, or one per node)"),),
 )
 
 COMPONENTS = (UNIFORM_MASS, DIAGONAL_MASS, MESH_MATRIX_MASS, FEM_MASS, NODAL_MASS_DENSITY)
