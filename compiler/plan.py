@@ -1100,6 +1100,97 @@ def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int
     _add_springs(planner, checked, springs, ends[0], ends[1], group)
 
 
+def _lower_grid_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """RegularGridSpringForceField: its own springs, then springs along the grid's edges, face
+    diagonals and cube diagonals, in SOFA's loop order, ks = stiffness / rest length."""
+    import math
+
+    from .barycentric import RegularGrid
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    topology = _topology_of(planner, checked)
+    cells = _topology_cells(planner, checked) or {}
+    if topology is None or "resolution" not in cells:
+        planner.unsupported(checked, "it needs a RegularGridTopology in its node")
+        return
+    bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
+    nx, ny, nz = (int(c) for c in cells["resolution"])
+    _, step = RegularGrid((nx, ny, nz), tuple(bounds[:3]), tuple(bounds[3:])).frame()
+    dx, dy, dz = (np.array([step[a] if a == axis else 0.0 for a in range(3)]) for axis in range(3))
+
+    def norm(v: np.ndarray) -> float:
+        return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+    def coefficient(kind: str, name: str) -> float:
+        both = planner.value(component, name.lower())  # `stiffness` / `damping` set all three
+        return float(both if both is not None else planner.value(component, f"{kind}{name}") or 0.0)
+
+    def point(x: int, y: int, z: int) -> int:
+        return x + nx * (y + ny * z)
+
+    rows = [tuple(r) for r in _springs_from_fields(planner, checked)]
+
+    def add(kind: str, pairs: list[tuple[tuple[int, int], float, float | None]]) -> None:
+        ks, kd = coefficient(kind, "Stiffness"), coefficient(kind, "Damping")
+        if ks == 0.0 and kd == 0.0:
+            return
+        for (a, b), length, scale_length in pairs:
+            divisor = scale_length if scale_length is not None else length
+            rows.append((a, b, ks / divisor, kd / divisor, length))
+
+    lines = []
+    for axis, delta, size in (
+        (0, dx, (nx - 1, ny, nz)),
+        (1, dy, (nx, ny - 1, nz)),
+        (2, dz, (nx, ny, nz - 1)),
+    ):
+        length = norm(delta)
+        for z in range(size[2]):
+            for y in range(size[1]):
+                for x in range(size[0]):
+                    offset = [(1, 0, 0), (0, 1, 0), (0, 0, 1)][axis]
+                    lines.append(
+                        ((point(x, y, z), point(x + offset[0], y + offset[1], z + offset[2])), length, None)
+                    )
+    add("lines", lines)
+    quads = []
+    for u, v, size, (o1, o2, o3, o4) in (
+        (dx, dy, (nx - 1, ny - 1, nz), ((0, 0, 0), (1, 1, 0), (1, 0, 0), (0, 1, 0))),
+        (dx, dz, (nx - 1, ny, nz - 1), ((0, 0, 0), (1, 0, 1), (1, 0, 0), (0, 0, 1))),
+        (dy, dz, (nx, ny - 1, nz - 1), ((0, 0, 0), (0, 1, 1), (0, 1, 0), (0, 0, 1))),
+    ):
+        first, second = norm(u + v), norm(u - v)
+        # SOFA divides the second YZ diagonal's stiffness by the first's length (kept as is).
+        second_scale = first if u is dy else None
+        for z in range(size[2]):
+            for y in range(size[1]):
+                for x in range(size[0]):
+                    corner = [(x + o[0], y + o[1], z + o[2]) for o in (o1, o2, o3, o4)]
+                    quads.append(((point(*corner[0]), point(*corner[1])), first, None))
+                    quads.append(((point(*corner[2]), point(*corner[3])), second, second_scale))
+    add("quads", quads)
+    cubes = []
+    diagonals = (
+        ((0, 0, 0), (1, 1, 1), norm(dx + dy + dz)),
+        ((1, 0, 0), (0, 1, 1), norm(-dx + dy + dz)),
+        ((0, 1, 0), (1, 0, 1), norm(dx - dy + dz)),
+        ((0, 0, 1), (1, 1, 0), norm(dx + dy - dz)),
+    )
+    for z in range(nz - 1):
+        for y in range(ny - 1):
+            for x in range(nx - 1):
+                for a, b, length in diagonals:
+                    ends = (point(x + a[0], y + a[1], z + a[2]), point(x + b[0], y + b[1], z + b[2]))
+                    cubes.append((ends, length, None))
+    add("cubes", cubes)
+    springs = np.array(rows, dtype=float).reshape(-1, 5)
+    _add_springs(planner, checked, springs, state, state, group)
+
+
 # MeshSpringForceField: (topology field, corners per element, stiffness/damping prefix), in the
 # order SOFA adds them; a vertex pair gets one spring, from the first element kind that has it.
 _MESH_ELEMENTS = (
@@ -1697,6 +1788,7 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
 
 
 LOWERINGS: dict[str, Lowering] = {
+    "grid_springs": _lower_grid_springs,
     "element_fem": _lower_element_fem,
     "fem_mass": _lower_fem_mass,
     "mesh_matrix_mass": _lower_mesh_matrix_mass,

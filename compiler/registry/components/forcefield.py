@@ -174,6 +174,7 @@ _GRID_KINDS = ("lines", "quads", "cubes")
 
 REGULAR_GRID_SPRING_FORCE_FIELD = ComponentSpec(
     name="RegularGridSpringForceField",
+    kernel="grid_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs along the edges, face diagonals and cube diagonals of the node's RegularGridTopology, "
