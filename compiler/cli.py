@@ -168,6 +168,10 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         from .commands import cmd_schedule
 
         return cmd_schedule(args)
+    if args.effects and args.scene is not None:
+        from .commands import cmd_effects
+
+        return cmd_effects(args)
     if args.scene is None:
         raise UsageError("inspect needs a SCENE file (or --components)")
     path = Path(args.scene)
@@ -285,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--components", action="store_true", help="list the components sofac knows instead of a scene"
     )
     inspect.add_argument(
+        "--effects", action="store_true", help="list the effects the compiled step contains, and why"
+    )
+    inspect.add_argument(
         "--schedule", action="store_true", help="print the compiled step's plan: groups, states, kernel calls"
     )
     inspect.set_defaults(handler=_cmd_inspect)
@@ -330,6 +337,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .commands import register
 
     register(commands, _EPILOG)
+    from .accuracy_cli import register as register_accuracy
+
+    register_accuracy(commands, _EPILOG)
 
     version = commands.add_parser("version", help="print sofac's version")
     version.set_defaults(handler=_cmd_version)

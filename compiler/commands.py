@@ -12,8 +12,12 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from .diagnostics import SceneError, Severity, SofacError
+
+if TYPE_CHECKING:
+    from .loader import SimulationDiverged
 
 EXIT_OK = 0
 EXIT_ERRORS = 1
@@ -96,8 +100,30 @@ def cmd_schedule(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_effects(args: argparse.Namespace) -> int:
+    import json
+
+    from . import check, plan
+
+    try:
+        with _reported():
+            checked, diagnostics = check.check_file(_scene(args))
+            if checked is None or diagnostics.has_errors():
+                raise SceneError(diagnostics.sorted())
+            scene_plan = plan.plan_scene(checked, diagnostics)
+    except _Failed:
+        return EXIT_ERRORS
+    if getattr(args, "format", "text") == "json":
+        rows = [{"effect": e, "component": o, "detail": d} for e, o, d in scene_plan.effects]
+        print(json.dumps(rows, indent=2))
+    else:
+        print(plan.format_effects(scene_plan))
+    return EXIT_OK
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from .cli import UsageError
+    from .loader import SimulationDiverged
 
     if args.steps < 0:
         raise UsageError("--steps must be >= 0")
@@ -113,12 +139,18 @@ def cmd_run(args: argparse.Namespace) -> int:
             if args.dt is not None:
                 sim.dt = args.dt
             ready = time.perf_counter()
-            if args.export_states:
-                from .writestate import export_states
+            try:
+                if args.export_states:
+                    from .writestate import export_states
 
-                export_states(sim, args.steps, Path(args.export_states), every=args.every, mapped=args.mapped)
-            else:
-                sim.step(args.steps)
+                    export_states(
+                        sim, args.steps, Path(args.export_states), every=args.every, mapped=args.mapped
+                    )
+                else:
+                    sim.step(args.steps)
+            except SimulationDiverged as error:
+                _report_divergence(error, sim, args.show)
+                raise _Failed from None
             stepped = time.perf_counter()
     except _Failed:
         return EXIT_ERRORS
@@ -133,11 +165,25 @@ def cmd_run(args: argparse.Namespace) -> int:
         state = sim[path]
         if state.info.mapped and not args.mapped:
             continue
-        rows = state.position[: args.show]
-        more = f" ... ({state.info.size} DOFs)" if state.info.size > args.show else ""
-        values = "; ".join(" ".join(f"{v:.6g}" for v in row) for row in rows)
-        print(f"  {path} <{state.info.template}>: {values}{more}")
+        print(_state_line(path, state.info.template, state.position, args.show))
     return EXIT_OK
+
+
+def _state_line(path: str, template: str, position: Any, show: int) -> str:
+    rows = position[:show]
+    more = f" ... ({len(position)} DOFs)" if len(position) > show else ""
+    values = "; ".join(" ".join(f"{v:.6g}" for v in row) for row in rows)
+    return f"  {path} <{template}>: {values}{more}"
+
+
+def _report_divergence(error: SimulationDiverged, sim: Any, show: int) -> None:
+    """The error line, then where the independent states were at the last finite step."""
+    print(f"sofac: error: {error}", file=sys.stderr)
+    if error.last_finite:
+        when = f"step {error.last_finite_step}, t={error.last_finite_time:g}"
+        print(f"sofac: the last finite state ({when}):", file=sys.stderr)
+        for path, (position, _velocity) in error.last_finite.items():
+            print(_state_line(path, sim[path].info.template, position, show), file=sys.stderr)
 
 
 def register(commands: argparse._SubParsersAction, epilog: str) -> None:

@@ -25,14 +25,78 @@ from .diagnostics import SceneError, SofacError
 _host: ModuleType | None = None
 
 
-class SimulationDiverged(SofacError):
-    """A state stopped being finite during a step."""
+class PrunedEffectError(SofacError):
+    """A run-time change that needs code the compiler left out (e.g. gravity on a zero-gravity scene)."""
 
-    def __init__(self, message: str, *, step: int, time: float, state: str) -> None:
+
+Snapshot = dict[str, tuple[np.ndarray, np.ndarray]]  # state path -> (position, velocity) copies
+
+
+class SimulationDiverged(SofacError):
+    """A simulation stopped being finite, or its energy grew past a bound (see ``Simulation.step``).
+
+    ``reason`` is ``"non-finite"`` (the step's guard found a NaN or infinity in an independent
+    state's position or velocity) or ``"energy"`` (the total energy passed a bound set with
+    ``step(n, energy_bound=...)`` or ``guard_energy(factor)``). Where it happened:
+
+    * ``step``: the failing step, counted from the creation or the last ``reset()`` (1 = the first
+      step ever run); ``time``: the simulation time after it (``sim.time``).
+    * ``state``: the path of the state that failed (the first in traversal order); ``dof``: the
+      first non-finite DOF (row) of that state, and ``field``: ``"position"``, ``"velocity"`` or
+      ``"position and velocity"``. For an energy failure, the state and DOF with the largest speed.
+    * ``solver``: the ODE solver of that state (``Type 'path' (file:line)``), ``hint``: what to try.
+    * ``energy``/``bound``: the total energy and the bound it passed (energy failures only).
+
+    The simulation's arrays hold the failing step's values: the compiled step stops right after
+    the step whose state stopped being finite. ``last_finite`` ({state path: (position, velocity)},
+    copies of the independent states) is the state at the start of the chunk of steps that failed
+    (at most ``Simulation.chunk`` steps earlier), at ``last_finite_step`` / ``last_finite_time``;
+    it is None when the state was not finite before the call (or snapshots are switched off).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        step: int,
+        time: float,
+        state: str,
+        reason: str = "non-finite",
+        dof: int | None = None,
+        field: str = "",
+        solver: str = "",
+        hint: str = "",
+        energy: float | None = None,
+        bound: float | None = None,
+        last_finite: Snapshot | None = None,
+        last_finite_step: int | None = None,
+        last_finite_time: float | None = None,
+    ) -> None:
         super().__init__(message)
         self.step = step
         self.time = time
         self.state = state
+        self.reason = reason
+        self.dof = dof
+        self.field = field
+        self.solver = solver
+        self.hint = hint
+        self.energy = energy
+        self.bound = bound
+        self.last_finite = last_finite
+        self.last_finite_step = last_finite_step
+        self.last_finite_time = last_finite_time
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Keyword-only arguments: rebuild from the attributes (exceptions cross process pools).
+        return (_rebuild_diverged, (type(self), str(self), dict(self.__dict__)))
+
+
+def _rebuild_diverged(cls: type[SimulationDiverged], message: str, attributes: dict[str, Any]) -> Any:
+    error = cls.__new__(cls)
+    Exception.__init__(error, message)
+    error.__dict__.update(attributes)
+    return error
 
 
 def host() -> ModuleType:
@@ -47,6 +111,12 @@ def host() -> ModuleType:
         sys.modules.setdefault("_sofac_host", module)
         _host = module
     return _host
+
+
+class _EnergyGuard(NamedTuple):
+    factor: float
+    scale: float
+    start: float  # the total energy when the guard was set
 
 
 class Energy(NamedTuple):
@@ -118,6 +188,19 @@ class Simulation:
                 self._views[index[id(state.v)]].reshape(-1, datatype.deriv_size),
                 self._views[index[id(state.f)]].reshape(-1, datatype.deriv_size),
             )
+        self._solver_of = {s.path: g for g in self.plan.groups for s in g.states}
+        self._independent = [s for s in self._states.values() if not s.info.mapped]
+        self._steps = 0  # steps run since the creation or the last reset()
+        self._energy_guard: _EnergyGuard | None = None
+        self._snapshot: Snapshot | None = None  # preallocated copies, refilled at each chunk
+        self._snapshot_step = 0
+        self._snapshot_time = 0.0
+
+    #: Steps per call of the compiled step: between two chunks, ``step()`` checks the energy bound
+    #: (if any) and copies the independent states for ``SimulationDiverged.last_finite``.
+    chunk: int = 1000
+    #: Copy the independent states at the start of each chunk (``SimulationDiverged.last_finite``).
+    keep_last_finite: bool = True
 
     # --- time ----------------------------------------------------------------------------------
     @property
@@ -134,27 +217,205 @@ class Simulation:
             raise ValueError(f"dt must be a positive number, got {value!r}")
         self.param("/.dt")[0] = value
 
-    def step(self, n: int = 1) -> None:
-        """Advance ``n`` steps; raises SimulationDiverged if a state stops being finite."""
+    @property
+    def steps(self) -> int:
+        """Steps run since the simulation was created or last reset."""
+        return self._steps
+
+    def step(self, n: int = 1, *, energy_bound: float | None = None) -> None:
+        """Advance ``n`` steps, in chunks of at most ``chunk`` steps.
+
+        Raises SimulationDiverged when an independent state stops being finite (the compiled step
+        checks every step and stops right after the failing one, whose values the arrays then
+        hold), or, checked between chunks and at the end, when the total energy exceeds
+        ``energy_bound`` or the bound set by ``guard_energy()``."""
         if n < 0:
             raise ValueError("n must be >= 0")
-        done = int(self._native.step(int(n)))
-        if done < n or (n and not self._finite()):
-            bad = next((s for s in self._states.values() if not self._state_finite(s)), None)
-            path = bad.info.path if bad else "?"
+        if energy_bound is not None and np.isnan(energy_bound):
+            raise ValueError("energy_bound must be a number")
+        chunk = max(1, int(self.chunk))
+        remaining = int(n)
+        while remaining > 0:
+            count = min(remaining, chunk)
+            if self.keep_last_finite:
+                self._take_snapshot()
+            done = int(self._native.step(count))
+            self._steps += done
+            remaining -= count
+            if done < count or not self._finite():
+                raise self._non_finite_error()
+            if energy_bound is not None or self._energy_guard is not None:
+                self._check_energy(energy_bound)
+
+    def guard_energy(self, factor: float | None, *, scale: float | None = None) -> None:
+        """Make ``step()`` raise SimulationDiverged when the total energy gains more than
+        ``factor`` x ``scale`` over its value now (checked between chunks and after each call).
+
+        ``scale`` defaults to the energy scale now, |kinetic| + |potential|. Without external
+        work, an implicit solver never gains energy, so a small factor catches a slow blow-up
+        before it reaches infinity; ``guard_energy(None)`` switches the guard off. The bound is
+        fixed when set (``reset()`` keeps it)."""
+        if factor is None:
+            self._energy_guard = None
+            return
+        if not (np.isfinite(factor) and factor > 0):
+            raise ValueError(f"factor must be a positive number, got {factor!r}")
+        energy = self.energy()
+        if scale is None:
+            scale = abs(energy.kinetic) + abs(energy.potential)
+            if not (np.isfinite(scale) and scale > 0):
+                raise ValueError(f"the energy scale is {scale:g} now; give guard_energy(factor, scale=...)")
+        elif not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"scale must be a positive number, got {scale!r}")
+        self._energy_guard = _EnergyGuard(float(factor), float(scale), energy.total)
+
+    # --- the divergence guard ------------------------------------------------------------------
+    def _take_snapshot(self) -> None:
+        if self._snapshot is None:
+            self._snapshot = {
+                s.info.path: (s.position.copy(), s.velocity.copy())
+                for s in self._independent
+                if s.info.simulated
+            }
+        else:
+            for path, (x, v) in self._snapshot.items():
+                state = self._states[path]
+                np.copyto(x, state.position)
+                np.copyto(v, state.velocity)
+        self._snapshot_step = self._steps
+        self._snapshot_time = self.time
+
+    def _last_finite(self) -> tuple[Snapshot | None, int | None, float | None]:
+        snapshot = self._snapshot if self.keep_last_finite else None
+        if snapshot is None or not all(
+            np.isfinite(x).all() and np.isfinite(v).all() for x, v in snapshot.values()
+        ):
+            return None, None, None
+        copies = {path: (x.copy(), v.copy()) for path, (x, v) in snapshot.items()}
+        return copies, self._snapshot_step, self._snapshot_time
+
+    def _solver_and_hint(self, path: str, energy: bool = False) -> tuple[str, str]:
+        group = self._solver_of.get(path)
+        dt = f"{self.dt:g}"
+        if group is None:
+            return "", f"try a smaller dt (now {dt}) or an implicit solver"
+        solver = plan.origin_of(group.solver)
+        if group.scheme != "implicit":
+            return solver, (
+                f"{group.solver.type_name} is explicit, stable only for small enough steps: try a smaller "
+                f"dt (now {dt}) or an implicit solver (EulerImplicitSolver with a CGLinearSolver)"
+            )
+        if group.direct:
+            return solver, (
+                f"try a smaller dt (now {dt}); a failed factorisation (a singular or indefinite system "
+                "matrix: an inverted element, a stiff spring compressed at a large dt) also gives NaN"
+            )
+        linear = group.linear_solver.type_name if group.linear_solver is not None else "the linear solver"
+        gain = "an unconverged solve can add energy: " if energy else ""
+        return solver, (
+            f"try a smaller dt (now {dt}); {gain}give {linear} more iterations or a smaller tolerance, "
+            "or use a direct solver (SparseLDLSolver)"
+        )
+
+    def _non_finite_error(self) -> SimulationDiverged:
+        bad = next((s for s in self._independent if not self._state_finite(s)), None)
+        path = bad.info.path if bad is not None else "?"
+        dof: int | None = None
+        where = ""
+        if bad is not None:
+            x_bad = ~np.isfinite(bad.position).all(axis=1)
+            v_bad = ~np.isfinite(bad.velocity).all(axis=1)
+            dof = int(np.argmax(x_bad | v_bad))
+            where = " and ".join(
+                name for name, rows in (("position", x_bad), ("velocity", v_bad)) if rows[dof]
+            )
+        solver, hint = self._solver_and_hint(path)
+        last, last_step, last_time = self._last_finite()
+        if last is not None:
+            kept = f"last finite state: step {last_step} (t={last_time:g})"
+        elif self.keep_last_finite:
+            kept = "the state was already not finite before this call (reset() restarts the simulation)"
+        else:
+            kept = ""
+        at = f" (DOF {dof}, its {where})" if dof is not None else ""
+        under = f" under {solver}" if solver else ""
+        message = (
+            f"the simulation diverged at step {self._steps} (t={self.time:g}): {path} is no longer "
+            f"finite{at}{under}; {hint}" + (f"; {kept}" if kept else "")
+        )
+        return SimulationDiverged(
+            message,
+            step=self._steps,
+            time=self.time,
+            state=path,
+            dof=dof,
+            field=where,
+            solver=solver,
+            hint=hint,
+            last_finite=last,
+            last_finite_step=last_step,
+            last_finite_time=last_time,
+        )
+
+    def _check_energy(self, energy_bound: float | None) -> None:
+        total = self.energy().total
+        limits: list[tuple[float, str]] = []
+        if energy_bound is not None:
+            limits.append((float(energy_bound), "energy_bound"))
+        guard = self._energy_guard
+        if guard is not None:
+            limits.append(
+                (
+                    guard.start + guard.factor * guard.scale,
+                    f"guard_energy: {guard.start:g} + {guard.factor:g} x scale {guard.scale:g}",
+                )
+            )
+        for limit, origin in limits:
+            if total <= limit:
+                continue
+            fastest = self._fastest()
+            path, dof, speed = fastest if fastest is not None else ("?", None, 0.0)
+            solver, hint = self._solver_and_hint(path, energy=True)
+            last, last_step, last_time = self._last_finite()
+            at = f"; the fastest DOF is {path} DOF {dof} (|v| = {speed:g})" if dof is not None else ""
+            under = f" under {solver}" if solver else ""
+            message = (
+                f"the simulation diverged at step {self._steps} (t={self.time:g}): the total energy "
+                f"{total:g} exceeds its bound {limit:g} ({origin}){at}{under}; {hint}"
+            )
             raise SimulationDiverged(
-                f"the simulation diverged at step {done} (t={self.time:g}): {path} is no longer finite; "
-                "try a smaller dt, or an implicit solver",
-                step=done,
+                message,
+                step=self._steps,
                 time=self.time,
                 state=path,
+                reason="energy",
+                dof=dof,
+                field="velocity" if dof is not None else "",
+                solver=solver,
+                hint=hint,
+                energy=total,
+                bound=limit,
+                last_finite=last,
+                last_finite_step=last_step,
+                last_finite_time=last_time,
             )
 
+    def _fastest(self) -> tuple[str, int, float] | None:
+        best: tuple[str, int, float] | None = None
+        for state in self._independent:
+            if not state.velocity.size:
+                continue
+            speeds = np.linalg.norm(state.velocity, axis=1)
+            row = int(np.argmax(speeds))
+            if best is None or not speeds[row] <= best[2]:
+                best = (state.info.path, row, float(speeds[row]))
+        return best
+
     def _state_finite(self, state: State) -> bool:
-        return bool(np.isfinite(state.position).all() and np.isfinite(state.velocity).all())
+        return _all_finite(state.position) and _all_finite(state.velocity)
 
     def _finite(self) -> bool:
-        return all(self._state_finite(s) for s in self._states.values() if not s.info.mapped)
+        return all(self._state_finite(s) for s in self._independent)
 
     def reset(self) -> None:
         """Back to the initial state and time 0 (tuned parameters are kept)."""
@@ -162,6 +423,7 @@ class Simulation:
             if buffer.role in ("state", "scratch"):
                 view[:] = buffer.initial
         self._native.time = 0.0
+        self._steps = 0
         self._native.init()
 
     # --- inspection ----------------------------------------------------------------------------
@@ -182,7 +444,14 @@ class Simulation:
         raise KeyError(f"no MechanicalObject {path!r}; the scene has: {', '.join(self._states)}")
 
     def param(self, key: str) -> np.ndarray:
-        """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view."""
+        """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
+
+        Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity)."""
+        if key in self.plan.pruned:
+            raise PrunedEffectError(
+                f"{key}: {self.plan.pruned[key]}, so the compiled step has no code for it and changing it "
+                "would have no effect; load the scene with sofac.load(path, prune=False) to keep it"
+            )
         for buffer, view in zip(self.plan.buffers, self._views, strict=True):
             if buffer.key == key and buffer.role == "param":
                 return view
@@ -197,6 +466,10 @@ class Simulation:
         return Energy(float(kinetic), float(potential))
 
 
+def _all_finite(array: np.ndarray) -> bool:
+    return bool(np.isfinite(array).all())
+
+
 def sofa_name(component: Any) -> str:
     """The name SOFA gives a component: its own, else class name + a per-node counter from 1."""
     if component.name:
@@ -205,25 +478,27 @@ def sofa_name(component: Any) -> str:
     return f"{component.type_name}{same.index(component) + 1}"
 
 
-def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = ()) -> Compiled:
+def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = (), prune: bool = True) -> Compiled:
     """Check, plan, generate and build a scene (or take it from the cache)."""
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
-    return compile_checked(checked, diagnostics)
+    return compile_checked(checked, diagnostics, prune=prune)
 
 
-def compile_checked(checked: Any, diagnostics: Any = None) -> Compiled:
-    scene_plan = plan.plan_scene(checked, diagnostics)
+def compile_checked(checked: Any, diagnostics: Any = None, *, prune: bool = True) -> Compiled:
+    scene_plan = plan.plan_scene(checked, diagnostics, prune=prune)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     return Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
 
 
-def load(path: str | Path, *, dt: float | None = None, data_roots: Sequence[Path] = ()) -> Simulation:
+def load(
+    path: str | Path, *, dt: float | None = None, data_roots: Sequence[Path] = (), prune: bool = True
+) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene."""
     started = time.perf_counter()
-    sim = compile_scene(path, data_roots=data_roots).instantiate()
+    sim = compile_scene(path, data_roots=data_roots, prune=prune).instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
         sim.dt = dt

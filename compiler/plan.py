@@ -172,6 +172,10 @@ class Plan:
     states: list[StatePlan]  # all MechanicalObjects, SOFA traversal order
     groups: list[Group]
     ignored: list[tuple[Component, str]]  # components kept out of the step, and why
+    # Effects left out because the scene makes them vanish (parameter key -> why); changing such a
+    # parameter at run time needs a recompilation (load(..., prune=False) keeps them).
+    pruned: dict[str, str] = field(default_factory=dict)
+    effects: list[tuple[str, str, str]] = field(default_factory=list)  # (effect, origin, detail)
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
@@ -187,9 +191,12 @@ def origin_of(component: Component) -> str:
 
 
 class _Planner:
-    def __init__(self, checked: CheckedScene, diagnostics: Diagnostics) -> None:
+    def __init__(self, checked: CheckedScene, diagnostics: Diagnostics, prune: bool = True) -> None:
         self.checked = checked
         self.diags = diagnostics
+        self.prune = prune
+        self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
+        self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
@@ -215,6 +222,13 @@ class _Planner:
         buffer = Buffer(ident, key, kind, array, columns, role)
         self.buffers.append(buffer)
         return buffer
+
+    def add_gravity(self, group: Group, op: Op) -> None:
+        """A mass's weight, unless gravity is zero and pruning is on (then no code at all)."""
+        if self.prune and not self.gravity.initial.any():
+            self.pruned.setdefault(self.gravity.key, "gravity is zero: no weight computed")
+            return
+        group.forces.append(op)
 
     def unsupported(self, checked: CheckedComponent, why: str) -> None:
         component = checked.component
@@ -252,7 +266,35 @@ class _Planner:
             states=[self.states[id(c.component)] for c in self.checked.states()],
             groups=groups,
             ignored=self.ignored,
+            pruned=self.pruned,
+            effects=self._effects(groups),
         )
+
+    def _effects(self, groups: list[Group]) -> list[tuple[str, str, str]]:
+        """What the compiled step does and why: one line per effect, naming its component."""
+        effects = []
+        for group in groups:
+            states = ", ".join(s.path for s in group.states)
+            effects.append(("integration", origin_of(group.solver), f"{group.scheme} scheme over {states}"))
+        if self.gravity.key not in self.pruned:
+            effects.append(
+                ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
+            )
+        kept_out = {id(component) for component, _ in self.ignored}
+        for component in self.lowered:
+            if id(component) in kept_out:
+                continue
+            spec = self.checked.of(component).spec
+            assert spec is not None
+            for effect in sorted(e.value for e in spec.effects):
+                if effect == "gravity" and self.gravity.key in self.pruned:
+                    continue
+                effects.append((effect, origin_of(component), spec.category.value))
+        for key, why in self.pruned.items():
+            effects.append(("pruned", key, why))
+        for component, why in self.ignored:
+            effects.append(("kept out", origin_of(component), why))
+        return effects
 
     def value_node(self, node: Node, name: str) -> Any:
         from .registry import node_spec
@@ -404,6 +446,7 @@ class _Planner:
             if lowering is None or checked.category in (Category.STATE, Category.ODE_SOLVER):
                 continue
             lowering(self, checked, owner)
+            self.lowered.append(checked.component)
         return list(groups.values())
 
     def _new_group(self, solver: CheckedComponent, index: int) -> Group | None:
@@ -735,8 +778,8 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
     lumped_factor = repr(float(data.lumping_coefficient))
     origin = origin_of(component)
     g = planner.gravity
-    group.forces.append(
-        Op(origin, [_call("mesh_matrix_mass_gravity", state.f, vertex, n, lumped_factor, g, width)])
+    planner.add_gravity(
+        group, Op(origin, [_call("mesh_matrix_mass_gravity", state.f, vertex, n, lumped_factor, g, width)])
     )
     _assemble(
         planner,
@@ -913,11 +956,8 @@ def _add_mass(
     origin = origin_of(checked.component)
     t, n = state.cpp_type, state.size
     stride_value = stride if stride else 0
-    group.forces.append(
-        Op(
-            origin,
-            [_call(f"mass_gravity<{t}>", state.f, n, buffer, stride_value, planner.gravity)],
-        )
+    planner.add_gravity(
+        group, Op(origin, [_call(f"mass_gravity<{t}>", state.f, n, buffer, stride_value, planner.gravity)])
     )
     group.energy.append(
         Op(
@@ -1381,7 +1421,8 @@ def _mapping_ends(
     parent = planner.states.get(id(source)) if isinstance(source, Component) else None
     child = planner.states.get(id(target)) if isinstance(target, Component) else None
     if parent is None or child is None:
-        return None  # visual output: kept out of the step
+        planner.ignored.append((checked.component, "visual mapping: computed only for rendering"))
+        return None
     group = owner.get(id(child.component))
     if group is None:
         planner.ignored.append((checked.component, "its input has no ODE solver"))
@@ -1736,8 +1777,13 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
         return
     _, corners, cells = geometry
     if group.scheme != "implicit":
-        planner.unsupported(checked, "FEMMass needs an implicit solver (SOFA cannot invert it: accFromF)")
-        return
+        if group.scheme != "euler" or not group.assembled:
+            planner.unsupported(
+                checked,
+                "FEMMass needs an implicit solver, or explicit Euler with a sparse direct linear solver",
+            )
+            return
+        group.direct = True  # explicit Euler solves M a = f
     source = _nodal_mass_density(planner, checked)
     if source is None:
         planner.unsupported(checked, "no NodalMassDensity in its context (SOFA marks it invalid)")
@@ -1771,8 +1817,9 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
             ],
         )
     )
-    group.forces.append(Op(origin, [_call("fem_mass_gravity", state.f, *csr, planner.gravity)]))
-    group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+    planner.add_gravity(group, Op(origin, [_call("fem_mass_gravity", state.f, *csr, planner.gravity)]))
+    if group.scheme == "implicit":
+        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
     _assemble(
         planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
     )
@@ -1810,9 +1857,16 @@ LOWERINGS: dict[str, Lowering] = {
 }
 
 
-def plan_scene(checked: CheckedScene, diagnostics: Diagnostics | None = None) -> Plan:
-    """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled."""
-    return _Planner(checked, diagnostics if diagnostics is not None else Diagnostics()).run()
+def plan_scene(checked: CheckedScene, diagnostics: Diagnostics | None = None, *, prune: bool = True) -> Plan:
+    """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled.
+    With ``prune``, effects the scene makes vanish (zero gravity) get no code."""
+    return _Planner(checked, diagnostics if diagnostics is not None else Diagnostics(), prune).run()
+
+
+def format_effects(plan: Plan) -> str:
+    """The effects the step contains, and those left out, for ``sofac inspect --effects``."""
+    width = max((len(e) for e, _, _ in plan.effects), default=0)
+    return "\n".join(f"{effect:<{width}}  {origin}: {detail}" for effect, origin, detail in plan.effects)
 
 
 def format_schedule(plan: Plan) -> str:
