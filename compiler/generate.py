@@ -120,6 +120,7 @@ class _GroupView:
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
         self.implicit = group.implicit
+        self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
         self.cg = group.cg
 
 

@@ -142,6 +142,7 @@ class Group:
     implicit: dict[str, Buffer] = field(default_factory=dict)
     linear_solver: Component | None = None
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
+    trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner block size (0: none, 1: Jacobi, 3: block)
@@ -499,9 +500,10 @@ class _Planner:
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
         """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
         component = solver.component
-        if self.value(component, "trapezoidalScheme") or self.value(component, "firstOrder"):
-            self.unsupported(solver, "trapezoidalScheme and firstOrder are not compiled yet")
+        if self.value(component, "firstOrder"):
+            self.unsupported(solver, "firstOrder is not compiled yet")
             return False
+        group.trapezoidal = bool(self.value(component, "trapezoidalScheme"))
         for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
             group.implicit[name] = self.buffer(
                 component, name, [float(self.value(component, name) or 0.0)], role="param"
