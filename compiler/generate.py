@@ -112,6 +112,7 @@ class _GroupView:
         self.direct = group.direct
         self.pcg = group.pcg
         self.preconditioner = group.preconditioner
+        self.ssor_omega = group.ssor_omega
         self.matrix = group.direct or bool(group.preconditioner)  # an assembled system matrix
         self.assemble = group.assemble
         self.system_size = group.system_size

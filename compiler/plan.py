@@ -145,9 +145,10 @@ class Group:
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
-    # PCGLinearSolver: iterations, tolerance; preconditioner block size (0: none, 1: Jacobi, 3: block)
+    # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
     preconditioner: int = 0
+    ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
 
     def offset(self, state: StatePlan) -> int | None:
@@ -488,12 +489,16 @@ class _Planner:
         preconditioner = linear.links.get("preconditioner")
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
-            block = {"jacobi": 1, "block_jacobi": 3}.get(spec.kernel if spec else "")
+            block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1}.get(spec.kernel if spec else "")
             if block is None:
                 self.unsupported(
                     self.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
                 )
                 return False
+            if block == -1:
+                group.ssor_omega = self.buffer(
+                    preconditioner, "omega", [float(self.value(preconditioner, "omega"))], role="param"
+                )
             group.preconditioner, group.assembled = block, True
         return True
 

@@ -145,6 +145,40 @@ struct JacobiPreconditioner {
     }
 };
 
+// SSOR preconditioner of PCGLinearSolver (SOFA's scalar CRS version): with A = D + L + L^T,
+// z = (2 - w) ((D/w + L^T)^-1 ... ): a backward sweep over the upper part, then a forward sweep over
+// the lower part, each entry taken in increasing column order (A is symmetric: column j = row j).
+struct SsorPreconditioner {
+    double omega = 1.0;
+    std::vector<double> inverse_diagonal;
+    const Eigen::SparseMatrix<double>* matrix = nullptr;
+
+    void update(const Eigen::SparseMatrix<double>& a) {
+        matrix = &a;
+        inverse_diagonal.resize(static_cast<std::size_t>(a.rows()));
+        for (Index j = 0; j < a.rows(); ++j) inverse_diagonal[j] = 1.0 / a.coeff(j, j);
+    }
+
+    void apply(const double* r, double* z, Index n) const {
+        const auto& a = *matrix;
+        const double w = omega;
+        for (Index j = n - 1; j >= 0; --j) {
+            double sum = 0.0;
+            for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it; ++it)
+                if (it.row() > j) sum += z[it.row()] * it.value();
+            z[j] = (r[j] - sum) * w * inverse_diagonal[j];
+        }
+        for (Index j = 0; j < n; ++j) {
+            double sum = 0.0;
+            for (Eigen::SparseMatrix<double>::InnerIterator it(a, j); it && it.row() < j; ++it)
+                sum += z[it.row()] * it.value();
+            z[j] -= sum * w * inverse_diagonal[j];
+        }
+        if (w != 1.0)
+            for (Index j = 0; j < n; ++j) z[j] *= 2 - w;
+    }
+};
+
 // ---- contributions --------------------------------------------------------------------------
 
 // Mass blocks (uniform / diagonal / rigid, as mass_multiply), times mfact.

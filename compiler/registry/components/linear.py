@@ -240,6 +240,7 @@ BLOCK_JACOBI_PRECONDITIONER = ComponentSpec(
 
 SSOR_PRECONDITIONER = ComponentSpec(
     name="SSORPreconditioner",
+    kernel="ssor",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Symmetric successive over-relaxation preconditioner.",
