@@ -16,8 +16,9 @@ with a reference run. For each configuration it measures:
   reference run (of the most accurate configuration when the reference is analytic).
 * ``wall_per_sim_second``: seconds of stepping per simulated second (compilation, instantiation,
   sampling and energy evaluation excluded); ``compile_seconds`` apart (0 when cached).
-* ``diverged`` (with the step and time): a configuration whose state stops being finite is a
-  result, not an error.
+* ``diverged`` (with the step, time and reason): a configuration whose state stops being finite,
+  or strays farther than ``BLOWUP`` scene sizes from the reference, is a result, not an error; one
+  that cannot be compiled has its reason in ``error``.
 
 The reference is, by default, RK4 at the smallest dt / 16 (implicit Euler with the direct solver
 when the scene keeps Rayleigh damping, which only the implicit solver models, or when RK4
@@ -27,7 +28,9 @@ the one a scene declares in ``<scene>.analytic.py`` (a function ``positions(t)``
 
 The result is a :class:`Sweep`: a list of :class:`Record` (dataclasses) with the reference, the
 measured orders of convergence and helpers (:func:`columns`, :func:`format_table`,
-:func:`write_json`, :func:`write_csv`; plots in :mod:`sofac.accuracy_plots`).
+:func:`markdown_table`, :func:`write_json`, :func:`write_csv`; plots in :mod:`sofac.accuracy_plots`).
+The command line is ``sofac accuracy`` (:mod:`sofac.accuracy_cli`); docs/accuracy.md shows it on the
+bundled scenes.
 """
 
 from __future__ import annotations
@@ -91,6 +94,9 @@ MAX_TIMING_RUNS = 50
 # A run whose points stray farther than BLOWUP scene sizes from the reference has diverged, even
 # while its numbers stay finite (an unstable explicit step grows geometrically, to 1e300 and beyond).
 BLOWUP = 10.0
+# The reference has no reference: it has blown up when a point strays this many initial scene sizes
+# from where it started.
+REFERENCE_BLOWUP = 1000.0
 
 _SOLVER_CATEGORIES = {
     registry.Category.ODE_SOLVER,
@@ -343,11 +349,7 @@ def with_solver(scene: Scene, solver: Solver, *, keep_rayleigh: bool) -> Scene:
 
 def scene_rayleigh(scene: Scene) -> bool:
     """Whether an ODE solver of the scene has (non-zero) Rayleigh damping."""
-    return any(
-        _rayleigh_of(c) is not None and registry.lookup(c.type_name) is not None
-        for c in _ode_solvers(scene.root)
-        if "rayleighStiffness" in c.attributes or "rayleighMass" in c.attributes
-    )
+    return any(_rayleigh_of(c) is not None for c in _ode_solvers(scene.root))
 
 
 def _parse(path: Path, data_roots: Sequence[Path]) -> Scene:
@@ -383,16 +385,17 @@ def _point_dims(template: str, coord_size: int) -> int:
     return min(coord_size, 3)
 
 
+def _as_points(positions: np.ndarray, template: str) -> np.ndarray:
+    """A state's positions as (N, 3) points (zero-padded below 3D)."""
+    dims = min(_point_dims(template, positions.shape[1]), positions.shape[1])
+    block = np.zeros((positions.shape[0], 3))
+    block[:, :dims] = positions[:, :dims]
+    return block
+
+
 def _points(sim: Simulation, paths: Sequence[str]) -> np.ndarray:
-    """The points of the given states as one (P, 3) array (zero-padded below 3D)."""
-    blocks = []
-    for path in paths:
-        state = sim[path]
-        position = state.position
-        dims = _point_dims(state.info.template, position.shape[1])
-        block = np.zeros((position.shape[0], 3))
-        block[:, :dims] = position[:, :dims]
-        blocks.append(block)
+    """The points of the given states as one (P, 3) array."""
+    blocks = [_as_points(sim[path].position, sim[path].info.template) for path in paths]
     return np.concatenate(blocks) if blocks else np.zeros((0, 3))
 
 
@@ -401,7 +404,10 @@ def _analytic_points(solution: AnalyticSolution, t: float, sim: Simulation) -> t
     paths: list[str] = []
     blocks = []
     for key, value in given.items():
-        state = sim[key]
+        try:
+            state = sim[key]
+        except KeyError as exc:
+            raise AccuracyError(f"analytic solution: {exc.args[0]}") from None
         array = np.asarray(value, dtype=float)
         if array.ndim == 1:
             array = array.reshape(state.position.shape[0], -1)
@@ -410,10 +416,7 @@ def _analytic_points(solution: AnalyticSolution, t: float, sim: Simulation) -> t
                 f"analytic solution: {key!r} has {array.shape[0]} points, the state has "
                 f"{state.position.shape[0]}"
             )
-        dims = min(_point_dims(state.info.template, array.shape[1]), array.shape[1])
-        block = np.zeros((array.shape[0], 3))
-        block[:, :dims] = array[:, :dims]
-        blocks.append(block)
+        blocks.append(_as_points(array, state.info.template))
         paths.append(state.info.path)
     return paths, np.concatenate(blocks) if blocks else np.zeros((0, 3))
 
@@ -810,7 +813,11 @@ def _numeric_reference(setup: _Setup, bar: _Progress) -> _Reference:
         if isinstance(built, str):
             setup.notes.append(f"the reference {candidate.label} cannot be compiled: {built}")
             continue
-        run = _run(built, candidate.dt, setup.per_sample(candidate), setup.samples, None)
+        probe = built.instantiate()
+        start = _points(probe, probe.objects())
+        extent = float(np.linalg.norm(start.max(axis=0) - start.min(axis=0))) if len(start) else 0.0
+        limit = REFERENCE_BLOWUP * extent if extent > 0 else math.inf
+        run = _run(built, candidate.dt, setup.per_sample(candidate), setup.samples, None, None, limit)
         if run.diverged_step is not None:
             setup.notes.append(f"the reference {candidate.label} diverged at step {run.diverged_step}")
             continue

@@ -931,6 +931,10 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     group.forces.append(
         Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method)])
     )
+    if prefix != "tetracorot_fem":  # SOFA's potential energy (0 for corotational tetrahedra, as SOFA)
+        group.energy.append(
+            Op(origin, ["potential += " + _call(f"{prefix}_energy", elements, count, state.x, data, method)])
+        )
     if group.scheme == "implicit":
         group.stiffness_dx.append(
             Op(

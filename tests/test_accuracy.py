@@ -183,6 +183,17 @@ def test_a_diverging_configuration_is_reported_not_raised(tmp_path: Path) -> Non
     assert data["records"][0]["max_error"] is None
 
 
+def test_a_reference_that_diverges_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = tmp_path / "stiff.scn"
+    scene.write_text(STIFF)
+    with pytest.raises(AccuracyError, match=r"no reference run \(symplectic@0.04\).*diverged at step"):
+        accuracy.sweep(scene, solvers=["symplectic"], dts=[0.04], duration=2.0, reference="symplectic@0.04")
+    code = main(
+        ["accuracy", str(scene), "--dt", "0.04", "--reference", "symplectic@0.04", "--out", str(tmp_path)]
+    )
+    assert code == 2 and "no reference run" in capsys.readouterr().err
+
+
 def test_a_non_finite_state_stops_the_run() -> None:
     model = accuracy._parse(OSCILLATOR, [])
     compiled = accuracy.compile_variant(model, Solver("euler"), keep_rayleigh=False)
@@ -257,6 +268,10 @@ def test_solver_names_and_expansion() -> None:
         "implicit-cg:100:1e-05",
     ]
     assert [s.label for s in accuracy.expand_solvers(["implicit"], ["direct"])] == ["implicit-direct"]
+    # CG's absolute threshold: negligible unless given, and then part of the label.
+    assert Solver.parse("implicit-cg:25:1e-5:1e-5").label == "implicit-cg:25:1e-05:1e-05"
+    with_threshold = accuracy.expand_solvers(["implicit"], ["cg"], [25], [1e-5], cg_threshold=1e-5)
+    assert [s.label for s in with_threshold] == ["implicit-cg:25:1e-05:1e-05"]
     with pytest.raises(AccuracyError, match="linear solver"):
         accuracy.expand_solvers(["implicit"], ["lu"])
 
@@ -296,6 +311,21 @@ def test_measured_orders_and_pareto_front() -> None:
         ("rk2", 0.005),
         ("rk4", 0.01),
     ]
+
+
+def test_markdown_table_collapses_diverged_rows() -> None:
+    info = SweepInfo("s.scn", 1.0, 0.1, 10, 1.0, "analytic", 1.0, "none")
+    records = [
+        record("rk4", 0.01, 1e-8),
+        record("rk4", 0.005, 6.25e-10),
+        record("euler", 0.01, math.nan, diverged=True, diverged_step=7, diverged_time=0.07),
+    ]
+    full = accuracy.markdown_table(Sweep(records, info, None))
+    assert full.count("\n| `") == 3 and "diverged at step 7 (t=0.07)" in full
+    short = accuracy.markdown_table(Sweep(records, info, None), collapse_diverged=True)
+    assert short.count("\n| `") == 2
+    assert "Diverged, at dt (step): `euler` 0.01 (step 7)." in short
+    assert "`rk4` **4.00**" in short
 
 
 def test_csv_writes_every_field(tmp_path: Path) -> None:
