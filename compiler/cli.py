@@ -340,6 +340,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .accuracy_cli import register as register_accuracy
 
     register_accuracy(commands, _EPILOG)
+    from .render_cli import register as register_render
+
+    register_render(commands, _EPILOG)
 
     version = commands.add_parser("version", help="print sofac's version")
     version.set_defaults(handler=_cmd_version)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on a bundled scene: install what is missing, check the hybrid pendulum, then
 # compile it (cached after the first time) and run 1 s of it, printing where its bodies are and
-# the compile and step times.
+# the compile and step times; last, draw it after that second, off-screen, into
+# out/hybrid_pendulum.png.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -10,3 +11,4 @@ bash scripts/setup.sh
 source scripts/python.sh
 "$PYTHON" -m sofac check scenes/hybrid_pendulum.scn
 "$PYTHON" -m sofac run scenes/hybrid_pendulum.scn --steps 100 --mapped
+"$PYTHON" -m sofac render scenes/hybrid_pendulum.scn --steps 100 --grid --out out/hybrid_pendulum.png
