@@ -27,11 +27,16 @@ _LAZY = {
 }
 
 
+_SUBMODULES = ("accuracy", "render")  # `sofac.render.render(sim)` after a bare `import sofac`
+
+
 def __getattr__(name: str) -> Any:
     # Imported on first use, so that `import sofac` stays light (no numpy) for tools that only read
     # its version or resources.
-    if name in _LAZY:
-        import importlib
+    import importlib
 
+    if name in _LAZY:
         return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    if name in _SUBMODULES:
+        return importlib.import_module(f"{__name__}.{name}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
