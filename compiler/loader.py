@@ -461,6 +461,12 @@ class Simulation:
     def params(self) -> dict[str, np.ndarray]:
         return {b.key: v for b, v in zip(self.plan.buffers, self._views, strict=True) if b.role == "param"}
 
+    def render(self, width: int = 640, height: int = 480, camera: Any = None, **options: Any) -> np.ndarray:
+        """An off-screen picture (height, width, 3) of the scene's visual models (see sofac.render)."""
+        from .render import render
+
+        return render(self, width, height, camera, **options)
+
     def energy(self) -> Energy:
         kinetic, potential = self._native.energy()
         return Energy(float(kinetic), float(potential))
@@ -490,7 +496,9 @@ def compile_checked(checked: Any, diagnostics: Any = None, *, prune: bool = True
     scene_plan = plan.plan_scene(checked, diagnostics, prune=prune)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
-    return Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
+    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
+    compiled.checked = checked  # the checked scene, for consumers such as rendering (visual models)
+    return compiled
 
 
 def load(

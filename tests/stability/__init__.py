@@ -1,0 +1,1 @@
+"""Stability suite: hard scenes with their expected outcomes, property-based runs, determinism."""
