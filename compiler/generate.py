@@ -122,6 +122,7 @@ class _GroupView:
             view.offset = group.offset(state)
         self.implicit = group.implicit
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
+        self.factor_once = group.factor_once
         self.cg = group.cg
 
 

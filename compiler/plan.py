@@ -143,6 +143,7 @@ class Group:
     linear_solver: Component | None = None
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
+    factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
     assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
@@ -521,12 +522,13 @@ class _Planner:
             return False  # E221, reported by the checker
         if checked_linear.spec.kernel == "pcg":
             return self._plan_pcg(checked_linear, group)
-        if checked_linear.spec.kernel not in ("cg", "direct"):
+        if checked_linear.spec.kernel not in ("cg", "direct", "precomputed"):
             self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
             return False
         group.linear_solver = linear
-        if checked_linear.spec.kernel == "direct":
+        if checked_linear.spec.kernel in ("direct", "precomputed"):
             group.assembled = group.direct = True
+            group.factor_once = checked_linear.spec.kernel == "precomputed"
             return True
         group.cg = {
             "iterations": self.buffer(

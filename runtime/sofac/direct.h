@@ -78,6 +78,7 @@ struct DirectSolver {
     std::vector<char> fixed;  // per scalar DOF: projected out (row and column cleared, diagonal 1)
     Eigen::VectorXd rhs, solution;
     bool ok = true;
+    bool factored = false;  // PrecomputedLinearSolver: factorised once, on the first step
 
     DirectSolver() { factorization.cholmod().print = 0; }  // failures are reported, not printed
 

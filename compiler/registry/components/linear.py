@@ -197,12 +197,14 @@ SVD_LINEAR_SOLVER = ComponentSpec(
 
 PRECOMPUTED_LINEAR_SOLVER = ComponentSpec(
     name="PrecomputedLinearSolver",
+    kernel="precomputed",
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
-    doc="Solves with an inverse matrix precomputed at init (optionally cached in a file).",
+    doc="Solves with the system matrix of the first step, factorised once (SOFA precomputes its "
+    "inverse then, optionally cached in a file): later changes of the matrix are ignored.",
     templates=(CRS_SCALAR,),
     default_template=CRS_SCALAR,
-    unsupported_reason="PrecomputedLinearSolver is not implemented yet",
+    supported=True,
     effects=_SOLVE,
     fields=(
         FieldSpec("jmjt_twostep", Bool(), True),
