@@ -835,3 +835,26 @@ def barycentric_map(
         topology=topology,
     )
     return embedding.indices, embedding.weights
+
+
+def map_cells(
+    input_rest_positions: Any,
+    points: Any,
+    cells: dict[str, np.ndarray],
+    *,
+    mode: str,
+    grid: RegularGrid | SparseGrid | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`barycentric_map` with a topology's element arrays by name (``edges``, ``triangles``,
+    ``quads``, ``tetrahedra``, ``hexahedra``) and the mapper mode of :func:`mapper_for`."""
+    return barycentric_map(
+        input_rest_positions,
+        points,
+        tetrahedra=cells.get("tetrahedra"),
+        hexahedra=cells.get("hexahedra"),
+        triangles=cells.get("triangles"),
+        quads=cells.get("quads"),
+        edges=cells.get("edges"),
+        grid=grid,
+        topology="dynamic" if mode == "dynamic" else "mesh",
+    )

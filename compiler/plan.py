@@ -1559,7 +1559,7 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
 
 
 def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    from .barycentric import RegularGrid, barycentric_map, mapper_for
+    from .barycentric import RegularGrid, map_cells, mapper_for
 
     ends = _mapping_ends(planner, checked, owner)
     if ends is None:
@@ -1592,17 +1592,7 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
         planner.unsupported(checked, "its input or output positions are not known at compile time")
         return
     try:
-        indices, weights = barycentric_map(
-            rest,
-            points,
-            tetrahedra=cells.get("tetrahedra"),
-            hexahedra=cells.get("hexahedra"),
-            triangles=cells.get("triangles"),
-            quads=cells.get("quads"),
-            edges=cells.get("edges"),
-            grid=grid,
-            topology="dynamic" if mode == "dynamic" else "mesh",
-        )
+        indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
     except ValueError as error:
         planner.unsupported(checked, f"it cannot embed its points: {error}")
         return

@@ -1093,7 +1093,7 @@ class _SceneBuilder:
         return _Feed("rigid", state, local=np.asarray(local, dtype=float), frame_of=frame_of)
 
     def _barycentric_feed(self, mapping: Any, source: Component, points: np.ndarray, state: str) -> _Feed:
-        from .barycentric import RegularGrid, barycentric_map, mapper_for
+        from .barycentric import RegularGrid, map_cells, mapper_for
 
         rest = self.checked.positions(source)
         if rest is None or rest.shape[1] != 3:
@@ -1110,17 +1110,7 @@ class _SceneBuilder:
             grid = RegularGrid(
                 tuple(int(c) for c in cells["resolution"][:3]), tuple(bounds[:3]), tuple(bounds[3:6])
             )
-        indices, weights = barycentric_map(
-            rest,
-            points,
-            tetrahedra=cells.get("tetrahedra"),
-            hexahedra=cells.get("hexahedra"),
-            triangles=cells.get("triangles"),
-            quads=cells.get("quads"),
-            edges=cells.get("edges"),
-            grid=grid,
-            topology="dynamic" if mode == "dynamic" else "mesh",
-        )
+        indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
         return _Feed("linear", state, indices=indices, weights=weights)
 
     def _input_points(self, feed: _Feed) -> np.ndarray:
