@@ -223,6 +223,8 @@ def _cmd_regress(args: argparse.Namespace) -> int:
     results = regress.run_regression(list_path, scenes, references, args.only, args.jobs, progress=progress)
     if args.format == "json":
         sys.stdout.write(regress.results_as_json(results, list_path))
+    elif args.format == "markdown":
+        sys.stdout.write(regress.format_markdown(results))
     else:
         sys.stdout.write(regress.format_table(results))
     failed = any(r.failed or (args.strict and r.status is regress.Status.UNSUPPORTED) for r in results)
@@ -327,7 +329,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SUBSTRING",
         help="run only scenes whose path contains one",
     )
-    regress.add_argument("--format", choices=("text", "json"), default="text", help="output format")
+    regress.add_argument(
+        "--format", choices=("text", "json", "markdown"), default="text", help="output format"
+    )
     regress.add_argument("--strict", action="store_true", help="count UNSUPPORTED scenes as failures")
     regress.add_argument(
         "--jobs", "-j", type=int, default=1, metavar="N", help="run N scenes at once, each in its own process"

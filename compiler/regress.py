@@ -709,6 +709,17 @@ def format_table(results: Sequence[SceneResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def format_markdown(results: Sequence[SceneResult]) -> str:
+    """A Markdown table (the README's per-scene table) and the totals line."""
+    lines = ["| scene | status | SOFA's error | ε | max diff / bbox | detail |", "|---|---|---|---|---|---|"]
+    for r in results:
+        detail = _detail(r).replace("|", "/")
+        cells = (r.scene, r.status.value, _fmt(r.error), f"{r.epsilon:g}", _fmt(r.max_rel), detail)
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", summary_line(results)]
+    return "\n".join(lines) + "\n"
+
+
 def results_as_json(results: Sequence[SceneResult], list_path: str | Path | None = None) -> str:
     """Every result with its per-state figures, and the totals, as a JSON document."""
     tally = counts(results)
