@@ -16,6 +16,7 @@ from sofac.regress import (
     Status,
     compare_vec,
     due_steps,
+    format_markdown,
     format_table,
     parse_regression_list,
     reference_files,
@@ -329,6 +330,9 @@ def test_run_regression_table_and_json(mini: Path) -> None:
     assert table.splitlines()[0].split()[:6] == ["SCENE", "STATUS", "ERROR", "EPSILON", "MAX/BBOX", "TIME"]
     assert "TriangleCollisionModel at " in table and "(+1 more: MeshMatrixMass)" in table
     assert table.rstrip().endswith("1/6 pass (1 fail, 1 unsupported, 2 error, 1 missing)")
+    markdown = format_markdown(results).splitlines()
+    assert markdown[0].startswith("| scene | status |") and len(markdown) == 2 + len(results) + 2
+    assert markdown[2].startswith(f"| {results[0].scene} | PASS |")
     document = json.loads(results_as_json(results, mini / "scenes.regression-tests"))
     assert document["summary"]["pass"] == 1 and document["summary"]["total"] == 6
     assert document["results"][0]["states"][1]["name"] == "MechanicalObject1"
