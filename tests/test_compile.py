@@ -347,3 +347,32 @@ def test_divergence_is_reported(tmp_path: Path) -> None:
     with pytest.raises(sofac.SimulationDiverged) as failure:
         sim.step(10000)
     assert failure.value.state == "/osc/dofs"
+
+
+SOLVED_BEAM = """<Node name="root" gravity="0 -9.81 0" dt="0.02"><DefaultAnimationLoop/>
+<Node name="beam"><EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0.1"/>{solver}
+<RegularGridTopology n="3 3 6" min="0 0 0" max="1 1 3"/>
+<MechanicalObject name="dofs"/><UniformMass totalMass="1"/>
+<BoxROI name="box" box="-1 -1 -0.001 2 2 0.001"/><FixedProjectiveConstraint indices="@box.indices"/>
+<TetrahedronFEMForceField youngModulus="1e4" poissonRatio="0.3" method="large"/></Node></Node>"""
+
+
+def test_cg_and_the_direct_solvers_agree_on_the_implicit_step(tmp_path: Path) -> None:
+    solvers = {
+        "cg": '<CGLinearSolver iterations="2000" tolerance="1e-15" threshold="1e-30"/>',
+        "ldl": "<SparseLDLSolver/>",
+        "cholesky": "<SparseCholeskySolver/>",
+        "eigen_lu": "<EigenSparseLU/>",
+        "pcg_jacobi": '<PCGLinearSolver iterations="2000" tolerance="1e-28" preconditioner="@p"/>'
+        '<JacobiPreconditioner name="p"/>',
+    }
+    final = {}
+    for name, solver in solvers.items():
+        path = tmp_path / f"{name}.scn"
+        path.write_text(SOLVED_BEAM.format(solver=solver))
+        sim = sofac.load(path)
+        sim.step(15)
+        final[name] = sim["dofs"].position.copy()
+    assert np.abs(final["cg"][-9:, 1] - final["cg"][:9, 1]).min() > 1e-3  # the beam bends
+    for name, positions in final.items():
+        assert np.abs(positions - final["ldl"]).max() < 1e-9, name
