@@ -1,0 +1,583 @@
+"""The performance workloads of issue 6 (``shared/bench/workloads.md``), side by side in one run.
+
+For each workload, in this one process:
+
+- **sofac**: the workload as a generated ``.scn`` scene (``scenegen.py``), ``sofac.load``, warm-up
+  steps, then ``--batches`` timed batches of ``sim.step(steps)``;
+- **hand-written**: an independent C++ loop of the same algorithm (``handwritten/w1.cpp``,
+  ``w2.cpp``), compiled with g++ and sofac's optimisation flags (``sofac.build.SCENE_FLAGS`` without
+  the shared-library ones) and timed inside the C++ program, batch by batch, after the same warm-up;
+- **NumPy / SciPy**: vectorised NumPy (W1) and a ``scipy.sparse`` matrix with
+  ``scipy.sparse.linalg.cg`` (W2), when SciPy is installed;
+- **SOFA**: SOFA's measured figures from ``shared/reference/sofa/timings.md`` (not run here).
+
+W3 (the corotational tetrahedral cantilever) has no hand-written loop and no NumPy version: it
+is compared with SOFA's figure for the same beam only. ``Demos/liver.scn`` from the SOFA corpus is
+timed with sofac against SOFA's figure.
+
+ms/step is the fastest batch (the machine is shared; the median is printed too). The final
+positions of sofac and the hand-written loop after the same number of steps are compared (the
+same algorithm must give the same numbers to rounding).
+
+    python benchmarks/workloads.py                      # everything (a few minutes)
+    python benchmarks/workloads.py --only w1 w2 liver   # some workloads
+    python benchmarks/workloads.py --markdown table.md  # also write the table as Markdown
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+# Single-threaded like everything else compared here (and no idle BLAS threads spinning on the
+# second core while the C++ loops run).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(HERE))
+
+import scenegen  # noqa: E402
+
+HANDWRITTEN = HERE / "handwritten"
+ALL = ("w1", "w2", "w3", "w3ldl", "beam", "liver")
+
+# SOFA's measured ms/step (the minimum over runs) from shared/reference/sofa/timings.md.
+SOFA_MS: dict[str, float] = {"w1": 4.02, "w2": 9.2, "beam": 27.99, "liver": 1.128}
+# The issue's targets: at least this many times faster than SOFA; at most this many times the
+# hand-written loop.
+SOFA_TARGET: dict[str, float] = {"w1": 20.0, "w2": 1.8, "beam": 1.8, "w3": 1.8, "liver": 10.0}
+HAND_TARGET: dict[str, float] = {"w1": 1.2, "w2": 1.3, "w3": 1.3, "w3ldl": 1.3}
+# The W3 beam is SOFA's e_beam_large_cg25 apart from its length (5 m here, 4 m there) and the
+# tetrahedral split (Hexa2TetraTopologicalMapping here, the grid's own there): same counts.
+SOFA_OF = {"w3": "beam"}
+
+
+@dataclass
+class Row:
+    workload: str
+    implementation: str
+    ms: float  # fastest batch, ms per step
+    median_ms: float
+    note: str = ""
+    final: np.ndarray | None = field(default=None, repr=False)
+
+
+@dataclass
+class Setup:
+    n: int = 100
+    w1_steps: int = 1000
+    w2_steps: int = 100
+    w3_steps: int = 100
+    ldl_steps: int = 10
+    liver_steps: int = 500
+    batches: int = 3
+    check_steps: int = 10  # the short run whose final positions must agree to rounding
+    workdir: Path = field(default_factory=lambda: Path(tempfile.gettempdir()))
+
+
+# ---- shared material --------------------------------------------------------------------------
+
+
+def find_shared() -> Path | None:
+    """``../shared`` beside the checkout, else ``$SOFAC_SHARED``."""
+    candidates = [REPO.parent / "shared"]
+    if os.environ.get("SOFAC_SHARED"):
+        candidates.append(Path(os.environ["SOFAC_SHARED"]))
+    return next((c for c in candidates if (c / "corpus" / "sofa").is_dir()), None)
+
+
+def machine_note() -> str:
+    cpu = platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    return f"{cpu}, {os.cpu_count()} logical CPUs, load average {load}"
+
+
+# ---- sofac ------------------------------------------------------------------------------------
+
+
+def time_sofac(scene: Path, warmup: int, steps: int, batches: int) -> tuple[list[float], np.ndarray, float]:
+    """ms per step of each batch, the first state's final positions, and the load time in s."""
+    import sofac
+
+    started = time.perf_counter()
+    sim = sofac.load(scene)
+    loaded = time.perf_counter() - started
+    if warmup:
+        sim.step(warmup)
+    times = []
+    for _ in range(batches):
+        t0 = time.perf_counter()
+        sim.step(steps)
+        times.append((time.perf_counter() - t0) * 1e3 / steps)
+    state = sim[sim.objects()[0]]
+    return times, np.array(state.position, dtype=float), loaded
+
+
+# ---- hand-written C++ -------------------------------------------------------------------------
+
+
+def handwritten_flags() -> list[str]:
+    """sofac's scene flags without those that make a shared library."""
+    from sofac.build import SCENE_FLAGS
+
+    return [f for f in SCENE_FLAGS if f not in ("-shared", "-fPIC", "-fvisibility=hidden", "-w")]
+
+
+def build_handwritten(name: str, out: Path) -> Path:
+    """Compile ``handwritten/NAME.cpp`` into ``out``; returns the executable."""
+    from sofac.build import compiler
+
+    out.mkdir(parents=True, exist_ok=True)
+    exe = out / name
+    command = [compiler(), *handwritten_flags(), str(HANDWRITTEN / f"{name}.cpp"), "-o", str(exe)]
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr}")
+    return exe
+
+
+def write_cloth_input(path: Path, cloth: scenegen.Cloth) -> None:
+    """The binary cloth file read by ``handwritten/cloth_io.h``."""
+    a = np.array([s[0] for s in cloth.springs], dtype=np.int64)
+    b = np.array([s[1] for s in cloth.springs], dtype=np.int64)
+    rest = np.array([s[2] for s in cloth.springs], dtype=np.float64)
+    header = np.array([len(cloth.positions), len(cloth.springs), len(cloth.fixed)], dtype=np.int64)
+    with path.open("wb") as file:
+        for array in (
+            header,
+            np.array(cloth.positions, dtype=np.float64).ravel(),
+            a,
+            b,
+            rest,
+            np.array(cloth.fixed, dtype=np.int64),
+        ):
+            file.write(array.tobytes())
+
+
+def run_handwritten(exe: Path, cloth_file: Path, args: Sequence[object]) -> tuple[dict[str, Any], np.ndarray]:
+    """Run a hand-written loop: its JSON report and its final positions (points x 3)."""
+    final = cloth_file.with_suffix(f".{exe.name}.out")
+    done = subprocess.run(
+        [str(exe), str(cloth_file), str(final), *(repr(a) if isinstance(a, float) else str(a) for a in args)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    report = json.loads(done.stdout)
+    return report, np.fromfile(final, dtype=np.float64).reshape(-1, 3)
+
+
+# ---- NumPy / SciPy ----------------------------------------------------------------------------
+
+
+class ClothArrays:
+    """The cloth as NumPy arrays."""
+
+    def __init__(self, cloth: scenegen.Cloth) -> None:
+        self.x0 = np.array(cloth.positions, dtype=float)
+        self.a = np.array([s[0] for s in cloth.springs], dtype=np.int64)
+        self.b = np.array([s[1] for s in cloth.springs], dtype=np.int64)
+        self.rest = np.array([s[2] for s in cloth.springs], dtype=float)
+        self.free = np.ones(len(self.x0), dtype=bool)
+        self.free[list(cloth.fixed)] = False
+        self.n = len(self.x0)
+
+    def forces(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """f (n x 3) = m g + springs, and per spring the unit direction, length and intensity."""
+        u = x[self.b] - x[self.a]
+        d = np.sqrt(np.einsum("ij,ij->i", u, u))
+        u /= d[:, None]
+        intensity = scenegen.CLOTH_STIFFNESS * (d - self.rest)
+        fs = u * intensity[:, None]
+        f = np.empty_like(x)
+        for c in range(3):
+            f[:, c] = np.bincount(self.a, fs[:, c], self.n) - np.bincount(self.b, fs[:, c], self.n)
+        f[:, 1] += scenegen.CLOTH_VERTEX_MASS * scenegen.GRAVITY[1]
+        return f, u, d, intensity
+
+
+def numpy_w1(
+    cloth: scenegen.Cloth, warmup: int, steps: int, batches: int, extra: int = 0
+) -> tuple[list[float], np.ndarray]:
+    """Vectorised symplectic Euler; ``extra`` untimed steps follow the batches."""
+    arrays = ClothArrays(cloth)
+    x, v = arrays.x0.copy(), np.zeros_like(arrays.x0)
+    scale = np.where(arrays.free, scenegen.W1_DT / scenegen.CLOTH_VERTEX_MASS, 0.0)[:, None]
+
+    def step() -> None:
+        f = arrays.forces(x)[0]
+        v[...] += scale * f
+        x[...] += scenegen.W1_DT * v
+
+    times = _timed(step, warmup, steps, batches)
+    for _ in range(extra):
+        step()
+    return times, x
+
+
+def scipy_w2(
+    cloth: scenegen.Cloth, warmup: int, steps: int, batches: int, extra: int = 0
+) -> tuple[list[float], np.ndarray, int]:
+    """K assembled as a scipy.sparse matrix each step, b = h (f + h K v), then CG on the projected
+    system P (M - h^2 K) P from 0, exactly as SOFA's CGLinearSolver with tolerance = threshold = 0
+    (a NumPy loop around the sparse product: scipy.sparse.linalg.cg with rtol = 0 divides 0 by 0
+    when a residual reaches exactly 0). ``extra`` untimed steps follow the batches. Also returns
+    the fewest CG iterations any step ran."""
+    import scipy.sparse as sp
+
+    arrays = ClothArrays(cloth)
+    h, m, k = scenegen.W2_DT, scenegen.CLOTH_VERTEX_MASS, scenegen.CLOTH_STIFFNESS
+    x, v = arrays.x0.copy(), np.zeros_like(arrays.x0)
+    size = 3 * arrays.n
+    free = np.repeat(arrays.free, 3).astype(float)
+    ia = 3 * arrays.a[:, None] + np.arange(3)  # springs x 3 DOF indices
+    ib = 3 * arrays.b[:, None] + np.arange(3)
+    # the four 3x3 blocks of each spring: (a,a) -J, (b,b) -J, (a,b) +J, (b,a) +J
+    rows = np.concatenate([np.repeat(i, 3, axis=1).ravel() for i in (ia, ib, ia, ib)])
+    cols = np.concatenate([np.tile(j, (1, 3)).ravel() for j in (ia, ib, ib, ia)])
+    fewest = [scenegen.CG_ITERATIONS]
+
+    def step() -> None:
+        f, u, d, intensity = arrays.forces(x)
+        t = intensity / d
+        blocks = (k - t)[:, None, None] * u[:, :, None] * u[:, None, :] + t[:, None, None] * np.eye(3)
+        flat = blocks.reshape(len(t), 9).ravel()
+        K = sp.csr_matrix((np.concatenate([-flat, -flat, flat, flat]), (rows, cols)), shape=(size, size))
+        A = m * sp.identity(size, format="csr") - (h * h) * K
+        r = free * (h * (f.ravel() + h * (K @ v.ravel())))
+        dv = np.zeros(size)
+        p = np.zeros(size)
+        rho_previous = 1.0
+        done = 0
+        if r @ r != 0.0:
+            for iteration in range(1, scenegen.CG_ITERATIONS + 1):
+                rho = r @ r
+                if iteration > 1 and rho == 0.0:
+                    break
+                p = r + (rho / rho_previous) * p if iteration > 1 else r.copy()
+                q = free * (A @ p)
+                den = p @ q
+                if den == 0.0:
+                    break
+                alpha = rho / den
+                dv += alpha * p
+                r -= alpha * q
+                rho_previous = rho
+                done = iteration
+        fewest[0] = min(fewest[0], done)
+        v[...] += dv.reshape(-1, 3)
+        x[...] += h * v
+
+    times = _timed(step, warmup, steps, batches)
+    for _ in range(extra):
+        step()
+    return times, x, fewest[0]
+
+
+def _timed(step: Callable[[], None], warmup: int, steps: int, batches: int) -> list[float]:
+    for _ in range(warmup):
+        step()
+    times = []
+    for _ in range(batches):
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            step()
+        times.append((time.perf_counter() - t0) * 1e3 / steps)
+    return times
+
+
+def have_scipy() -> bool:
+    try:
+        import scipy.sparse.linalg  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+# ---- the workloads ----------------------------------------------------------------------------
+
+
+def relative_difference(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| over max |b| (positions)."""
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def row(
+    workload: str, implementation: str, times: list[float], note: str = "", final: np.ndarray | None = None
+) -> Row:
+    return Row(workload, implementation, min(times), statistics.median(times), note, final)
+
+
+def run_cloth(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[list[Row], dict[str, float]]:
+    """W1 or W2: sofac, hand-written, NumPy/SciPy. Also the relative differences of final positions."""
+    implicit = which == "w2"
+    folder = setup.workdir
+    cloth = scenegen.cloth(setup.n)
+    scene = folder / f"{which}_n{setup.n}.scn"
+    scene.write_text(scenegen.cloth_scene(setup.n, implicit=implicit))
+    cloth_file = folder / f"{which}_n{setup.n}.bin"
+    write_cloth_input(cloth_file, cloth)
+    steps = setup.w2_steps if implicit else setup.w1_steps
+    warmup = max(1, steps // 10)
+    batches = setup.batches
+    label = f"{which.upper()} {setup.n}x{setup.n}"
+    rows: list[Row] = []
+    checks: dict[str, float] = {}
+
+    log(f"{label}: sofac")
+    times, sofac_final, loaded = time_sofac(scene, warmup, steps, batches)
+    rows.append(row(which, "sofac", times, f"load {loaded:.1f} s", sofac_final))
+
+    log(f"{label}: hand-written C++")
+    exe = build_handwritten(which, folder / "bin")
+    g = scenegen.GRAVITY[1]
+    m, k = scenegen.CLOTH_VERTEX_MASS, scenegen.CLOTH_STIFFNESS
+    if implicit:
+        args: list[object] = [scenegen.W2_DT, m, k, g, scenegen.CG_ITERATIONS, warmup, steps, batches]
+    else:
+        args = [scenegen.W1_DT, m, k, g, warmup, steps, batches]
+    report, hand_final = run_handwritten(exe, cloth_file, args)
+    note = f"CG iterations per step >= {report['fewest_cg_iterations']}" if implicit else ""
+    rows.append(row(which, "hand-written C++", report["ms_per_step"], note, hand_final))
+    total = warmup + steps * batches
+    checks[f"sofac vs hand-written, after {total} steps"] = relative_difference(sofac_final, hand_final)
+    # The short run: W2's dynamics (25 CG iterations, far from converged, on a falling cloth) amplify
+    # rounding differences exponentially (~1e-14 after 20 steps, 1e-8 after 40, O(0.1) after 80), so
+    # the same-algorithm check compares a few steps, where both must agree to rounding.
+    short = setup.check_steps
+    _t, sofac_short, _l = time_sofac(scene, 0, short, 1)
+    short_args = [*args[:-3], 0, short, 1]
+    _r, hand_short = run_handwritten(exe, cloth_file, short_args)
+    checks[f"sofac vs hand-written, after {short} steps"] = relative_difference(sofac_short, hand_short)
+
+    if implicit and not have_scipy():
+        log(f"{label}: SciPy not installed, skipped")
+    else:
+        log(f"{label}: {'SciPy' if implicit else 'NumPy'}")
+        # slower: fewer timed steps per batch, then untimed steps up to the same step count
+        np_steps = max(1, steps // 10)
+        extra = (steps - np_steps) * batches
+        if implicit:
+            times, final, fewest = scipy_w2(cloth, warmup, np_steps, batches, extra)
+            note = f"scipy.sparse K, CG in NumPy; CG iterations per step >= {fewest}"
+        else:
+            times, final = numpy_w1(cloth, warmup, np_steps, batches, extra)
+            note = "vectorised NumPy (bincount scatter)"
+        rows.append(row(which, "SciPy" if implicit else "NumPy", times, note, final))
+        checks[f"NumPy/SciPy vs hand-written, after {total} steps"] = relative_difference(final, hand_final)
+        short_final = scipy_w2(cloth, 0, short, 1)[1] if implicit else numpy_w1(cloth, 0, short, 1)[1]
+        checks[f"NumPy/SciPy vs hand-written, after {short} steps"] = relative_difference(
+            short_final, hand_short
+        )
+    return rows, checks
+
+
+def run_scene(workload: str, scene: Path, steps: int, setup: Setup, log: Callable[[str], None]) -> Row:
+    log(f"{workload}: sofac {scene.name}")
+    times, _final, loaded = time_sofac(scene, max(1, steps // 10), steps, setup.batches)
+    return row(workload, "sofac", times, f"{scene.name}, load {loaded:.1f} s")
+
+
+def run(
+    workloads: Sequence[str], setup: Setup, log: Callable[[str], None]
+) -> tuple[list[Row], dict[str, dict[str, float]]]:
+    rows: list[Row] = []
+    checks: dict[str, dict[str, float]] = {}
+    shared = find_shared()
+    for workload in workloads:
+        if workload in ("w1", "w2"):
+            found, check = run_cloth(workload, setup, log)
+            rows += found
+            checks[workload] = check
+        elif workload in ("w3", "w3ldl"):
+            cg, ldl = scenegen.write_beam(setup.workdir)
+            scene, steps = (cg, setup.w3_steps) if workload == "w3" else (ldl, setup.ldl_steps)
+            rows.append(run_scene(workload, scene, steps, setup, log))
+        elif workload == "beam":
+            scene = (
+                shared / "reference" / "sofa" / "scenes" / "e_beam_large_cg25_noexport.scn"
+                if shared
+                else None
+            )
+            if scene is None or not scene.is_file():
+                log("beam: shared/reference/sofa not found, skipped")
+                continue
+            rows.append(run_scene("beam", scene, setup.w3_steps, setup, log))
+        elif workload == "liver":
+            scene = shared / "corpus" / "sofa" / "Demos" / "liver.scn" if shared else None
+            if scene is None or not scene.is_file():
+                log("liver: shared/corpus/sofa not found, skipped")
+                continue
+            rows.append(run_scene("liver", scene, setup.liver_steps, setup, log))
+        else:
+            raise ValueError(f"unknown workload {workload!r}; known: {', '.join(ALL)}")
+    return rows, checks
+
+
+# ---- the table ----------------------------------------------------------------------------------
+
+
+def table(rows: Sequence[Row], sofa: bool = True) -> list[list[str]]:
+    """workload, implementation, ms/step (min), median, / hand-written, SOFA / this, target, met.
+
+    ``sofa``: compare W1/W2 with SOFA's figures (only meaningful at N = 100)."""
+    sofa_ms = SOFA_MS if sofa else {k: v for k, v in SOFA_MS.items() if k not in ("w1", "w2")}
+    out = [
+        [
+            "workload",
+            "implementation",
+            "ms/step",
+            "median",
+            "x hand-written",
+            "SOFA faster by",
+            "target",
+            "met",
+            "note",
+        ]
+    ]
+    hand = {r.workload: r.ms for r in rows if r.implementation == "hand-written C++"}
+    for workload in dict.fromkeys(r.workload for r in rows):
+        sofa_key = SOFA_OF.get(workload, workload)
+        for r in (r for r in rows if r.workload == workload):
+            to_hand = f"{r.ms / hand[workload]:.2f}" if workload in hand else "-"
+            to_sofa = f"{sofa_ms[sofa_key] / r.ms:.2f}" if sofa_key in sofa_ms else "-"
+            target, met = "", ""
+            if r.implementation == "sofac":
+                goals, results = [], []
+                if sofa_key in sofa_ms and workload in SOFA_TARGET:
+                    goals.append(f">= {SOFA_TARGET[workload]:g}x faster than SOFA")
+                    results.append(sofa_ms[sofa_key] / r.ms >= SOFA_TARGET[workload])
+                if workload in HAND_TARGET:
+                    goals.append(f"<= {HAND_TARGET[workload]:g}x hand-written")
+                    results.append(workload in hand and r.ms / hand[workload] <= HAND_TARGET[workload])
+                target = "; ".join(goals)
+                met = "; ".join(
+                    ("met" if ok else "not met")
+                    if (g.startswith(">=") or workload in hand)
+                    else "no hand-written loop"
+                    for g, ok in zip(goals, results, strict=True)
+                )
+            out.append(
+                [
+                    workload,
+                    r.implementation,
+                    f"{r.ms:.4g}",
+                    f"{r.median_ms:.4g}",
+                    to_hand,
+                    to_sofa,
+                    target,
+                    met,
+                    r.note,
+                ]
+            )
+        if sofa_key in sofa_ms:
+            ms = sofa_ms[sofa_key]
+            to_hand = f"{ms / hand[workload]:.2f}" if workload in hand else "-"
+            source = "timings.md" + (" (e_beam_large_cg25)" if sofa_key != workload else "")
+            out.append([workload, "SOFA (reference)", f"{ms:.4g}", "", to_hand, "1.00", "", "", source])
+    return out
+
+
+def render(cells: list[list[str]], markdown: bool) -> str:
+    if markdown:
+        lines = ["| " + " | ".join(cells[0]) + " |", "|" + "---|" * len(cells[0])]
+        lines += ["| " + " | ".join(c) + " |" for c in cells[1:]]
+        return "\n".join(lines)
+    widths = [max(len(r[i]) for r in cells) for i in range(len(cells[0]))]
+    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in cells]
+    lines.insert(1, "-" * len(lines[0]))
+    return "\n".join(lines)
+
+
+def checks_text(checks: dict[str, dict[str, float]]) -> str:
+    lines = []
+    for workload, found in checks.items():
+        for what, value in found.items():
+            lines.append(
+                f"{workload.upper()} final positions, {what}: max |difference| / max |x| = {value:.3g}"
+            )
+    return "\n".join(lines)
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--only", nargs="+", choices=ALL, default=list(ALL), help="workloads to run")
+    parser.add_argument("--n", type=int, default=100, help="cloth size N for W1/W2 (default 100)")
+    parser.add_argument("--w1-steps", type=int, default=1000, help="W1 steps per batch (default 1000)")
+    parser.add_argument("--w2-steps", type=int, default=100, help="W2 steps per batch (default 100)")
+    parser.add_argument(
+        "--w3-steps", type=int, default=100, help="W3 CG / beam steps per batch (default 100)"
+    )
+    parser.add_argument("--ldl-steps", type=int, default=10, help="W3 SparseLDL steps per batch (default 10)")
+    parser.add_argument("--liver-steps", type=int, default=500, help="liver steps per batch (default 500)")
+    parser.add_argument(
+        "--batches", type=int, default=3, help="timed batches (default 3; the fastest is shown)"
+    )
+    parser.add_argument("--check-steps", type=int, default=10, help="steps of the W1/W2 agreement check (10)")
+    parser.add_argument("--markdown", type=Path, help="also write the table (Markdown) to this file")
+    parser.add_argument("--json", type=Path, help="also write the rows and checks as JSON")
+    return parser.parse_args(argv)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parse_args(argv)
+    if shutil.which(os.environ.get("CXX", "g++")) is None:
+        print("workloads: no C++ compiler (g++ or $CXX)", file=sys.stderr)
+        return 2
+    started = datetime.datetime.now()
+    before = machine_note()
+    with tempfile.TemporaryDirectory(prefix="sofac-bench-") as tmp:
+        setup = Setup(
+            n=args.n,
+            w1_steps=args.w1_steps,
+            w2_steps=args.w2_steps,
+            w3_steps=args.w3_steps,
+            ldl_steps=args.ldl_steps,
+            liver_steps=args.liver_steps,
+            batches=args.batches,
+            check_steps=args.check_steps,
+            workdir=Path(tmp),
+        )
+        rows, checks = run(args.only, setup, lambda s: print(f"... {s}", file=sys.stderr, flush=True))
+    cells = table(rows, sofa=args.n == 100)
+    header = f"{started:%Y-%m-%d %H:%M}; before: {before}; after: {machine_note()}"
+    print(header)
+    print(render(cells, markdown=False))
+    print(checks_text(checks))
+    if args.markdown:
+        args.markdown.write_text(f"{header}\n\n{render(cells, markdown=True)}\n\n{checks_text(checks)}\n")
+    if args.json:
+        payload = {
+            "header": header,
+            "rows": [{k: v for k, v in r.__dict__.items() if k != "final"} for r in rows],
+            "checks": checks,
+        }
+        args.json.write_text(json.dumps(payload, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,61 @@
+"""The performance benchmarks (benchmarks/workloads.py) still run: tiny sizes, no timing assertions."""
+
+from __future__ import annotations
+
+import importlib
+import shutil
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+@pytest.fixture(scope="module")
+def workloads() -> Iterator[ModuleType]:
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        yield importlib.import_module("workloads")
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+
+
+def test_cloth_matches_the_workload_definition(workloads: ModuleType) -> None:
+    scenegen = workloads.scenegen
+    n = 100
+    cloth = scenegen.cloth(n)
+    assert len(cloth.positions) == n * n
+    assert len(cloth.springs) == 2 * n * (n - 1) + 2 * (n - 1) ** 2 == 39_402
+    assert cloth.fixed == (0, n - 1)
+    assert cloth.positions[n - 1] == (1.0, 0.0, 0.0)
+    text = scenegen.cloth_scene(3, implicit=True)
+    assert 'iterations="25" tolerance="0" threshold="0"' in text
+    assert "0 1 1000.0 0 0.5" in text  # "i j stiffness damping rest-length"
+
+
+def test_generated_scenes_check_clean(workloads: ModuleType, tmp_path: Path) -> None:
+    from sofac.cli import main as sofac_main
+
+    scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *workloads.scenegen.write_beam(tmp_path, 3, 3, 4)]
+    assert sofac_main(["check", "--quiet", *map(str, scenes)]) == 0
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+def test_cloth_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) -> None:
+    setup = workloads.Setup(n=5, w1_steps=3, w2_steps=3, batches=2, check_steps=3, workdir=tmp_path)
+    rows, checks = workloads.run(["w1", "w2"], setup, lambda _: None)
+    implementations = {(r.workload, r.implementation) for r in rows}
+    assert {("w1", "sofac"), ("w1", "hand-written C++"), ("w1", "NumPy")} <= implementations
+    assert {("w2", "sofac"), ("w2", "hand-written C++")} <= implementations
+    assert all(r.ms > 0 for r in rows)
+    # the same algorithm gives the same positions to rounding (few steps: W2 amplifies rounding)
+    for workload in ("w1", "w2"):
+        short = {k: v for k, v in checks[workload].items() if k.endswith("after 3 steps")}
+        assert short and all(v < 1e-9 for v in short.values()), checks[workload]
+    cells = workloads.table(rows, sofa=False)
+    assert cells[0][:3] == ["workload", "implementation", "ms/step"]
+    assert any(c[1] == "sofac" and c[0] == "w1" and "hand-written" in c[6] for c in cells)
+    assert workloads.render(cells, markdown=True).startswith("| workload |")
