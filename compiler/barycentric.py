@@ -46,32 +46,14 @@ _CHUNK = 1 << 21  # candidate (point, element) pairs evaluated at once
 
 
 # The mapper SOFA's BarycentricMapping::createMapperFromTopology picks for an input topology class.
-_DYNAMIC_CONTAINERS = frozenset(
-    {
-        "PointSetTopologyContainer",
-        "EdgeSetTopologyContainer",
-        "TriangleSetTopologyContainer",
-        "QuadSetTopologyContainer",
-        "TetrahedronSetTopologyContainer",
-        "HexahedronSetTopologyContainer",
-        "DynamicSparseGridTopologyContainer",
-        "MultilevelHexahedronSetTopologyContainer",
-    }
-)
 
 
-def mapper_for(topology_class: str) -> str:
-    """Which mapper SOFA uses for an input topology of this class (dealiased SOFA class name):
+def mapper_for(topology_role: str) -> str:
+    """Which mapper SOFA uses for an input topology, from its registry role (ComponentSpec.role):
     ``"regular_grid"`` (pass ``grid=RegularGrid(...)``), ``"sparse_grid"`` (``grid=SparseGrid(...)``),
-    ``"dynamic"`` (``topology="dynamic"``) or ``"mesh"`` (``topology="mesh"``: MeshTopology,
-    GridTopology, CylinderGridTopology, SphereGridTopology, CubeTopology, ...)."""
-    if topology_class == "RegularGridTopology":
-        return "regular_grid"
-    if topology_class in ("SparseGridTopology", "SparseGridRamificationTopology"):
-        return "sparse_grid"
-    if topology_class in _DYNAMIC_CONTAINERS:
-        return "dynamic"
-    return "mesh"
+    ``"dynamic"`` (``topology="dynamic"``: the *SetTopologyContainer family) or ``"mesh"``
+    (``topology="mesh"``: MeshTopology, GridTopology, CubeTopology, ...)."""
+    return topology_role if topology_role in ("regular_grid", "sparse_grid", "dynamic") else "mesh"
 
 
 @dataclass(frozen=True)

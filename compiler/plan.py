@@ -248,7 +248,7 @@ class _Planner:
         dt = float(self.value_node(root, "dt"))
         gravity = np.asarray(self.value_node(root, "gravity"), dtype=float)
         for checked in self.checked:
-            if checked.category is Category.CONTEXT and checked.spec and checked.spec.name == "Gravity":
+            if checked.spec and checked.spec.role == "gravity":
                 if checked.component.node is root:
                     gravity = np.asarray(self.value(checked.component, "gravity"), dtype=float)
                 else:
@@ -761,7 +761,7 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
     cells = _topology_cells(planner, checked) or {}
     topology = _topology_of(planner, checked)
     spec = planner.checked.of(topology).spec if topology is not None else None
-    if spec is not None and mapper_for(spec.name) == "dynamic":
+    if spec is not None and mapper_for(spec.role) == "dynamic":
         cells.pop("edges", None)  # a dynamic container builds its whole edge array from its elements
     density = planner.value(component, "massDensity") if component.get("massDensity") is not None else None
     try:
@@ -1578,7 +1578,7 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
     # The input topology's class decides which of SOFA's mappers embeds the points.
     topology = _topology_of(planner, probe)
     topology_spec = planner.checked.of(topology).spec if topology is not None else None
-    mode = mapper_for(topology_spec.name if topology_spec else "")
+    mode = mapper_for(topology_spec.role if topology_spec else "")
     grid = None
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
@@ -1659,7 +1659,7 @@ def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict
     if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
         planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
         return
-    corotational = checked.spec is not None and checked.spec.name == "CorotationalFEMForceField"
+    corotational = checked.spec is not None and checked.spec.role == "corotational"
     method = 0
     if corotational:
         name = planner.value(component, "rotationMethod")
@@ -1761,7 +1761,7 @@ def _nodal_mass_density(planner: _Planner, checked: CheckedComponent) -> Compone
     for node in (checked.component.node, *checked.component.node.ancestors()):
         for candidate in node.objects:
             spec = planner.checked.of(candidate).spec
-            if spec is not None and spec.name == "NodalMassDensity":
+            if spec is not None and spec.role == "nodal_mass_density":
                 return candidate
     return None
 

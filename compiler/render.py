@@ -1103,7 +1103,7 @@ class _SceneBuilder:
         topology = self.topology_of(source, mapping.links.get("input_topology"))
         cells = self.cells(topology)
         spec = self.checked.of(topology).spec if topology is not None else None
-        mode = mapper_for(spec.name if spec is not None else "")
+        mode = mapper_for(spec.role if spec is not None else "")
         grid = None
         if mode == "regular_grid" and "resolution" in cells and cells.get("bounds", np.zeros(0)).size >= 6:
             bounds = cells["bounds"]

@@ -140,6 +140,10 @@ class ComponentSpec:
     # Name of the lowering (in plan.py) that turns it into kernel calls of the compiled step;
     # "" = the compiler cannot compile it yet (components with no part in the step need none).
     kernel: str = ""
+    # A finer kind that later stages distinguish inside a category or kernel, e.g. which of SOFA's
+    # barycentric mappers a topology gets ("regular_grid", "sparse_grid", "dynamic"; "" = mesh),
+    # "corotational" vs "linear" element force fields, "gravity" and "nodal_mass_density" data.
+    role: str = ""
 
     _by_name: dict[str, FieldSpec] = field(default_factory=dict, compare=False, repr=False)
 

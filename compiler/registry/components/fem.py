@@ -274,6 +274,7 @@ _ELEMENT_FEM_FIELDS = (
 
 COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="CorotationalFEMForceField",
+    role="corotational",
     kernel="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,

@@ -447,6 +447,7 @@ UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
 
 GRAVITY = ComponentSpec(
     name="Gravity",
+    role="gravity",
     category=Category.CONTEXT,
     module=_LOAD_MODULE,
     doc="Sets the gravity of its node's subtree (re-applied after the root's values are copied down).",

@@ -129,6 +129,7 @@ FEM_MASS = ComponentSpec(
 
 NODAL_MASS_DENSITY = ComponentSpec(
     name="NodalMassDensity",
+    role="nodal_mass_density",
     category=Category.UTILITY,
     module=_MODULE,
     doc="A mass density value per node, read by FEMMass (a node beyond the list takes its last value).",

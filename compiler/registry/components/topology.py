@@ -87,6 +87,7 @@ GRID_TOPOLOGY = ComponentSpec(
 
 REGULAR_GRID_TOPOLOGY = ComponentSpec(
     name="RegularGridTopology",
+    role="regular_grid",
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Regular grid between min and max: points (index x + nx (y + ny z)), edges, all grid quads, "
@@ -126,6 +127,7 @@ _SPARSE_GRID_FIELDS = (
 
 SPARSE_GRID_TOPOLOGY = ComponentSpec(
     name="SparseGridTopology",
+    role="sparse_grid",
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Hexahedral cells of a regular grid that intersect or lie inside a closed surface mesh.",
@@ -137,6 +139,7 @@ SPARSE_GRID_TOPOLOGY = ComponentSpec(
 
 SPARSE_GRID_RAMIFICATION_TOPOLOGY = ComponentSpec(
     name="SparseGridRamificationTopology",
+    role="sparse_grid",
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Sparse grid that duplicates cells crossed by several disconnected parts of the surface.",
@@ -218,6 +221,7 @@ _KIND_ELEMENTS = {
 def _container(kind: str) -> ComponentSpec:
     return ComponentSpec(
         name=f"{kind}SetTopologyContainer",
+        role="dynamic",  # SOFA's barycentric mapper for dynamic containers; edges built from elements
         category=Category.TOPOLOGY,
         module=_DYNAMIC,
         doc=f"Dynamic topology container of {_KIND_ELEMENTS[kind]} (and their sub-elements); static "
