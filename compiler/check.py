@@ -149,7 +149,7 @@ class _Checker:
                 self._check_indices(checked)
         self._check_plugins()
         for checked in self.checked:
-            if checked.spec is not None and checked.spec.name == "UniformMass":
+            if checked.spec is not None and checked.spec.kernel == "uniform_mass":
                 self._check_rigid_inertia(checked)
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)

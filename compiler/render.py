@@ -673,7 +673,7 @@ class Renderer:
             layers = self.layers(parent) if isinstance(parent, Node) else Layers()
             for component in node.objects:
                 item = self.checked.components.get(id(component))
-                if item is not None and item.spec is not None and item.spec.name == "VisualStyle":
+                if item is not None and item.spec is not None and item.spec.role == "visual_style":
                     words = self.checked.value(component, "displayFlags") or ()
                     layers = _apply_words(layers, [words] if isinstance(words, str) else words)
             self._flags[key] = layers
@@ -877,7 +877,9 @@ class _SceneBuilder:
                 self._forcefield(item, scene)
             elif category is Category.COLLISION_MODEL:
                 self._collision(item, scene)
-            elif category is Category.MAPPING and item.spec is not None and item.spec.name == "RigidMapping":
+            elif (
+                category is Category.MAPPING and item.spec is not None and item.spec.kernel == "rigid_mapping"
+            ):
                 self._attachment(item, scene)
         return scene
 
@@ -1042,6 +1044,7 @@ class _SceneBuilder:
     # --- mappings ---------------------------------------------------------------------------------
     def _feed(self, mapping: Any, points: np.ndarray, path: str) -> _Feed | None:
         name = mapping.spec.name if mapping.spec is not None else mapping.component.type_name
+        kernel = mapping.spec.kernel if mapping.spec is not None else ""
         source = mapping.links.get("input")
         if not isinstance(source, Component):
             self.warnings.append(f"{path}: its {name} has no input state; drawn at rest")
@@ -1053,16 +1056,16 @@ class _SceneBuilder:
         template = self.checked.of(source).datatype
         rigid = bool(template is not None and template.rigid and template.coord_size == 7)
         try:
-            if name in ("IdentityMapping", "SubsetMapping"):
+            if kernel in ("identity_mapping", "subset_mapping"):
                 indices = None
-                if name == "SubsetMapping":
+                if kernel == "subset_mapping":
                     written = self.value(mapping.component, "indices")
                     if written is not None and np.size(written):
                         indices = np.asarray(written, dtype=np.int64).ravel()
                 return _Feed("identity", state, indices=indices)
-            if name == "RigidMapping" and rigid:
+            if kernel == "rigid_mapping" and rigid:
                 return self._rigid_feed(mapping, source, points, state)
-            if name == "BarycentricMapping":
+            if kernel == "barycentric_mapping":
                 return self._barycentric_feed(mapping, source, points, state)
         except (ValueError, IndexError) as error:
             self.warnings.append(f"{path}: its {name} cannot be set up ({error}); drawn at rest")

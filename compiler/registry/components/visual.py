@@ -116,6 +116,7 @@ OGL_MODEL = ComponentSpec(
 
 VISUAL_STYLE = ComponentSpec(
     name="VisualStyle",
+    role="visual_style",
     category=Category.RENDERING,
     module=_VISUAL_MODULE,
     doc="Display flags of its subtree (showVisual, showBehaviorModels, showForceFields, "
