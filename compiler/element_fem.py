@@ -45,10 +45,6 @@ def rotation_method(name: str | None, element: str) -> int | None:
     return _ROTATION_CODES.get(name)
 
 
-def default_rotation_method(element: str) -> str:
-    return _FRAME_METHOD[element]
-
-
 @dataclass(frozen=True)
 class MassPattern:
     """Compressed rows of the scalar mass matrix: row r holds cols[row_begin[r]:row_begin[r+1]]."""
