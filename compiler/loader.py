@@ -484,16 +484,20 @@ def sofa_name(component: Any) -> str:
     return f"{component.type_name}{same.index(component) + 1}"
 
 
-def compile_scene(path: str | Path, *, data_roots: Sequence[Path] = (), prune: bool = True) -> Compiled:
+def compile_scene(
+    path: str | Path, *, data_roots: Sequence[Path] = (), prune: bool = True, rigid_model: str = "sofa"
+) -> Compiled:
     """Check, plan, generate and build a scene (or take it from the cache)."""
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
-    return compile_checked(checked, diagnostics, prune=prune)
+    return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model)
 
 
-def compile_checked(checked: Any, diagnostics: Any = None, *, prune: bool = True) -> Compiled:
-    scene_plan = plan.plan_scene(checked, diagnostics, prune=prune)
+def compile_checked(
+    checked: Any, diagnostics: Any = None, *, prune: bool = True, rigid_model: str = "sofa"
+) -> Compiled:
+    scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
@@ -502,11 +506,16 @@ def compile_checked(checked: Any, diagnostics: Any = None, *, prune: bool = True
 
 
 def load(
-    path: str | Path, *, dt: float | None = None, data_roots: Sequence[Path] = (), prune: bool = True
+    path: str | Path,
+    *,
+    dt: float | None = None,
+    data_roots: Sequence[Path] = (),
+    prune: bool = True,
+    rigid_model: str = "sofa",
 ) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene."""
     started = time.perf_counter()
-    sim = compile_scene(path, data_roots=data_roots, prune=prune).instantiate()
+    sim = compile_scene(path, data_roots=data_roots, prune=prune, rigid_model=rigid_model).instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
         sim.dt = dt

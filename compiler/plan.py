@@ -194,10 +194,13 @@ def origin_of(component: Component) -> str:
 
 
 class _Planner:
-    def __init__(self, checked: CheckedScene, diagnostics: Diagnostics, prune: bool = True) -> None:
+    def __init__(
+        self, checked: CheckedScene, diagnostics: Diagnostics, prune: bool = True, rigid_model: str = "sofa"
+    ) -> None:
         self.checked = checked
         self.diags = diagnostics
         self.prune = prune
+        self.rigid_model = rigid_model
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
@@ -998,17 +1001,24 @@ def _add_mass(
         lambda offset: _call(f"assemble_mass<{t}>", "A", offset, n, buffer, stride_value, "mfact"),
     )
     if group.scheme == "implicit":
+        if planner.rigid_model == "exact" and state.datatype.name == "Rigid3d":
+            planner.unsupported(checked, "the exact rigid model is compiled for explicit solvers only")
         group.mass_dx.append(
             Op(origin, [_call(f"mass_multiply<{t}>", state.df, state.dx, n, buffer, stride_value, "mfact")])
         )
     elif state.acc is not None:
         state.mass = (buffer, stride_value)
-        group.accelerations.append(
-            Op(
-                origin,
-                [_call(f"mass_acceleration<{t}>", state.acc, state.f, n, buffer, stride_value)],
+        if planner.rigid_model == "exact" and state.datatype.name == "Rigid3d":
+            code = _call(
+                "rigid_acceleration_exact", state.acc, state.f, state.x, state.v, n, buffer, stride_value
             )
-        )
+            group.accelerations.append(
+                Op(origin + " [exact rigid model: rotated inertia, gyroscopic term]", [code])
+            )
+        else:
+            group.accelerations.append(
+                Op(origin, [_call(f"mass_acceleration<{t}>", state.acc, state.f, n, buffer, stride_value)])
+            )
 
 
 def _springs_from_fields(planner: _Planner, checked: CheckedComponent) -> np.ndarray:
@@ -1860,10 +1870,22 @@ LOWERINGS: dict[str, Lowering] = {
 }
 
 
-def plan_scene(checked: CheckedScene, diagnostics: Diagnostics | None = None, *, prune: bool = True) -> Plan:
+def plan_scene(
+    checked: CheckedScene,
+    diagnostics: Diagnostics | None = None,
+    *,
+    prune: bool = True,
+    rigid_model: str = "sofa",
+) -> Plan:
     """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled.
-    With ``prune``, effects the scene makes vanish (zero gravity) get no code."""
-    return _Planner(checked, diagnostics if diagnostics is not None else Diagnostics(), prune).run()
+    With ``prune``, effects the scene makes vanish (zero gravity) get no code. ``rigid_model="exact"``
+    turns rigid inertias with their bodies and keeps the gyroscopic term (explicit solvers; SOFA's
+    model, the default, applies the inertia in world axes)."""
+    if rigid_model not in ("sofa", "exact"):
+        raise ValueError(f"rigid_model must be 'sofa' or 'exact', not {rigid_model!r}")
+    return _Planner(
+        checked, diagnostics if diagnostics is not None else Diagnostics(), prune, rigid_model
+    ).run()
 
 
 def format_effects(plan: Plan) -> str:

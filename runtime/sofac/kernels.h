@@ -95,6 +95,22 @@ inline void mass_multiply(double* df, const double* dx, Index n, const double* m
     }
 }
 
+// The exact rigid-body model (opt-in, not SOFA's): the inertia given in the body frame turns with
+// the body, I_w = R I R^T, and Euler's equations keep the gyroscopic term:
+// dw/dt = I_w^-1 (tau - w x I_w w). Linear part as mass_acceleration.
+inline void rigid_acceleration_exact(double* a, const double* f, const double* x, const double* v, Index n,
+                                     const double* mass, Index mass_stride) {
+    for (Index i = 0; i < n; ++i) {
+        const double* mi = mass + i * mass_stride;
+        linear<Rigid3d>(a, i) = linear<Rigid3d>(f, i) / mi[0];
+        const Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> body(mi + 1);
+        const Mat3 rotation = orientation(x, i).toRotationMatrix();
+        const Mat3 world = rotation * body * rotation.transpose();
+        const Vec3 w = angular(v, i);
+        angular(a, i) = world.inverse() * (Vec3(angular(f, i)) - w.cross(world * w));
+    }
+}
+
 // Kinetic energy 1/2 v.M.v and gravity's potential -m g.x.
 template <class DT>
 inline void mass_energy(const double* x, const double* v, Index n, const double* mass, Index mass_stride,
