@@ -1653,19 +1653,27 @@ def _element_cells(
     return element, corners, cells
 
 
+def _element_target(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group, tuple[str, int, np.ndarray]] | None:
+    """The state, group and elements (type, corners, cells) an element component acts on."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return None
+    state, group = found
+    geometry = _element_cells(planner, checked, state)
+    return None if geometry is None else (state, group, geometry)
+
+
 def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """CorotationalFEMForceField and LinearSmallStrainFEMForceField on tetrahedra or hexahedra."""
     from . import element_fem
 
-    found = _target(planner, checked, owner)
+    found = _element_target(planner, checked, owner)
     if found is None:
         return
-    state, group = found
+    state, group, (element, corners, cells) = found
     component = checked.component
-    geometry = _element_cells(planner, checked, state)
-    if geometry is None:
-        return
-    element, corners, cells = geometry
     if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
         planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
         return
@@ -1780,15 +1788,11 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
     """FEMMass: the consistent scalar mass matrix of the elements, from a NodalMassDensity."""
     from . import element_fem
 
-    found = _target(planner, checked, owner)
+    found = _element_target(planner, checked, owner)
     if found is None:
         return
-    state, group = found
+    state, group, (_, corners, cells) = found
     component = checked.component
-    geometry = _element_cells(planner, checked, state)
-    if geometry is None:
-        return
-    _, corners, cells = geometry
     if group.scheme != "implicit":
         if group.scheme != "euler" or not group.assembled:
             planner.unsupported(
