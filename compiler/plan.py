@@ -936,6 +936,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     group.forces.append(
         Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method)])
     )
+    and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
+    if and_mass and not _lower_hexa_mass(planner, checked, state, group, elements, count, data, method):
+        return
     if prefix != "tetracorot_fem":  # SOFA's potential energy (0 for corotational tetrahedra, as SOFA)
         group.energy.append(
             Op(origin, ["potential += " + _call(f"{prefix}_energy", elements, count, state.x, data, method)])
@@ -964,6 +967,91 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                 f"sofac::{prefix}_element_matrix",
             ),
         )
+
+
+def _lower_hexa_mass(
+    planner: _Planner,
+    checked: CheckedComponent,
+    state: StatePlan,
+    group: Group,
+    elements: Buffer,
+    count: int,
+    data: Buffer,
+    method: int,
+) -> bool:
+    """HexahedronFEMForceFieldAndMass's mass: SOFA's element mass matrices (consistent, or lumped
+    onto the diagonal) in a scalar CSR matrix, and its weight from the particle masses (vol/8)."""
+    from . import element_fem
+
+    component = checked.component
+    if group.scheme != "implicit" and not (group.scheme == "euler" and group.assembled):
+        # SOFA's accFromF is not implemented for this class: only a solve with M works.
+        planner.unsupported(
+            checked, "its mass needs an implicit solver, or explicit Euler with a sparse direct linear solver"
+        )
+        return False
+    if group.scheme != "implicit":
+        group.direct = True
+    lumped = bool(planner.value(component, "lumpedMass"))
+    cells = elements.initial.reshape(-1, 8)
+    if lumped:
+        pattern = element_fem.mass_pattern(np.arange(state.size, dtype=np.int64).reshape(-1, 1), state.size)
+    else:
+        pattern = element_fem.mass_pattern(cells, state.size)
+    density_value = planner.value(component, "density")
+    density = planner.buffer(
+        component, "density", np.atleast_1d(1.0 if density_value is None else float(density_value))
+    )
+    rows = planner.buffer(component, "rowBegin", pattern.row_begin, "i64")
+    cols = planner.buffer(component, "colsIndex", pattern.cols, "i64")
+    values = planner.buffer(component, "massMatrices", np.zeros(pattern.nonzeros), role="scratch")
+    particle = planner.buffer(component, "particleMasses", np.zeros(state.size), role="scratch")
+    csr = (rows, cols, values, state.size)
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "hexa_fem_mass_init",
+                    elements,
+                    count,
+                    state.rest,
+                    data,
+                    method,
+                    density,
+                    rows,
+                    cols,
+                    state.size,
+                    "true" if lumped else "false",
+                    values,
+                    particle,
+                )
+            ],
+        )
+    )
+    planner.add_gravity(
+        group,
+        Op(origin, [_call("mass_gravity<sofac::Vec3d>", state.f, state.size, particle, 1, planner.gravity)]),
+    )
+    if group.scheme == "implicit":
+        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+    _assemble(
+        planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
+    )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "kinetic += " + _call("fem_mass_kinetic_energy", state.v, *csr),
+                "potential += "
+                + _call(
+                    "gravity_potential<sofac::Vec3d>", state.x, state.size, particle, planner.gravity, 1.0
+                ),
+            ],
+        )
+    )
+    return True
 
 
 def _add_mass(
