@@ -969,6 +969,77 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         )
 
 
+def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TriangularFEMForceFieldOptim: corotational membrane triangles ("large" only, as SOFA)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    rest_scale = _written_float(planner, component, "restScale")
+    if rest_scale is not None and rest_scale != 1.0:
+        planner.unsupported(checked, "restScale other than 1 is not compiled yet")
+        return
+    cells = (_topology_cells(planner, checked) or {}).get("triangles")
+    if cells is None or not cells.size:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return
+    count = cells.size // 3
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, "triangles", cells, "i64", columns=3)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+    )
+    material = (young_buffer, _count(young_buffer), poisson_buffer, _count(poisson_buffer))
+    data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(origin, [_call("trifem_optim_init", elements, count, state.rest, *material, 1, data)])
+    )
+    group.forces.append(
+        Op(origin, [_call("trifem_optim_add_force", elements, count, state.x, state.f, data, *material)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "trifem_optim_add_dforce",
+                        elements,
+                        count,
+                        state.dx,
+                        state.df,
+                        "kfact",
+                        data,
+                        *material,
+                    )
+                ],
+            )
+        )
+        matrix = (
+            "[&](const double* d, Index e, int, double* o) { sofac::trifem_optim_element_matrix(d, e, "
+            f"{_ptr(young_buffer)}, {_count(young_buffer)}, {_ptr(poisson_buffer)}, "
+            f"{_count(poisson_buffer)}, o); }}"
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(
+                "assemble_elements<3>", "A", elements, count, data, 1, offset, "kfact", matrix
+            ),
+        )
+
+
 def _lower_hexa_mass(
     planner: _Planner,
     checked: CheckedComponent,
@@ -1947,6 +2018,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetra_fem": _lower_fem,
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
+    "trifem_optim": _lower_trifem_optim,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,
     "diagonal_mass": _lower_diagonal_mass,

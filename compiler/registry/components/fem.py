@@ -208,6 +208,7 @@ TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
 
 TRIANGULAR_FEM_FORCE_FIELD_OPTIM = ComponentSpec(
     name="TriangularFEMForceFieldOptim",
+    kernel="trifem_optim",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Optimised corotational membrane triangles (large displacements only).",
