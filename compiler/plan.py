@@ -1040,6 +1040,58 @@ def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dic
         )
 
 
+def _lower_bending_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FastTriangularBendingSprings: one linear bending spring per edge between two triangles."""
+    from . import bending, masses
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    cells = _topology_cells(planner, checked) or {}
+    triangles = cells.get("triangles")
+    if triangles is None or not triangles.size:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, triangles=triangles, quads=cells.get("quads"))
+    stiffness = planner.value(component, "bendingStiffness")
+    min_dist = planner.value(component, "minDistValidity")
+    vid, alpha, lam = bending.bending_springs(
+        planner.checked.positions(state.component),
+        triangles,
+        edges,
+        1.0 if stiffness is None else float(stiffness),
+        1e-6 if min_dist is None else float(min_dist),
+    )
+    count = len(lam)
+    table = (
+        planner.buffer(component, "vid", vid.ravel(), "i64", columns=4),
+        planner.buffer(component, "alpha", alpha.ravel(), columns=4),
+        planner.buffer(component, "lambda", lam),
+        count,
+    )
+    origin = origin_of(component)
+    group.forces.append(Op(origin, [_call("bending_springs_add_force", *table, state.x, state.f)]))
+    group.energy.append(Op(origin, ["potential += " + _call("bending_springs_energy", *table, state.x)]))
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, "kfact")])
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call("assemble_bending_springs", "A", offset, *table, "kfact"),
+        )
+
+
 def _lower_hexa_mass(
     planner: _Planner,
     checked: CheckedComponent,
@@ -2019,6 +2071,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
+    "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,
     "diagonal_mass": _lower_diagonal_mass,

@@ -10,6 +10,7 @@ from sofac.regress import Status, run_regression
 
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
+    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",  # with TriangularFEMForceFieldOptim
 ]
 
 

@@ -9,6 +9,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from sofac.bending import bending_springs
 from sofac.build import eigen_include
 from sofac.resources import resource_dir
 
@@ -28,6 +29,26 @@ API void tri_force(const Index* t, Index n, const double* x, double* f, double* 
 API void tri_dforce(const Index* t, Index n, const double* dx, double* df, double k, const double* d,
                     const double* e, Index ne, const double* nu, Index nn) {
     sofac::trifem_optim_add_dforce(t, n, dx, df, k, d, e, ne, nu, nn);
+}
+API void bend_force(const Index* v, const double* a, const double* l, Index n, const double* x, double* f) {
+    sofac::bending_springs_add_force(v, a, l, n, x, f);
+}
+API double bend_energy(const Index* v, const double* a, const double* l, Index n, const double* x) {
+    return sofac::bending_springs_energy(v, a, l, n, x);
+}
+API void bend_dforce(const Index* v, const double* a, const double* l, Index n, const double* dx, double* df,
+                     double k) {
+    sofac::bending_springs_add_dforce(v, a, l, n, dx, df, k);
+}
+struct Dense {
+    double* m;
+    Index n;
+    void add(Index r, Index c, double v) { m[r * n + c] += v; }
+};
+API void bend_matrix(const Index* v, const double* a, const double* l, Index n, double k, double* out,
+                     Index size) {
+    Dense A{out, size};
+    sofac::assemble_bending_springs(A, 0, v, a, l, n, k);
 }
 API void tri_matrix(const double* d, Index i, const double* e, Index ne, const double* nu, Index nn,
                     double* out) {
@@ -68,6 +89,11 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.tri_force.argtypes = [I64, count, D, D, D, D, count, D, count]
     library.tri_dforce.argtypes = [I64, count, D, D, real, D, D, count, D, count]
     library.tri_matrix.argtypes = [D, count, D, count, D, count, D]
+    library.bend_force.argtypes = [I64, D, D, count, D, D]
+    library.bend_energy.argtypes = [I64, D, D, count, D]
+    library.bend_energy.restype = real
+    library.bend_dforce.argtypes = [I64, D, D, count, D, D, real]
+    library.bend_matrix.argtypes = [I64, D, D, count, real, D, count]
     return library
 
 
@@ -178,3 +204,51 @@ def test_optim_dforce_and_matrix_match_finite_differences(lib: ctypes.CDLL) -> N
     at_rest = np.column_stack([tri2.dforce(np.eye(12)[j]) for j in range(12)])
     assert np.abs(at_rest - fd).max() < 1e-6 * np.abs(fd).max()
     assert np.abs(jacobian - analytic).max() < 0.5 * np.abs(analytic).max()  # same operator, plus rotation
+
+
+# ---- FastTriangularBendingSprings ----------------------------------------------------------------
+
+# Two triangles on the edge C=(0,0,0) D=(1,0,0); A=(0.5,1,0) in triangle 0, B=(0.5,-1,0) in triangle 1.
+SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.5, 1.0, 0.0], [0.5, -1.0, 0.0]])
+SQUARE_TRIS = np.array([[0, 1, 2], [1, 0, 3]])
+SQUARE_EDGES = np.array([[1, 2], [2, 0], [0, 1], [0, 3], [3, 1]])
+
+
+def test_bending_spring_weights_and_stiffness_by_hand() -> None:
+    """One spring (the shared edge): alpha = (1/2, 1/2, -1/2, -1/2) (equal triangle areas), heights
+    1 and 1, edge length 1: lambda = 2/3 (1 + 1) / 1 * 1 * k."""
+    vid, alpha, lam = bending_springs(SQUARE, SQUARE_TRIS, SQUARE_EDGES, 300.0, 1e-6)
+    assert vid.tolist() == [[2, 3, 0, 1]]  # A in the lower triangle, then B, then the edge as stored
+    assert alpha.tolist() == [[0.5, 0.5, -0.5, -0.5]]
+    assert lam.tolist() == [pytest.approx(400.0, rel=1e-15)]
+    none = bending_springs(SQUARE, SQUARE_TRIS[:1], SQUARE_EDGES[:3], 300.0, 1e-6)
+    assert none[0].shape == (0, 4)  # a border edge has no spring
+
+
+def test_bending_force_energy_and_derivative(lib: ctypes.CDLL) -> None:
+    k, h = 300.0, 0.01
+    vid, alpha, lam = bending_springs(SQUARE, SQUARE_TRIS, SQUARE_EDGES, k, 1e-6)
+    args = (_i(vid), _d(alpha), _d(lam), len(lam))
+    flat = np.zeros(12)
+    lib.bend_force(*args, _d(SQUARE.ravel().copy()), _d(flat))
+    assert np.abs(flat).max() == 0.0  # the flat rest shape
+    lifted = SQUARE.copy()
+    lifted[2, 2] = h  # A up by h: R = h/2 z, f_k = -R lambda alpha_k
+    force = np.zeros(12)
+    lib.bend_force(*args, _d(lifted.ravel().copy()), _d(force))
+    expected = np.zeros((4, 3))
+    expected[:, 2] = [h * k / 3, h * k / 3, -h * k / 3, -h * k / 3]  # nodes 0, 1 are C, D; 2, 3 are A, B
+    assert np.abs(force.reshape(4, 3) - expected).max() < 1e-12 * k
+    energy = lib.bend_energy(*args, _d(lifted.ravel().copy()))
+    assert energy == pytest.approx(0.5 * (h / 2) ** 2 * 400.0, rel=1e-13)
+    # The force is linear in x: K dx equals the force difference, and the assembled matrix K.
+    rng = np.random.default_rng(1)
+    dx = rng.standard_normal(12)
+    f1 = np.zeros(12)
+    lib.bend_force(*args, _d((lifted.ravel() + dx).copy()), _d(f1))
+    df = np.zeros(12)
+    lib.bend_dforce(*args, _d(dx), _d(df), 1.0)
+    assert np.abs(df - (f1 - force)).max() < 1e-10 * np.abs(df).max()
+    matrix = np.zeros((12, 12))
+    lib.bend_matrix(*args, 2.0, _d(matrix), 12)
+    assert np.abs(matrix @ dx - 2.0 * df).max() < 1e-10 * np.abs(df).max()

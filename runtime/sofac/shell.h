@@ -172,4 +172,66 @@ inline void trifem_optim_element_matrix(const double* data, Index e, const doubl
                 }
 }
 
+// FastTriangularBendingSprings (Volino's linear bending): per spring across an edge CD between the
+// triangles ACD and BCD, R = sum_k alpha_k p_k (alpha and lambda precomputed at compile time from
+// the rest positions, as SOFA's setEdgeSpring); f_k -= R lambda alpha_k; energy R.R lambda / 2.
+// vid: 4 indices (A, B, C, D) per spring, alpha: 4 weights, lambda: 1 stiffness.
+inline void bending_springs_add_force(const Index* vid, const double* alpha, const double* lambda, Index n,
+                                      const double* x, double* f) {
+    for (Index s = 0; s < n; ++s) {
+        const Index* v = vid + 4 * s;
+        const double* a = alpha + 4 * s;
+        const double l = lambda[s];
+        double R[3];
+        for (int d = 0; d < 3; ++d)
+            R[d] = x[3 * v[0] + d] * a[0] + x[3 * v[1] + d] * a[1] + x[3 * v[2] + d] * a[2] + x[3 * v[3] + d] * a[3];
+        for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) f[3 * v[k] + d] -= R[d] * l * a[k];
+    }
+}
+
+inline double bending_springs_energy(const Index* vid, const double* alpha, const double* lambda, Index n,
+                                     const double* x) {
+    double energy = 0.0;
+    for (Index s = 0; s < n; ++s) {
+        const Index* v = vid + 4 * s;
+        const double* a = alpha + 4 * s;
+        double R[3];
+        for (int d = 0; d < 3; ++d)
+            R[d] = x[3 * v[0] + d] * a[0] + x[3 * v[1] + d] * a[1] + x[3 * v[2] + d] * a[2] + x[3 * v[3] + d] * a[3];
+        energy += (R[0] * R[0] + R[1] * R[1] + R[2] * R[2]) * lambda[s] * 0.5;
+    }
+    return energy;
+}
+
+// df += kfactor K dx, K = -lambda alpha alpha^T (x) I3 (SOFA's LOCAL_OPTIM addDForce order).
+inline void bending_springs_add_dforce(const Index* vid, const double* alpha, const double* lambda, Index n,
+                                       const double* dx, double* df, double kfactor) {
+    for (Index s = 0; s < n; ++s) {
+        const Index* v = vid + 4 * s;
+        const double* a = alpha + 4 * s;
+        double p[4][3];
+        for (int k = 0; k < 4; ++k)
+            for (int d = 0; d < 3; ++d) p[k][d] = dx[3 * v[k] + d] * lambda[s] * kfactor * a[k];
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k)
+                for (int d = 0; d < 3; ++d) df[3 * v[j] + d] -= p[k][d] * a[j];
+    }
+}
+
+// Sparse direct solvers: A += kfact K.
+template <class Assembler>
+inline void assemble_bending_springs(Assembler& A, Index offset, const Index* vid, const double* alpha,
+                                     const double* lambda, Index n, double kfact) {
+    for (Index s = 0; s < n; ++s) {
+        const Index* v = vid + 4 * s;
+        const double* a = alpha + 4 * s;
+        for (int j = 0; j < 4; ++j)
+            for (int k = 0; k < 4; ++k) {
+                const double value = -lambda[s] * a[j] * a[k] * kfact;
+                for (int d = 0; d < 3; ++d) A.add(offset + 3 * v[j] + d, offset + 3 * v[k] + d, value);
+            }
+    }
+}
+
 }  // namespace sofac
