@@ -80,6 +80,25 @@ def mesh_loader(ctx: Context) -> Outputs:
     }
 
 
+def string_mesh(ctx: Context) -> Outputs:
+    """StringMeshCreator: ``resolution`` points x / (resolution - 1) on the x axis, edges (i-1, i)."""
+    count = int(ctx.value("resolution"))
+    if count < 2:
+        raise EvaluationError("resolution must be >= 2", "resolution")
+    points = np.zeros((count, 3))
+    points[:, 0] = [(x * 1.0) / (count - 1) for x in range(count)]
+    edges = np.array([[e - 1, e] for e in range(1, count)], dtype=np.int64)
+    empty = np.zeros(0, dtype=np.int64)
+    return {
+        "position": _transform(ctx, points).ravel(),
+        "edges": edges.ravel(),
+        "triangles": empty,
+        "quads": empty,
+        "tetrahedra": empty,
+        "hexahedra": empty,
+    }
+
+
 def sphere_loader(ctx: Context) -> Outputs:
     try:
         spheres = meshes.read_spheres(_file(ctx))
@@ -194,6 +213,7 @@ def hexa_to_tetra(ctx: Context) -> Outputs:
 EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "hexa_to_tetra": hexa_to_tetra,
     "mesh_loader": mesh_loader,
+    "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
     "box_roi": box_roi,

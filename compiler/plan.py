@@ -78,6 +78,8 @@ class MappingOp:
     apply: list[str]  # x and v of the child from the parent's
     jacobian: Callable[[Buffer, Buffer], str]  # (parent vector, child vector) -> child = J parent
     transpose: Callable[[Buffer, Buffer], str] | None  # parent += Jᵀ child; None: mapForces="0"
+    # Non-linear mappings: (parent dx, parent df) -> parent df += kfact dJᵀ/dx(child force) dx.
+    geometric: Callable[[Buffer, Buffer], str] | None = None
 
 
 @dataclass
@@ -367,7 +369,7 @@ class _Planner:
             return
         positions = self.checked.positions(component)
         if positions is None:
-            positions = np.zeros((0, datatype.coord_size))
+            positions = np.zeros((self._mapped_size(component), datatype.coord_size))
         n = len(positions)
         velocity = self.value(component, "velocity")
         v = np.zeros((n, datatype.deriv_size))
@@ -401,6 +403,16 @@ class _Planner:
                 component, "acceleration", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"
             )
         self.states[id(component)] = state
+
+    def _mapped_size(self, state: Component) -> int:
+        """The size a mapping gives its output state at init when the state has no positions of its
+        own (the distance mappings: one DOF per edge of their topology); else 0."""
+        mapping = self.checked.mapping_of(state)
+        if mapping is None or mapping.spec is None or mapping.spec.kernel != "distance_mapping":
+            return 0
+        topology = _topology_of(self, mapping)
+        edges = self.value(topology, "edges") if topology is not None else None
+        return int(np.size(edges) // 2) if edges is not None else 0
 
     def state_of(self, checked: CheckedComponent) -> StatePlan | None:
         return self.states.get(id(checked.state)) if checked.state is not None else None
@@ -967,6 +979,116 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                 f"sofac::{prefix}_element_matrix",
             ),
         )
+
+
+def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """DistanceMapping / SquareDistanceMapping (Vec3d -> Vec1d, one DOF per edge), with their
+    geometric stiffness in the matrix-free products (SOFA's matrixFreeApplyDJT)."""
+    import math
+
+    ends = _mapping_ends(planner, checked, owner)
+    if ends is None:
+        return
+    parent, child, group = ends
+    component = checked.component
+    if parent.datatype.name != "Vec3d" or child.datatype.name != "Vec1d":
+        planner.unsupported(checked, f"{component.type_name} is compiled for Vec3d -> Vec1d only")
+        return
+    topology = _topology_of(planner, checked)
+    edges_value = planner.value(topology, "edges") if topology is not None else None
+    if edges_value is None or not np.size(edges_value):
+        planner.unsupported(checked, "it needs a topology with edges known at compile time")
+        return
+    edges = np.asarray(edges_value, dtype=np.int64).reshape(-1, 2)
+    count = len(edges)
+    if child.size != count:
+        planner.unsupported(checked, f"its output state has {child.size} DOFs for {count} edges")
+        return
+    if not planner.value(component, "applyRestPosition"):
+        planner.unsupported(
+            checked, "applyRestPosition=false (rest positions left unmapped) is not compiled yet"
+        )
+        return
+    kind = 1 if checked.spec is not None and checked.spec.role == "square" else 0
+    lengths = np.zeros(count)
+    if kind == 0:
+        given = planner.value(component, "restLengths")
+        if given is not None and np.size(given) == count:
+            lengths = np.asarray(given, dtype=float).ravel()
+        elif not planner.value(component, "computeDistance"):
+            points = parent.x.initial.reshape(-1, 3).tolist()
+            for i, (a, b) in enumerate(edges.tolist()):
+                d = [points[a][k] - points[b][k] for k in range(3)]
+                lengths[i] = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    mode = {"None": 0, "Exact": 1, "Stabilized": 2}[str(planner.value(component, "geometricStiffness"))]
+    edge_buffer = planner.buffer(component, "edges", edges.ravel(), "i64", columns=2)
+    rest = planner.buffer(component, "restLengths", lengths)
+    direction = planner.buffer(component, "directions", np.zeros(3 * count), columns=3, role="scratch")
+    inverse = planner.buffer(component, "invlengths", np.zeros(count), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin + " [rest positions]",
+            [
+                _call(
+                    "distance_mapping_apply",
+                    parent.rest,
+                    child.rest,
+                    edge_buffer,
+                    count,
+                    rest,
+                    kind,
+                    direction,
+                    inverse,
+                )
+            ],
+        )
+    )
+    maps_forces = planner.value(component, "mapForces") is not False
+    geometric = None
+    if mode and maps_forces:
+
+        def geometric(dx: Buffer, df: Buffer) -> str:
+            return _call(
+                "distance_mapping_djt",
+                df,
+                dx,
+                child.f,
+                edge_buffer,
+                count,
+                direction,
+                inverse,
+                kind,
+                mode,
+                "kfact",
+            )
+
+    group.mappings.append(
+        MappingOp(
+            origin,
+            parent,
+            child,
+            [
+                _call(
+                    "distance_mapping_apply",
+                    parent.x,
+                    child.x,
+                    edge_buffer,
+                    count,
+                    rest,
+                    kind,
+                    direction,
+                    inverse,
+                ),
+                _call("distance_mapping_j", parent.v, child.v, edge_buffer, count, direction),
+            ],
+            lambda up, down: _call("distance_mapping_j", up, down, edge_buffer, count, direction),
+            (lambda up, down: _call("distance_mapping_jt", up, down, edge_buffer, count, direction))
+            if maps_forces
+            else None,
+            geometric,
+        )
+    )
 
 
 def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -2071,6 +2193,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
+    "distance_mapping": _lower_distance_mapping,
     "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,

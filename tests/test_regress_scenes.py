@@ -10,7 +10,8 @@ from sofac.regress import Status, run_regression
 
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
-    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",  # with TriangularFEMForceFieldOptim
+    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
+    "Component/Mapping/NonLinear/DistanceMapping.scn",  # with TriangularFEMForceFieldOptim
 ]
 
 
