@@ -667,6 +667,8 @@ class _Checker:
             )
             if topology is not None:
                 value = self.value(self.checked.of(topology), "position")
+                if value is None or np.size(value) == 0:
+                    value = self._mapped_topology_points(topology)
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
             if not count:
@@ -679,6 +681,18 @@ class _Checker:
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
+
+    def _mapped_topology_points(self, topology: Component) -> Any:
+        """The points a topological mapping writes into a container (Mesh2PointTopologicalMapping)."""
+        for other in self.checked:
+            maps_here = (
+                other.category is Category.TOPOLOGICAL_MAPPING and other.links.get("output") is topology
+            )
+            if maps_here and other.spec is not None and other.spec.compute:
+                outputs = self._outputs(other)
+                if outputs and "position" in outputs:
+                    return outputs["position"]
+        return None
 
     def state_size(self, state: Component) -> int | None:
         points = self.positions(state)

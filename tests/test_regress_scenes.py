@@ -11,7 +11,8 @@ from sofac.regress import Status, run_regression
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
     "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
-    "Component/Mapping/NonLinear/DistanceMapping.scn",  # with TriangularFEMForceFieldOptim
+    "Component/Mapping/NonLinear/DistanceMapping.scn",
+    "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",  # with TriangularFEMForceFieldOptim
 ]
 
 
