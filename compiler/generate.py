@@ -126,6 +126,7 @@ class _GroupView:
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
         self.factor_once = group.factor_once
         self.cg = group.cg
+        self.minres = group.minres
 
 
 def render(plan: Plan) -> str:

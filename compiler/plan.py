@@ -150,6 +150,7 @@ class Group:
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
+    minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
@@ -452,6 +453,8 @@ class _Planner:
                 "rk4": ("x0", "v0", "dx", "dv"),
                 "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
             }[group.scheme]
+            if group.minres:
+                names = ("r", "r1", "r2", "y", "w", "w2", "v")
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -537,6 +540,17 @@ class _Planner:
             return False  # E221, reported by the checker
         if checked_linear.spec.kernel == "pcg":
             return self._plan_pcg(checked_linear, group)
+        if checked_linear.spec.kernel == "minres":
+            group.linear_solver = linear
+            group.minres = {
+                "iterations": self.buffer(
+                    linear, "iterations", [int(self.value(linear, "iterations") or 25)], "i64"
+                ),
+                "tolerance": self.buffer(
+                    linear, "tolerance", [float(self.value(linear, "tolerance"))], role="param"
+                ),
+            }
+            return True
         if checked_linear.spec.kernel not in ("cg", "direct", "precomputed"):
             self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
             return False

@@ -12,7 +12,8 @@ SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
     "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
     "Component/Mapping/NonLinear/DistanceMapping.scn",
-    "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",  # with TriangularFEMForceFieldOptim
+    "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",
+    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",  # with TriangularFEMForceFieldOptim
 ]
 
 

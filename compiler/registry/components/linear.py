@@ -89,6 +89,7 @@ PCG_LINEAR_SOLVER = ComponentSpec(
 
 MIN_RES_LINEAR_SOLVER = ComponentSpec(
     name="MinResLinearSolver",
+    kernel="minres",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="MINRES iterations (symmetric, possibly indefinite systems).",
