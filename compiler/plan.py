@@ -1105,6 +1105,153 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
     )
 
 
+def _lower_quad_bending_springs(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """QuadBendingSprings: a spring between the opposite corners of two quads sharing an edge
+    (SOFA's registerEdge / addSpring order, each pair once), rest length from the positions."""
+    import math
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    quads = (_topology_cells(planner, checked) or {}).get("quads")
+    rest = planner.checked.positions(state.component)
+    if quads is None or not quads.size or rest is None:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    stiffness = np.atleast_1d(np.asarray(planner.value(component, "stiffness"), dtype=float))
+    damping = np.atleast_1d(np.asarray(planner.value(component, "damping"), dtype=float))
+    ks, kd = float(stiffness[0]), float(damping[0])
+    low, high = (
+        int(v) for v in np.asarray(planner.value(component, "localRange"), dtype=np.int64).ravel()[:2]
+    )
+    points = [tuple(float(v) for v in row[:3]) for row in np.asarray(rest, dtype=float)]
+    rows = [tuple(float(v) for v in row) for row in _springs_from_fields(planner, checked)]
+    edges: dict[tuple[int, int], tuple[int, int]] = {}
+    springs: set[tuple[int, int]] = set()
+
+    def add(a: int, b: int) -> None:
+        if low >= 0 and a < low and b < low:
+            return
+        if high >= 0 and a > high and b > high:
+            return
+        key = (min(a, b), max(a, b))
+        if key in springs:
+            return
+        springs.add(key)
+        d = [points[a][k] - points[b][k] for k in range(3)]
+        rows.append((a, b, ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+
+    def register(ab: tuple[int, int], cd: tuple[int, int]) -> None:
+        if ab[0] > ab[1]:
+            ab, cd = (ab[1], ab[0]), (cd[1], cd[0])
+        if ab not in edges:
+            edges[ab] = cd
+        else:
+            ef = edges[ab]
+            add(cd[0], ef[0])
+            add(cd[1], ef[1])
+
+    for q in np.asarray(quads, dtype=np.int64).reshape(-1, 4).tolist():
+        register((q[0], q[1]), (q[3], q[2]))
+        register((q[1], q[2]), (q[0], q[3]))
+        register((q[2], q[3]), (q[1], q[0]))
+        register((q[3], q[0]), (q[2], q[1]))
+    _add_springs(planner, checked, np.array(rows, dtype=float).reshape(-1, 5), state, state, group)
+
+
+def _lower_interaction_ellipsoid(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """InteractionEllipsoidForceField: ellipsoids carried by a rigid DOF of object2 push the points of
+    object1 (object2 is read, not pushed: object2_forces must be false)."""
+    component = checked.component
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        ends.append(planner.states.get(id(target)) if isinstance(target, Component) else None)
+    points, frame = ends
+    if points is None or frame is None:
+        planner.unsupported(checked, "object1 and object2 must be MechanicalObjects")
+        return
+    group = owner.get(id(points.component))
+    if group is None:
+        planner.ignored.append((component, "object1 has no ODE solver"))
+        return
+    if points.datatype.name != "Vec3d" or frame.datatype.name != "Rigid3d":
+        planner.unsupported(checked, "it is compiled for Vec3d points and a Rigid3d frame only")
+        return
+    if planner.value(component, "object2_forces") is not False or planner.value(component, "object2_invert"):
+        planner.unsupported(checked, "object2_forces=true or object2_invert=true is not compiled yet")
+        return
+    index = int(planner.value(component, "object2_dof_index") or 0)
+    if not 0 <= index < frame.size:
+        planner.unsupported(checked, f"object2_dof_index {index} is not a DOF of object2")
+        return
+    center_value, radius_value = planner.value(component, "center"), planner.value(component, "vradius")
+    centers = np.asarray(center_value if center_value is not None else [], dtype=float).reshape(-1, 3)
+    radii = np.asarray(radius_value if radius_value is not None else [], dtype=float).reshape(-1, 3)
+    count = max(len(centers), len(radii))
+    table = []
+    for e in range(count):
+        r = radii[min(e, len(radii) - 1)] if len(radii) else np.ones(3)
+        c = centers[min(e, len(centers) - 1)] if len(centers) else np.zeros(3)
+        table.extend([*c.tolist(), *(1 / (float(v) * float(v)) for v in r)])
+    ellipsoids = planner.buffer(component, "ellipsoids", np.asarray(table, dtype=float), columns=6)
+    contacts = planner.buffer(component, "contacts", np.zeros(10 * points.size), columns=10, role="scratch")
+    quaternion = planner.buffer(component, "frame", np.array([0.0, 0.0, 0.0, 1.0]), role="scratch")
+    stiffness, damping = (
+        float(planner.value(component, "stiffness")),
+        float(planner.value(component, "damping")),
+    )
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "ellipsoid_add_force",
+                    points.x,
+                    points.v,
+                    points.f,
+                    points.size,
+                    frame.x,
+                    index,
+                    ellipsoids,
+                    count,
+                    repr(stiffness),
+                    repr(damping),
+                    contacts,
+                    quaternion,
+                )
+            ],
+        )
+    )
+    if group.scheme == "implicit":
+        if group.assembled:
+            planner.unsupported(checked, "a direct solver with an ellipsoid force field is not compiled yet")
+            return
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "ellipsoid_add_dforce",
+                        points.dx,
+                        points.df,
+                        points.size,
+                        contacts,
+                        quaternion,
+                        "kfact",
+                    )
+                ],
+            )
+        )
+
+
 def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """TriangularFEMForceFieldOptim: corotational membrane triangles ("large" only, as SOFA)."""
     found = _target(planner, checked, owner)
@@ -2207,6 +2354,8 @@ LOWERINGS: dict[str, Lowering] = {
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
+    "quad_bending_springs": _lower_quad_bending_springs,
+    "interaction_ellipsoid": _lower_interaction_ellipsoid,
     "distance_mapping": _lower_distance_mapping,
     "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,

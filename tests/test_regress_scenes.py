@@ -13,7 +13,8 @@ SCENES = [
     "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
     "Component/Mapping/NonLinear/DistanceMapping.scn",
     "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",
-    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",  # with TriangularFEMForceFieldOptim
+    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",
+    "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings  # with TriangularFEMForceFieldOptim
 ]
 
 
