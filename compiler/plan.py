@@ -409,7 +409,9 @@ class _Planner:
         """The size a mapping gives its output state at init when the state has no positions of its
         own (the distance mappings: one DOF per edge of their topology); else 0."""
         mapping = self.checked.mapping_of(state)
-        if mapping is None or mapping.spec is None or mapping.spec.kernel != "distance_mapping":
+        if mapping is None or mapping.spec is None:
+            return 0
+        if mapping.spec.kernel not in ("distance_mapping", "distance_multi_mapping"):
             return 0
         topology = _topology_of(self, mapping)
         edges = self.value(topology, "edges") if topology is not None else None
@@ -583,6 +585,9 @@ class _Planner:
                 mapping = self.checked.mapping_of(checked.component)
                 assert mapping is not None
                 source = mapping.links.get("input")
+                if not isinstance(source, Component):  # a multi-mapping: its group is its first input's
+                    inputs = _mapping_inputs(self, mapping)
+                    source = inputs[0] if inputs else None
                 group = owner.get(id(source)) if isinstance(source, Component) else None
                 if (
                     group is None
@@ -1250,6 +1255,188 @@ def _lower_interaction_ellipsoid(
                 ],
             )
         )
+
+
+def _mapping_inputs(planner: _Planner, checked: CheckedComponent) -> list[Component]:
+    """The parent states of a mapping: its ``input`` link, or each link of a multi-mapping's list (a
+    node stands for its MechanicalObject)."""
+    from . import links
+
+    single = checked.links.get("input")
+    if isinstance(single, Component):
+        return [single]
+    text = checked.component.get("input")
+    found: list[Component] = []
+    for word in str(text or "").split():
+        path = links.parse_link(word)
+        target = links.resolve(path, checked.component) if path is not None else None
+        if isinstance(target, Node):
+            target = planner.checked.resolver._node_state(target)
+        if isinstance(target, Component):
+            found.append(target)
+    return found
+
+
+def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """UniformVelocityDampingForceField: f -= c v; with implicit="true", B = -c I in the solves."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    coefficient = planner.buffer(
+        component, "dampingCoefficient", [float(planner.value(component, "dampingCoefficient"))], role="param"
+    )
+    scalars = state.size * state.datatype.deriv_size
+    origin = origin_of(component)
+    group.forces.append(
+        Op(origin, [_call("velocity_damping_force", state.f, state.v, scalars, f"S.{coefficient.ident}[0]")])
+    )
+    if planner.value(component, "implicit") and group.scheme == "implicit":
+        if group.assembled:
+            planner.unsupported(checked, "implicit damping with a direct solver is not compiled yet")
+            return
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "velocity_damping_dforce",
+                        state.df,
+                        state.dx,
+                        scalars,
+                        f"S.{coefficient.ident}[0]",
+                        "bfact",
+                    )
+                ],
+            )
+        )
+
+
+def _lower_distance_multi_mapping(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """DistanceMultiMapping (Vec3d -> Vec1d): distances between points of two parent states, each
+    edge from a point of the first input to one of the second (geometricStiffness None)."""
+    import math
+
+    component = checked.component
+    inputs = [planner.states.get(id(c)) for c in _mapping_inputs(planner, checked)]
+    target = checked.links.get("output")
+    child = planner.states.get(id(target)) if isinstance(target, Component) else None
+    if len(inputs) != 2 or any(p is None for p in inputs) or child is None:
+        planner.unsupported(checked, "it is compiled for two parent MechanicalObjects only")
+        return
+    first, second = inputs
+    assert first is not None and second is not None
+    group = owner.get(id(child.component))
+    if (
+        group is None
+        or owner.get(id(first.component)) is not group
+        or owner.get(id(second.component)) is not group
+    ):
+        planner.unsupported(checked, "its parents and output must share one ODE solver")
+        return
+    if any(s.datatype.name != "Vec3d" for s in (first, second)) or child.datatype.name != "Vec1d":
+        planner.unsupported(checked, f"{component.type_name} is compiled for Vec3d -> Vec1d only")
+        return
+    if str(planner.value(component, "geometricStiffness")) != "None":
+        planner.unsupported(checked, "its geometric stiffness is not compiled yet (geometricStiffness=0 is)")
+        return
+    if not planner.value(component, "applyRestPosition"):
+        planner.unsupported(
+            checked, "applyRestPosition=false (rest positions left unmapped) is not compiled yet"
+        )
+        return
+    topology = _topology_of(planner, checked)
+    edges_value = planner.value(topology, "edges") if topology is not None else None
+    pairs_value = planner.value(component, "indexPairs")
+    if edges_value is None or not np.size(edges_value) or pairs_value is None:
+        planner.unsupported(checked, "it needs edges and indexPairs known at compile time")
+        return
+    edges = np.asarray(edges_value, dtype=np.int64).reshape(-1, 2)
+    pairs = np.asarray(pairs_value, dtype=np.int64).reshape(-1, 2)
+    if (
+        edges.max() >= len(pairs)
+        or not (pairs[edges[:, 0], 0] == 0).all()
+        or not (pairs[edges[:, 1], 0] == 1).all()
+    ):
+        planner.unsupported(
+            checked, "only edges from a point of the first input to one of the second are compiled"
+        )
+        return
+    count = len(edges)
+    ends_a, ends_b = pairs[edges[:, 0], 1], pairs[edges[:, 1], 1]
+    if ends_a.max() >= first.size or ends_b.max() >= second.size or child.size != count:
+        planner.unsupported(checked, "its indexPairs or output size do not match the states")
+        return
+    lengths = np.zeros(count)
+    given = planner.value(component, "restLengths")
+    if given is not None and np.size(given) == count:
+        lengths = np.asarray(given, dtype=float).ravel()
+    elif not planner.value(component, "computeDistance"):
+        p0, p1 = first.x.initial.reshape(-1, 3).tolist(), second.x.initial.reshape(-1, 3).tolist()
+        for i in range(count):
+            d = [p0[ends_a[i]][k] - p1[ends_b[i]][k] for k in range(3)]
+            lengths[i] = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    a = planner.buffer(component, "endsInFirst", ends_a, "i64")
+    b = planner.buffer(component, "endsInSecond", ends_b, "i64")
+    rest = planner.buffer(component, "restLengths", lengths)
+    direction = planner.buffer(component, "directions", np.zeros(3 * count), columns=3, role="scratch")
+    inverse = planner.buffer(component, "invlengths", np.zeros(count), role="scratch")
+    origin = origin_of(component)
+    table = (a, b, count)
+    group.init.append(
+        Op(
+            origin + " [rest positions]",
+            [
+                _call(
+                    "distance_multi_apply",
+                    first.rest,
+                    second.rest,
+                    child.rest,
+                    *table[:2],
+                    count,
+                    rest,
+                    direction,
+                    inverse,
+                )
+            ],
+        )
+    )
+
+    def jt(up: Buffer, down: Buffer) -> str:
+        other = second.f if up is first.f else second.df
+        return _call("distance_multi_jt", up, other, down, *table, direction)
+
+    def j(up: Buffer, down: Buffer) -> str:
+        other = second.v if up is first.v else second.dx
+        return _call("distance_multi_j", up, other, down, *table, direction)
+
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
+            origin,
+            first,
+            child,
+            [
+                _call(
+                    "distance_multi_apply",
+                    first.x,
+                    second.x,
+                    child.x,
+                    *table[:2],
+                    count,
+                    rest,
+                    direction,
+                    inverse,
+                ),
+                j(first.v, child.v),
+            ],
+            j,
+            jt if maps_forces else None,
+        )
+    )
 
 
 def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -2357,6 +2544,8 @@ LOWERINGS: dict[str, Lowering] = {
     "quad_bending_springs": _lower_quad_bending_springs,
     "interaction_ellipsoid": _lower_interaction_ellipsoid,
     "distance_mapping": _lower_distance_mapping,
+    "distance_multi_mapping": _lower_distance_multi_mapping,
+    "velocity_damping": _lower_velocity_damping,
     "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,

@@ -15,7 +15,7 @@ from sofac.loader import compile_scene
 from sofac.resources import resource_dir
 
 SHIM = r"""
-#include "sofac/ellipsoid.h"
+#include "sofac/loads.h"
 using sofac::Index;
 #define API extern "C" __attribute__((visibility("default")))
 API void force(const double* x1, const double* v1, double* f1, Index n, const double* x2, const double* ell,

@@ -10,11 +10,12 @@ from sofac.regress import Status, run_regression
 
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
-    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
+    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",  # with TriangularFEMForceFieldOptim
     "Component/Mapping/NonLinear/DistanceMapping.scn",
     "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",
     "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",
-    "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings  # with TriangularFEMForceFieldOptim
+    "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
+    "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
 ]
 
 

@@ -427,12 +427,13 @@ TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
 
 UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
     name="UniformVelocityDampingForceField",
+    kernel="velocity_damping",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Viscous damping force -c v on every DOF.",
     templates=("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d", "Rigid2d"),
     default_template="Vec3d",
-    unsupported_reason="UniformVelocityDampingForceField is not implemented yet",
+    supported=True,
     effects=frozenset({Effect.DAMPING}),
     fields=(
         FieldSpec(

@@ -1,4 +1,8 @@
-// InteractionEllipsoidForceField (Vec3d points, Rigid3d frame), in SOFA's order of operations: the
+// Mechanical loads (Sofa.Component.MechanicalLoad) in SOFA's order of operations.
+//
+// UniformVelocityDampingForceField: f -= v c; implicit: df -= dx (bfact c) (B = -c I).
+//
+// InteractionEllipsoidForceField (Vec3d points, Rigid3d frame): the
 // points are brought into the frame of rigid DOF `frame` of object2 (q^-1 (p - c)), the nearest of
 // the ellipsoids (smallest sum dp_j^2 / r_j^2) pushes a point that is inside it (for stiffness > 0)
 // along the gradient g_j = dp_j / r_j^2 with intensity -|k| (|dp|_r - 1) / |g|, damped by
@@ -98,6 +102,16 @@ inline void ellipsoid_add_dforce(const double* dx1, double* df1, Index n, const 
         quat_rotate(frame_q, false, force, world);
         for (int d = 0; d < 3; ++d) df1[3 * i + d] += world[d];
     }
+}
+
+inline void velocity_damping_force(double* f, const double* v, Index n_scalars, double c) {
+    for (Index i = 0; i < n_scalars; ++i) f[i] -= v[i] * c;
+}
+
+inline void velocity_damping_dforce(double* df, const double* dx, Index n_scalars, double c, double bfact) {
+    if (bfact == 0.0) return;
+    const double b = bfact * c;
+    for (Index i = 0; i < n_scalars; ++i) df[i] -= dx[i] * b;
 }
 
 }  // namespace sofac
