@@ -510,7 +510,9 @@ class _Planner:
         preconditioner = linear.links.get("preconditioner")
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
-            block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1}.get(spec.kernel if spec else "")
+            block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
+            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner)):
+                return False
             if block is None:
                 self.unsupported(
                     self.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
@@ -521,6 +523,33 @@ class _Planner:
                     preconditioner, "omega", [float(self.value(preconditioner, "omega"))], role="param"
                 )
             group.preconditioner, group.assembled = block, True
+        return True
+
+    def _warp_is_identity(self, warp: CheckedComponent) -> bool:
+        """WarpPreconditioner as sofac compiles it: its RotationMatrixSystem reassembles the main
+        system every step (assemblingRate 1), which resets the rotations to identity, and its solver
+        is a sparse direct one: the preconditioner is then that solver on this step's matrix."""
+        system = warp.links.get("linearSystem")
+        inner = warp.links.get("linearSolver")
+        if not isinstance(inner, Component):
+            solvers = [
+                c
+                for c in warp.component.node.objects
+                if self.checked.of(c).category is Category.LINEAR_SOLVER
+            ]
+            inner = next(
+                (c for c in solvers if getattr(self.checked.of(c).spec, "kernel", "") == "direct"), None
+            )
+        if isinstance(system, Component) and int(self.value(system, "assemblingRate") or 1) != 1:
+            self.unsupported(
+                warp,
+                "a RotationMatrixSystem with assemblingRate > 1 (rotated factorisations) is not compiled yet",
+            )
+            return False
+        spec = self.checked.of(inner).spec if isinstance(inner, Component) else None
+        if spec is None or spec.kernel != "direct":
+            self.unsupported(warp, "its linearSolver must be a sparse direct solver")
+            return False
         return True
 
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
