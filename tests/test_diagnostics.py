@@ -440,7 +440,7 @@ CASES = [
     Case(
         "unsupported",
         "E222",
-        dyn('    <UniformVelocityDampingForceField dampingCoefficient="0.1"/>\n'),
+        dyn('    <QuadBendingFEMForceField/>\n'),
         6,
         hint="--allow-unsupported",
     ),

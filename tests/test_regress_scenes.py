@@ -15,8 +15,8 @@ SCENES = [
     "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",
     "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",
     "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
-    "Component/Mapping/NonLinear/DistanceMultiMapping.scn",
-    "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",  # with TransformEngine, UniformVelocityDamping
+    "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
+    "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",
 ]
 
 
