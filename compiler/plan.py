@@ -1139,6 +1139,85 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
     )
 
 
+def _lower_triangular_bending_springs(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """TriangularBendingSprings: per edge shared by two triangles, a spring between the two vertices
+    opposite it (m1 in the later triangle, m2 in the first one, as SOFA's applyTriangleCreation),
+    in the topology's edge order; rest length from the rest positions."""
+    import math
+
+    from . import masses
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    cells = _topology_cells(planner, checked) or {}
+    triangles = cells.get("triangles")
+    rest = planner.checked.positions(state.component)
+    if triangles is None or not triangles.size or rest is None:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, triangles=triangles)
+    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3).tolist()
+    around: dict[tuple[int, int], list[int]] = {}
+    for index, tri in enumerate(tris):
+        for j in range(3):
+            u, v = tri[(j + 1) % 3], tri[(j + 2) % 3]
+            around.setdefault((min(u, v), max(u, v)), []).append(index)
+    ks, kd = float(planner.value(component, "stiffness")), float(planner.value(component, "damping"))
+    points = [tuple(float(v) for v in row[:3]) for row in np.asarray(rest, dtype=float)]
+    pairs: list[tuple[int, int]] = []
+    params: list[tuple[float, float, float]] = []
+    for e1, e2 in np.asarray(edges, dtype=np.int64).reshape(-1, 2).tolist():
+        shell = around.get((min(e1, e2), max(e1, e2)), [])
+        if len(shell) != 2:
+            continue
+        first, later = sorted(shell)
+        m2 = next(v for v in tris[first] if v not in (e1, e2))
+        m1 = next(v for v in tris[later] if v not in (e1, e2))
+        d = [points[m1][k] - points[m2][k] for k in range(3)]
+        pairs.append((m1, m2))
+        params.append((ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+    count = len(pairs)
+    springs = planner.buffer(
+        component, "springs", np.asarray(pairs, dtype=np.int64).reshape(-1), "i64", columns=2
+    )
+    values = planner.buffer(component, "springParams", np.asarray(params, dtype=float).reshape(-1), columns=3)
+    dfdx = planner.buffer(component, "dfdx", np.zeros(9 * count), columns=9, role="scratch")
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [_call("triangular_bending_add_force", springs, values, count, state.x, state.v, state.f, dfdx)],
+        )
+    )
+    group.energy.append(
+        Op(origin, ["potential += " + _call("triangular_bending_energy", springs, values, count, state.x)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call("triangular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, "kfact")],
+            )
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call("assemble_triangular_bending", "A", offset, springs, count, dfdx, "kfact"),
+        )
+
+
 def _lower_quad_bending_springs(
     planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
 ) -> None:
@@ -2571,6 +2650,7 @@ LOWERINGS: dict[str, Lowering] = {
     "hexa_fem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
     "quad_bending_springs": _lower_quad_bending_springs,
+    "triangular_bending_springs": _lower_triangular_bending_springs,
     "interaction_ellipsoid": _lower_interaction_ellipsoid,
     "distance_mapping": _lower_distance_mapping,
     "distance_multi_mapping": _lower_distance_multi_mapping,

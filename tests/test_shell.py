@@ -6,11 +6,13 @@ from __future__ import annotations
 import ctypes
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 from sofac.bending import bending_springs
 from sofac.build import eigen_include
+from sofac.loader import compile_scene
 from sofac.resources import resource_dir
 
 SHIM = r"""
@@ -49,6 +51,13 @@ API void bend_matrix(const Index* v, const double* a, const double* l, Index n, 
                      Index size) {
     Dense A{out, size};
     sofac::assemble_bending_springs(A, 0, v, a, l, n, k);
+}
+API void tb_force(const Index* s, const double* p, Index n, const double* x, const double* v, double* f,
+                  double* m) {
+    sofac::triangular_bending_add_force(s, p, n, x, v, f, m);
+}
+API void tb_dforce(const Index* s, Index n, const double* m, const double* dx, double* df, double k) {
+    sofac::triangular_bending_add_dforce(s, n, m, dx, df, k);
 }
 API void tri_matrix(const double* d, Index i, const double* e, Index ne, const double* nu, Index nn,
                     double* out) {
@@ -89,6 +98,8 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.tri_force.argtypes = [I64, count, D, D, D, D, count, D, count]
     library.tri_dforce.argtypes = [I64, count, D, D, real, D, D, count, D, count]
     library.tri_matrix.argtypes = [D, count, D, count, D, count, D]
+    library.tb_force.argtypes = [I64, D, count, D, D, D, D]
+    library.tb_dforce.argtypes = [I64, count, D, D, D, real]
     library.bend_force.argtypes = [I64, D, D, count, D, D]
     library.bend_energy.argtypes = [I64, D, D, count, D]
     library.bend_energy.restype = real
@@ -252,3 +263,59 @@ def test_bending_force_energy_and_derivative(lib: ctypes.CDLL) -> None:
     matrix = np.zeros((12, 12))
     lib.bend_matrix(*args, 2.0, _d(matrix), 12)
     assert np.abs(matrix @ dx - 2.0 * df).max() < 1e-10 * np.abs(df).max()
+
+
+# ---- TriangularBendingSprings ----------------------------------------------------------------------
+
+
+def test_triangular_bending_spring_force_and_derivative(lib: ctypes.CDLL) -> None:
+    """One spring between points 0 and 1 (ks 40, kd 3, rest 2): F = ks (d - L) + kd u.(v1 - v0) along
+    u, on 0 (+) and 1 (-); its stored df/dx equals finite differences of the force (kd = 0)."""
+    springs = np.array([0, 1], dtype=np.int64)
+    x = np.array([0.0, 0.0, 0.0, 1.5, 2.0, 0.0])  # d = 2.5
+    v = np.array([0.0, 0.0, 0.0, 0.3, -0.1, 0.2])
+    f, m = np.zeros(6), np.zeros(9)
+    lib.tb_force(_i(springs), _d(np.array([40.0, 3.0, 2.0])), 1, _d(x), _d(v), _d(f), _d(m))
+    u = np.array([1.5, 2.0, 0.0]) / 2.5
+    intensity = 40.0 * 0.5 + 3.0 * (u @ v[3:])
+    assert np.abs(f - np.concatenate([u * intensity, -u * intensity])).max() < 1e-13
+    params = np.array([40.0, 0.0, 2.0])
+    lib.tb_force(_i(springs), _d(params), 1, _d(x), _d(np.zeros(6)), _d(np.zeros(6)), _d(m))
+    h = 1e-6
+    fd = np.zeros((6, 6))
+    for j in range(6):
+        plus, minus = np.zeros(6), np.zeros(6)
+        lib.tb_force(
+            _i(springs), _d(params), 1, _d(x + h * np.eye(6)[j]), _d(np.zeros(6)), _d(plus), _d(np.zeros(9))
+        )
+        lib.tb_force(
+            _i(springs), _d(params), 1, _d(x - h * np.eye(6)[j]), _d(np.zeros(6)), _d(minus), _d(np.zeros(9))
+        )
+        fd[:, j] = (plus - minus) / (2 * h)
+    analytic = np.zeros((6, 6))
+    for j in range(6):
+        df = np.zeros(6)
+        lib.tb_dforce(_i(springs), 1, _d(m), _d(np.eye(6)[j].copy()), _d(df), 1.0)
+        analytic[:, j] = df
+    assert np.abs(analytic - fd).max() < 1e-6 * np.abs(fd).max()
+
+
+def test_triangular_bending_springs_join_opposite_vertices(tmp_path: Path) -> None:
+    """Two triangles (0 1 2) and (1 3 2) share the edge 1-2: one spring, between 3 (the later
+    triangle's opposite vertex) and 0, of the rest length |x3 - x0|."""
+    scene = tmp_path / "bend.scn"
+    scene.write_text(
+        """<Node name="root" dt="0.01" gravity="0 0 -1">
+  <DefaultAnimationLoop/>
+  <EulerImplicitSolver/>
+  <CGLinearSolver iterations="25" tolerance="1e-9" threshold="1e-9"/>
+  <TriangleSetTopologyContainer name="topo" position="0 0 0  1 0 0  0 1 0  1 1 0.5" triangles="0 1 2  1 3 2"/>
+  <MechanicalObject name="dofs"/>
+  <UniformMass totalMass="1"/>
+  <TriangularBendingSprings name="bend" stiffness="300" damping="2"/>
+</Node>
+"""
+    )
+    plan = compile_scene(scene).plan
+    assert plan.buffer("/bend.springs").initial.tolist() == [3, 0]
+    assert plan.buffer("/bend.springParams").initial.tolist() == [300.0, 2.0, 1.5]

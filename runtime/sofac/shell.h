@@ -8,6 +8,8 @@
 // SOFA's getPotentialEnergy returns 0 for it (not implemented), as here.
 #pragma once
 
+#include <cmath>
+
 #include "fem.h"
 #include "types.h"
 
@@ -230,6 +232,92 @@ inline void assemble_bending_springs(Assembler& A, Index offset, const Index* vi
             for (int k = 0; k < 4; ++k) {
                 const double value = -lambda[s] * a[j] * a[k] * kfact;
                 for (int d = 0; d < 3; ++d) A.add(offset + 3 * v[j] + d, offset + 3 * v[k] + d, value);
+            }
+    }
+}
+
+// TriangularBendingSprings: a spring (m1, m2) between the vertices opposite each edge shared by two
+// triangles, in the topology's edge order: u = x_m2 - x_m1, d = |u|; for d > 1e-4, F = ks (d - L) +
+// kd (u/d).(v_m2 - v_m1), f_m1 += F u/d, f_m2 -= it, and the force pass stores df/dx =
+// (ks - F/d) u u^T / d^2 + F/d I (zero for d <= 1e-4). springs: (m1, m2) per spring; params: ks, kd,
+// L per spring; dfdx: 9 per spring.
+inline void triangular_bending_add_force(const Index* springs, const double* params, Index n, const double* x,
+                                         const double* v, double* f, double* dfdx) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double ks = params[3 * s], kd = params[3 * s + 1], rest = params[3 * s + 2];
+        double* m = dfdx + 9 * s;
+        double u[3];
+        for (int k = 0; k < 3; ++k) u[k] = x[3 * b + k] - x[3 * a + k];
+        const double d = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        if (!(d > 1.0e-4)) {
+            for (int k = 0; k < 9; ++k) m[k] = 0.0;
+            continue;
+        }
+        const double inverse = 1.0 / d;
+        for (int k = 0; k < 3; ++k) u[k] *= inverse;
+        const double elongation = d - rest;
+        double rv[3];
+        for (int k = 0; k < 3; ++k) rv[k] = v[3 * b + k] - v[3 * a + k];
+        const double speed = u[0] * rv[0] + u[1] * rv[1] + u[2] * rv[2];
+        const double intensity = ks * elongation + kd * speed;
+        for (int k = 0; k < 3; ++k) {
+            const double force = u[k] * intensity;
+            f[3 * a + k] += force;
+            f[3 * b + k] -= force;
+        }
+        const double tgt = intensity * inverse;
+        for (int j = 0; j < 3; ++j) {
+            for (int k = 0; k < 3; ++k) m[3 * j + k] = (ks - tgt) * u[j] * u[k];
+            m[3 * j + j] += tgt;
+        }
+    }
+}
+
+inline void triangular_bending_add_dforce(const Index* springs, Index n, const double* dfdx, const double* dx,
+                                          double* df, double kfactor) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double* m = dfdx + 9 * s;
+        double d[3];
+        for (int k = 0; k < 3; ++k) d[k] = dx[3 * b + k] - dx[3 * a + k];
+        for (int j = 0; j < 3; ++j) {
+            const double value = m[3 * j] * d[0] + m[3 * j + 1] * d[1] + m[3 * j + 2] * d[2];
+            df[3 * a + j] += value * kfactor;
+            df[3 * b + j] -= value * kfactor;
+        }
+    }
+}
+
+// SOFA's potential energy: sum of ks (d - L)^2 / 2 over the springs longer than 1e-4.
+inline double triangular_bending_energy(const Index* springs, const double* params, Index n, const double* x) {
+    double energy = 0.0;
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        double u[3];
+        for (int k = 0; k < 3; ++k) u[k] = x[3 * b + k] - x[3 * a + k];
+        const double d = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        if (d > 1.0e-4) {
+            const double elongation = d - params[3 * s + 2];
+            energy += elongation * elongation * params[3 * s] / 2;
+        }
+    }
+    return energy;
+}
+
+// Sparse direct solvers: A += kfact K, K = [[m, -m], [-m, m]] on (m1, m2).
+template <class Assembler>
+inline void assemble_triangular_bending(Assembler& A, Index offset, const Index* springs, Index n, const double* dfdx,
+                                        double kfact) {
+    for (Index s = 0; s < n; ++s) {
+        const Index ends[2] = {springs[2 * s], springs[2 * s + 1]};
+        const double* m = dfdx + 9 * s;
+        for (int p = 0; p < 2; ++p)
+            for (int q = 0; q < 2; ++q) {
+                const double sign = p == q ? -1.0 : 1.0;
+                for (int j = 0; j < 3; ++j)
+                    for (int k = 0; k < 3; ++k)
+                        A.add(offset + 3 * ends[p] + j, offset + 3 * ends[q] + k, sign * m[3 * j + k] * kfact);
             }
     }
 }

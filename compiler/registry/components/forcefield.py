@@ -283,12 +283,13 @@ QUAD_BENDING_SPRINGS = ComponentSpec(
 
 TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     name="TriangularBendingSprings",
+    kernel="triangular_bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs between the opposite vertices of adjacent triangles, resisting bending.",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="TriangularBendingSprings is not implemented yet",
+    supported=True,
     effects=_SPRING_EFFECTS,
     fields=(
         FieldSpec("stiffness", Real(), 100000.0, "spring stiffness", valid=MUST_BE_NONNEGATIVE),
