@@ -50,11 +50,15 @@ Outputs = dict[str, np.ndarray]
 
 
 def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
+    scale = np.asarray(ctx.value("scale3d"), dtype=float)
+    legacy = ctx.value("scale") if ctx.is_set("scale") else None
+    if legacy is not None and np.size(legacy) == 1:  # MeshLoader::parse: scale3d *= scale
+        scale = scale * float(np.asarray(legacy, dtype=float).ravel()[0])
     return meshes.apply_transform(
         points,
         translation=np.asarray(ctx.value("translation"), dtype=float),
         rotation_deg=np.asarray(ctx.value("rotation"), dtype=float),
-        scale=np.asarray(ctx.value("scale3d"), dtype=float),
+        scale=scale,
     )
 
 

@@ -938,6 +938,7 @@ _FEM_KINDS = {
     "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
+    "trifem": ("trifem", "triangles", 3, {1: 35}),
 }
 
 
@@ -953,6 +954,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
         return
     method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), 1)
+    if prefix == "trifem" and (method != 1 or group.assembled):
+        planner.unsupported(checked, "TriangularFEMForceField is compiled for method large with CG only")
+        return
     if prefix != "tetra_fem" and method == 3:
         method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
     topology = _topology_cells(planner, checked) or {}
@@ -999,7 +1003,7 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
     if and_mass and not _lower_hexa_mass(planner, checked, state, group, elements, count, data, method):
         return
-    if prefix != "tetracorot_fem":  # SOFA's potential energy (0 for corotational tetrahedra, as SOFA)
+    if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
         group.energy.append(
             Op(origin, ["potential += " + _call(f"{prefix}_energy", elements, count, state.x, data, method)])
         )
@@ -2648,6 +2652,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetra_fem": _lower_fem,
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
+    "trifem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
     "quad_bending_springs": _lower_quad_bending_springs,
     "triangular_bending_springs": _lower_triangular_bending_springs,

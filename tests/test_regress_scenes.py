@@ -17,6 +17,7 @@ SCENES = [
     "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
     "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
     "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",
+    "Demos/TriangleSurfaceCutting.scn",  # TriangularFEMForceField + TriangularBendingSprings, loader scale
 ]
 
 

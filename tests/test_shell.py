@@ -59,6 +59,16 @@ API void tb_force(const Index* s, const double* p, Index n, const double* x, con
 API void tb_dforce(const Index* s, Index n, const double* m, const double* dx, double* df, double k) {
     sofac::triangular_bending_add_dforce(s, n, m, dx, df, k);
 }
+API void tf_init(const Index* t, Index n, const double* x0, const double* e, Index ne, const double* nu,
+                 Index nn, double* d) {
+    sofac::trifem_init(t, n, x0, e, ne, nu, nn, 1, d);
+}
+API void tf_force(const Index* t, Index n, const double* x, double* f, double* d) {
+    sofac::trifem_add_force(t, n, x, f, d, 1);
+}
+API void tf_dforce(const Index* t, Index n, const double* dx, double* df, double k, const double* d) {
+    sofac::trifem_add_dforce(t, n, dx, df, k, d, 1);
+}
 API void tri_matrix(const double* d, Index i, const double* e, Index ne, const double* nu, Index nn,
                     double* out) {
     sofac::trifem_optim_element_matrix(d, i, e, ne, nu, nn, out);
@@ -98,6 +108,9 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.tri_force.argtypes = [I64, count, D, D, D, D, count, D, count]
     library.tri_dforce.argtypes = [I64, count, D, D, real, D, D, count, D, count]
     library.tri_matrix.argtypes = [D, count, D, count, D, count, D]
+    library.tf_init.argtypes = [I64, count, D, D, count, D, count, D]
+    library.tf_force.argtypes = [I64, count, D, D, D]
+    library.tf_dforce.argtypes = [I64, count, D, D, real, D]
     library.tb_force.argtypes = [I64, D, count, D, D, D, D]
     library.tb_dforce.argtypes = [I64, count, D, D, D, real]
     library.bend_force.argtypes = [I64, D, D, count, D, D]
@@ -319,3 +332,52 @@ def test_triangular_bending_springs_join_opposite_vertices(tmp_path: Path) -> No
     plan = compile_scene(scene).plan
     assert plan.buffer("/bend.springs").initial.tolist() == [3, 0]
     assert plan.buffer("/bend.springParams").initial.tolist() == [300.0, 2.0, 1.5]
+
+
+# ---- TriangularFEMForceField (large) ---------------------------------------------------------------
+
+
+class LargeTriangles:
+    def __init__(self, lib: ctypes.CDLL, rest: np.ndarray, tris: np.ndarray, young: float, nu: float) -> None:
+        self.lib, self.tris, self.n = lib, np.ascontiguousarray(tris, dtype=np.int64), len(tris)
+        self.data = np.zeros(35 * self.n)
+        rest = np.ascontiguousarray(rest, dtype=float)
+        lib.tf_init(
+            _i(self.tris), self.n, _d(rest), _d(np.array([young])), 1, _d(np.array([nu])), 1, _d(self.data)
+        )
+
+    def force(self, x: np.ndarray) -> np.ndarray:
+        f = np.zeros(x.size)
+        self.lib.tf_force(
+            _i(self.tris), self.n, _d(np.ascontiguousarray(x, dtype=float)), _d(f), _d(self.data)
+        )
+        return f
+
+    def dforce(self, dx: np.ndarray) -> np.ndarray:
+        df = np.zeros(dx.size)
+        self.lib.tf_dforce(_i(self.tris), self.n, _d(np.ascontiguousarray(dx)), _d(df), 1.0, _d(self.data))
+        return df
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.7])
+def test_large_triangle_small_strain_is_the_plane_stress_triangle(lib: ctypes.CDLL, angle: float) -> None:
+    young, nu = 1200.0, 0.3
+    rest2d = np.array([[0.0, 0.0], [2.0, 0.0], [0.5, 1.5]])
+    disp2d = 1e-7 * np.array([[0.0, 0.0], [3.0, 0.0], [1.0, 2.0]])
+    frame = rotation([1.0, 2.0, 0.5], angle)
+    rest = np.column_stack([rest2d, np.zeros(3)]) @ frame.T + [1.0, -2.0, 0.5]
+    moved = np.column_stack([rest2d + disp2d, np.zeros(3)]) @ frame.T + [1.0, -2.0, 0.5]
+    tri = LargeTriangles(lib, rest, np.array([[0, 1, 2]]), young, nu)
+    got = tri.force(moved.ravel()).reshape(3, 3) @ frame
+    expected = plane_stress_forces(rest2d, disp2d, young, nu).reshape(3, 2)
+    assert np.abs(got[:, 2]).max() < 1e-12
+    assert np.abs(got[:, :2] - expected).max() < 1e-6 * np.abs(expected).max()
+    # At rest the stored derivative is the plane-stress stiffness: compare with finite differences.
+    tri.force(rest.ravel())
+    h = 1e-6
+    fd = np.column_stack(
+        [(tri.force(rest.ravel() + h * e) - tri.force(rest.ravel() - h * e)) / (2 * h) for e in np.eye(9)]
+    )
+    tri.force(rest.ravel())
+    analytic = np.column_stack([tri.dforce(e.copy()) for e in np.eye(9)])
+    assert np.abs(analytic - fd).max() < 1e-6 * np.abs(fd).max()

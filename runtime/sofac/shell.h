@@ -322,4 +322,137 @@ inline void assemble_triangular_bending(Assembler& A, Index offset, const Index*
     }
 }
 
+// TriangularFEMForceField, method "large" (SOFA's TriangleFEMUtils, non-anisotropic path): per
+// triangle the frame R (x along ab, z the normal) of the current positions, the displacement of b and
+// c in it against the rotated rest shape, J from the current local b and c, stress = K J^T D with
+// K = E/(1-nu^2) area [[1, nu, 0], [nu, 1, 0], [0, 0, (1-nu)/2]], F = J stress rotated back. The
+// force pass stores R^T and J for the derivative passes. Element data (35 doubles): R^T (9), rest
+// b_x, c_x, c_y (3), J (6x3), K00 K01 K10 K11 K22 (5).
+namespace shell_detail {
+constexpr int TRI_FEM_DATA = 35;
+
+// SOFA's computeRotationLarge: rows x = normalized(b - a), z = normalized(x cross (c - a)), y = z cross x.
+inline void triangle_rotation(const V3& pa, const V3& pb, const V3& pc, double r[9]) {
+    V3 ex = sub(pb, pa);
+    normalize(ex);
+    V3 ey = sub(pc, pa);
+    V3 ez = cross(ex, ey);
+    normalize(ez);
+    ey = cross(ez, ex);
+    for (int k = 0; k < 3; ++k) {
+        r[k] = ex[k];
+        r[3 + k] = ey[k];
+        r[6 + k] = ez[k];
+    }
+}
+
+inline V3 mat_vec(const double r[9], const V3& v) {
+    return V3{{r[0] * v[0] + r[1] * v[1] + r[2] * v[2], r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+               r[6] * v[0] + r[7] * v[1] + r[8] * v[2]}};
+}
+
+// SOFA's computeStrainDisplacementLocal (J is 6x3, row-major).
+inline void strain_displacement(const V3& b, const V3& c, double J[18]) {
+    const double inv = 1 / (b[0] * c[1]);
+    for (int k = 0; k < 18; ++k) J[k] = 0.0;
+    J[0 * 3 + 0] = J[1 * 3 + 2] = -c[1] * inv;
+    J[0 * 3 + 2] = J[1 * 3 + 1] = (c[0] - b[0]) * inv;
+    J[2 * 3 + 0] = J[3 * 3 + 2] = c[1] * inv;
+    J[2 * 3 + 2] = J[3 * 3 + 1] = -c[0] * inv;
+    J[4 * 3 + 2] = J[5 * 3 + 1] = b[0] * inv;
+}
+
+// Local forces F (6) of displacements D (6): strain = J^T D (sparse), stress = K strain, F = J stress.
+inline void local_forces(const double J[18], const double* K, const double D[6], double F[6]) {
+    auto j = [&](int row, int col) { return J[row * 3 + col]; };
+    const double s0 = j(0, 0) * D[0] + j(2, 0) * D[2];
+    const double s1 = j(1, 1) * D[1] + j(3, 1) * D[3] + j(5, 1) * D[5];
+    const double s2 = j(0, 2) * D[0] + j(1, 2) * D[1] + j(2, 2) * D[2] + j(3, 2) * D[3] + j(4, 2) * D[4];
+    const double t0 = K[0] * s0 + K[1] * s1, t1 = K[2] * s0 + K[3] * s1, t2 = K[4] * s2;
+    F[0] = j(0, 0) * t0 + j(0, 2) * t2;
+    F[1] = j(1, 1) * t1 + j(1, 2) * t2;
+    F[2] = j(2, 0) * t0 + j(2, 2) * t2;
+    F[3] = j(3, 1) * t1 + j(3, 2) * t2;
+    F[4] = j(4, 2) * t2;
+    F[5] = j(5, 1) * t1;
+}
+}  // namespace shell_detail
+
+inline void trifem_init(const Index* tri, Index n, const double* rest_x, const double* young, Index n_young,
+                        const double* poisson, Index n_poisson, int /*method*/, double* data) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        double* e = data + TRI_FEM_DATA * i;
+        const V3 pa = load(rest_x + 3 * t[0]), pb = load(rest_x + 3 * t[1]), pc = load(rest_x + 3 * t[2]);
+        double r[9];
+        triangle_rotation(pa, pb, pc, r);
+        for (int a = 0; a < 3; ++a)
+            for (int b = 0; b < 3; ++b) e[3 * a + b] = r[3 * b + a];  // R^T
+        const V3 b = mat_vec(r, sub(pb, pa)), c = mat_vec(r, sub(pc, pa));
+        e[9] = b[0];
+        e[10] = c[0];
+        e[11] = c[1];
+        strain_displacement(b, c, e + 12);
+        const double area = b[0] * c[1] * 0.5;
+        const double y = fem_detail::young_in(young, n_young, i), p = fem_detail::poisson_in(poisson, n_poisson, i);
+        const double scale = (y / (1.0 - p * p)) * area;
+        e[30] = 1 * scale;
+        e[31] = p * scale;
+        e[32] = p * scale;
+        e[33] = 1 * scale;
+        e[34] = ((1.0 - p) * 0.5) * scale;
+    }
+}
+
+inline void trifem_add_force(const Index* tri, Index n, const double* x, double* f, double* data, int /*method*/) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        double* e = data + TRI_FEM_DATA * i;
+        const V3 pa = load(x + 3 * t[0]), pb = load(x + 3 * t[1]), pc = load(x + 3 * t[2]);
+        double r[9];
+        triangle_rotation(pa, pb, pc, r);
+        const V3 b = mat_vec(r, sub(pb, pa)), c = mat_vec(r, sub(pc, pa));
+        const double D[6] = {0, 0, e[9] - b[0], 0, e[10] - c[0], e[11] - c[1]};
+        double J[18], F[6];
+        strain_displacement(b, c, J);
+        local_forces(J, e + 30, D, F);
+        double rt[9];
+        for (int a = 0; a < 3; ++a)
+            for (int k = 0; k < 3; ++k) rt[3 * a + k] = r[3 * k + a];
+        for (int node = 0; node < 3; ++node) {
+            const V3 fw = mat_vec(rt, V3{{F[2 * node], F[2 * node + 1], 0}});
+            for (int k = 0; k < 3; ++k) f[3 * t[node] + k] += fw[k];
+        }
+        for (int k = 0; k < 18; ++k) e[12 + k] = J[k];
+        for (int k = 0; k < 9; ++k) e[k] = rt[k];
+    }
+}
+
+// df += kfactor (df/dx) dx with the frames and J of the last force pass (SOFA's applyStiffnessLarge, h = 1).
+inline void trifem_add_dforce(const Index* tri, Index n, const double* dx, double* df, double kfactor,
+                              const double* data, int /*method*/) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        const double* e = data + TRI_FEM_DATA * i;
+        double r[9];  // R_0_2 = transpose(rotation)
+        for (int a = 0; a < 3; ++a)
+            for (int k = 0; k < 3; ++k) r[3 * a + k] = e[3 * k + a];
+        double D[6], F[6];
+        for (int node = 0; node < 3; ++node) {
+            const V3 local = mat_vec(r, load(dx + 3 * t[node]));
+            D[2 * node] = local[0];
+            D[2 * node + 1] = local[1];
+        }
+        local_forces(e + 12, e + 30, D, F);
+        const double h = 1;
+        for (int node = 0; node < 3; ++node) {
+            const V3 fw = mat_vec(e, V3{{-h * F[2 * node], -h * F[2 * node + 1], 0}});
+            for (int k = 0; k < 3; ++k) df[3 * t[node] + k] += fw[k] * kfactor;
+        }
+    }
+}
+
 }  // namespace sofac

@@ -180,6 +180,7 @@ HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
 
 TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
     name="TriangularFEMForceField",
+    kernel="trifem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Constant-strain membrane triangles (plane stress) on a TriangleSetTopology, corotational for "
