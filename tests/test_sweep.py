@@ -7,6 +7,7 @@ a diverging parameter set is recorded, not fatal; an interrupted sweep resumes.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import pickle
@@ -322,3 +323,15 @@ def test_sweep_command_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixtur
         == 2
     )
     assert "name the file *.nc" in capsys.readouterr().err
+
+
+def test_calibration_example_recovers_the_modulus() -> None:
+    spec = importlib.util.spec_from_file_location("calibrate_beam", ROOT / "examples" / "calibrate_beam.py")
+    assert spec is not None and spec.loader is not None
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    true_modulus = 4e6
+    measured = example.tip_drop(sofac.load(BEAM), true_modulus)
+    modulus, runs = example.calibrate(measured, scheduler="synchronous")
+    assert modulus == pytest.approx(true_modulus, rel=1e-3)
+    assert runs < 40
