@@ -446,6 +446,9 @@ class Simulation:
     def param(self, key: str) -> np.ndarray:
         """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
 
+        Parameters read at every step (stiffnesses of springs, masses, gravity, dt) take effect at the
+        next step; those turned into data when the simulation is initialized (the element
+        stiffnesses from ``youngModulus``/``poissonRatio``) at the next ``reset()``.
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity)."""
         if key in self.plan.pruned:
             raise PrunedEffectError(
