@@ -200,6 +200,7 @@ CASES = [
     ("c1_beam_tetfem_cg", {"dofs": "c1_beam_tetfem_cg.csv"}),
     ("c2_beam_tetfem_ldl", {"dofs": "c2_beam_tetfem_ldl.csv"}),
     ("c3_beam_hexafem_cg", {"dofs": "c3_beam_hexafem_cg.csv"}),
+    ("e_beam_large_cg25", {"dofs": "e_beam_large_cg25.csv"}),  # 23814 tetrahedra, CG capped at 25
     ("a_pendulum_euler_explicit", {"dofs": "a_pendulum_euler_explicit.every100.csv"}),
     ("a2_pendulum_euler_explicit_totalmass", {"dofs": "a2_pendulum_euler_explicit_totalmass.every100.csv"}),
     ("b1_pendulum_rk4", {"dofs": "b1_pendulum_rk4.every100.csv"}),
