@@ -85,6 +85,7 @@ class _ProjectionView:
         self.origin = projection.origin
         self.velocity = projection.velocity
         self.on_v = projection.project(state.v)
+        self.on_x = projection.position(state.x) if projection.position else ""
         self.on_acc = projection.project(state.acc) if state.acc else ""
         self.on_f = projection.project(state.f)
         self.on_df = projection.project(state.df) if state.df else ""

@@ -14,6 +14,7 @@ number and array is a buffer handed to the instance when it is created.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -90,6 +91,8 @@ class Projection:
     velocity: bool = False  # also projects the velocity after the update
     # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (state offset -> code).
     mark: Callable[[int], str] | None = None
+    # projectPosition: coordinates moved onto the constraint after each step and at init.
+    position: Callable[[Buffer], str] | None = None
 
 
 @dataclass
@@ -1381,16 +1384,24 @@ def _fixed_indices(planner: _Planner, checked: CheckedComponent, state: StatePla
     return _indices(planner, checked, "indices", state.size, all_if_empty=False)
 
 
-def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+def _projected_target(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group] | None:
+    """A projective constraint's state and group; None (kept out, with why) on a mapped state."""
     found = _target(planner, checked, owner)
-    if found is None:
-        return
-    state, group = found
-    if state.acc is None:
+    if found is not None and found[0].acc is None:
         planner.ignored.append(
             (checked.component, "on a mapped state: projections act on independent states")
         )
+        return None
+    return found
+
+
+def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _projected_target(planner, checked, owner)
+    if found is None:
         return
+    state, group = found
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
     t = state.cpp_type
     group.projections.append(
@@ -1405,15 +1416,10 @@ def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, 
 
 
 def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    found = _target(planner, checked, owner)
+    found = _projected_target(planner, checked, owner)
     if found is None:
         return
     state, group = found
-    if state.acc is None:
-        planner.ignored.append(
-            (checked.component, "on a mapped state: projections act on independent states")
-        )
-        return
     width = state.datatype.deriv_size
     directions = planner.value(checked.component, "fixedDirections")
     flags = np.zeros(width, dtype=np.int64)
@@ -1433,6 +1439,214 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
             lambda vector: _call(f"project_partial<{t}>", vector, indices, _count(indices), mask),
             bool(velocity),
             lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices), mask),
+        )
+    )
+
+
+def _unit_vector(
+    planner: _Planner, component: Component, name: str, width: int, zero: int | None
+) -> np.ndarray:
+    """A direction field as SOFA normalises it (times 1/|n|); a zero vector becomes the unit vector
+    along axis ``zero``, or stays zero (no constraint) when ``zero`` is None."""
+    given = np.zeros(width)
+    value = planner.value(component, name)
+    if value is not None:
+        flat = np.asarray(value, dtype=float).ravel()[:width]
+        given[: flat.size] = flat
+    norm = math.sqrt(sum(float(c) * float(c) for c in given))
+    if norm == 0.0:
+        if zero is not None:
+            given[zero] = 1.0
+        return given
+    inverse = 1.0 / norm
+    return np.array([float(c) * inverse for c in given])
+
+
+def _lower_line_or_plane(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """Line- and PlaneProjectiveConstraint: responses and velocities through the block n n^T (line)
+    or I - n n^T (plane) of the listed points; positions onto the line / plane after each step."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.assembled:
+        planner.unsupported(
+            checked,
+            "with a sparse direct solver (SOFA does not project the assembled matrix for it either); "
+            "use CGLinearSolver",
+        )
+        return
+    line = checked.spec is not None and checked.spec.role == "line"
+    width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
+    direction = _unit_vector(
+        planner, component, "direction" if line else "normal", width, 0 if line else None
+    )
+    outer = np.array([[float(a) * float(b) for b in direction] for a in direction])
+    block = outer if line else np.eye(width) - outer
+    origin = np.zeros(width)
+    given = planner.value(component, "origin")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[:width]
+        origin[: flat.size] = flat
+    indices = planner.buffer(component, "indices", _indices(planner, checked, "indices", state.size), "i64")
+    block_buffer = planner.buffer(component, "projection", block)
+    origin_buffer = planner.buffer(component, "origin", origin)
+    direction_buffer = planner.buffer(component, "direction" if line else "normal", direction)
+    t = state.cpp_type
+    onto = "project_onto_line" if line else "project_onto_plane"
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            lambda vector: _call(f"project_block<{t}>", vector, indices, _count(indices), block_buffer),
+            velocity=True,
+            position=lambda x: _call(
+                f"{onto}<{t}>", x, indices, _count(indices), origin_buffer, direction_buffer
+            ),
+        )
+    )
+
+
+def _lower_point_constraint(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """PointProjectiveConstraint: the listed DOFs (all with fixAll) held at ``point``."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    indices = planner.buffer(component, "indices", _fixed_indices(planner, checked, state), "i64")
+    target = np.zeros(state.datatype.coord_size)
+    given = planner.value(component, "point")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[: target.size]
+        target[: flat.size] = flat
+    target_buffer = planner.buffer(component, "point", target)
+    t = state.cpp_type
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
+            velocity=True,
+            mark=lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices)),
+            position=lambda x: _call(f"project_onto_point<{t}>", x, indices, _count(indices), target_buffer),
+        )
+    )
+
+
+def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """PlaneForceField: a penalty on the points under the plane (stiffness in implicit solves)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.assembled:
+        planner.unsupported(
+            checked, "its contact-dependent stiffness is not assembled for direct solvers yet"
+        )
+        return
+    width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
+    normal = np.zeros(width)
+    flat = np.asarray(planner.value(component, "normal"), dtype=float).ravel()[:width]
+    normal[: flat.size] = flat
+    first, last = (int(v) for v in planner.value(component, "localRange"))
+    begin = first if first >= 0 else 0
+    end = last + 1 if last >= 0 and last + 1 < state.size else state.size
+    bilateral = "true" if planner.value(component, "bilateral") else "false"
+    contact = planner.buffer(component, "contacts", np.zeros(state.size), "i64", role="scratch")
+    normal_buffer = planner.buffer(component, "normal", normal, role="param")
+    parameters = {
+        name: planner.buffer(component, name, [float(planner.value(component, name))], role="param")
+        for name in ("d", "stiffness", "damping", "maxForce")
+    }
+    origin = origin_of(component)
+    t = state.cpp_type
+    group.forces.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"plane_forces<{t}>",
+                    state.f,
+                    state.x,
+                    state.v,
+                    contact,
+                    normal_buffer,
+                    parameters["d"],
+                    parameters["stiffness"],
+                    parameters["damping"],
+                    parameters["maxForce"],
+                    bilateral,
+                    begin,
+                    end,
+                )
+            ],
+        )
+    )
+    if group.scheme == "implicit":
+        stiffness = parameters["stiffness"]
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        f"plane_dforces<{t}>",
+                        state.df,
+                        state.dx,
+                        contact,
+                        normal_buffer,
+                        stiffness,
+                        "kfact",
+                        begin,
+                        end,
+                    )
+                ],
+            )
+        )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "potential += "
+                + _call(
+                    f"plane_energy<{t}>",
+                    state.x,
+                    normal_buffer,
+                    parameters["d"],
+                    parameters["stiffness"],
+                    bilateral,
+                    begin,
+                    end,
+                )
+            ],
+        )
+    )
+
+
+def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """UniformVelocityDampingForceField: f -= c v (an explicit force, as SOFA with implicit="0")."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.scheme == "implicit" and planner.value(component, "implicit"):
+        planner.unsupported(
+            checked, 'implicit="1" (its df/dv in the implicit solve) is not compiled yet; use implicit="0"'
+        )
+        return
+    coefficient = float(planner.value(component, "dampingCoefficient"))
+    key = f"{component.path}.dampingCoefficient"
+    if planner.prune and coefficient == 0.0:
+        planner.pruned[key] = "dampingCoefficient is 0: no damping force computed"
+        return
+    buffer = planner.buffer(component, "dampingCoefficient", [coefficient], role="param")
+    group.forces.append(
+        Op(
+            origin_of(component),
+            [_call("velocity_damping", state.f, state.v, buffer, state.size * state.datatype.deriv_size)],
         )
     )
 
@@ -1868,6 +2082,10 @@ LOWERINGS: dict[str, Lowering] = {
     "rest_shape_springs": _lower_rest_shape,
     "fixed": _lower_fixed,
     "partial_fixed": _lower_partial_fixed,
+    "line_or_plane": _lower_line_or_plane,
+    "point_constraint": _lower_point_constraint,
+    "plane_force": _lower_plane_force,
+    "velocity_damping": _lower_velocity_damping,
     "rigid_mapping": _lower_rigid_mapping,
     "identity_mapping": _lower_subset_mapping,
     "subset_mapping": _lower_subset_mapping,

@@ -341,6 +341,7 @@ CONSTANT_FORCE_FIELD = ComponentSpec(
 
 PLANE_FORCE_FIELD = ComponentSpec(
     name="PlaneForceField",
+    kernel="plane_force",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Penalty repulsion of points below the plane x.normal = d: f = -stiffness delta n + damping.",
@@ -424,12 +425,13 @@ TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
 
 UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
     name="UniformVelocityDampingForceField",
+    kernel="velocity_damping",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Viscous damping force -c v on every DOF.",
     templates=("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d", "Rigid2d"),
     default_template="Vec3d",
-    unsupported_reason="UniformVelocityDampingForceField is not implemented yet",
+    supported=True,
     effects=frozenset({Effect.DAMPING}),
     fields=(
         FieldSpec(
