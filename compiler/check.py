@@ -19,6 +19,7 @@ import numpy as np
 
 from . import evaluate, links, meshes, registry
 from .diagnostics import Diagnostics, SceneError, SourceLoc
+from .fem_topology import CELL_KINDS
 from .model import Component, Node, Scene
 from .registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from .registry.components.common import MATRIX_TEMPLATE_ALIASES
@@ -593,6 +594,16 @@ class _Checker:
             source = self.checked.components.get(id(checked.src))
             if source is not None and source.spec is not None and source.spec.field(name) is not None:
                 return self.value(source, name, depth + 1)
+        if checked.category is Category.TOPOLOGY and name in CELL_KINDS:
+            # A topological mapping (Hexa2Tetra, Tetra2Triangle...) writes its output container's cells.
+            for writer in self.checked:
+                if (
+                    writer.category is Category.TOPOLOGICAL_MAPPING
+                    and writer.links.get("output") is checked.component
+                ):
+                    written = self.value(writer, name, depth + 1)
+                    if written is not None and np.size(written):
+                        return written
         field_spec = checked.spec.field(name)
         return field_spec.default if field_spec else None
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from .check import CheckedComponent, CheckedScene
 from .diagnostics import Diagnostics, SceneError
+from .fem_topology import CELL_KINDS
 from .model import Component, Node
 from .registry import Category
 from .registry.datatypes import DATATYPES, DataType
@@ -646,9 +647,6 @@ def _lower_uniform_mass(planner: _Planner, checked: CheckedComponent, owner: dic
     _add_mass(planner, checked, state, group, buffer, 0)
 
 
-_CELL_KINDS = ("edges", "triangles", "quads", "tetrahedra", "hexahedra")
-
-
 def _topology_of(planner: _Planner, checked: CheckedComponent) -> Component | None:
     """The topology a component uses: its ``topology`` link, else the one in its context."""
     topology = checked.links.get("topology")
@@ -669,16 +667,10 @@ def _topology_cells(planner: _Planner, checked: CheckedComponent) -> dict[str, n
     if topology is None:
         return None
     cells: dict[str, np.ndarray] = {}
-    for kind in (*_CELL_KINDS, "resolution"):
+    for kind in (*CELL_KINDS, "resolution"):
         value = planner.value(topology, kind)
         if value is not None and np.size(value):
             cells[kind] = np.asarray(value, dtype=np.int64).ravel()
-    for other in planner.checked:  # elements written into it by a topological mapping
-        if other.category is Category.TOPOLOGICAL_MAPPING and other.links.get("output") is topology:
-            for kind in _CELL_KINDS:
-                value = planner.value(other.component, kind)
-                if kind not in cells and value is not None and np.size(value):
-                    cells[kind] = np.asarray(value, dtype=np.int64).ravel()
     return cells
 
 
@@ -1625,6 +1617,63 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
     )
 
 
+def _lower_triangle_pressure(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TrianglePressureForceField with useConstantForce: pressure x rest area on the listed triangles."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if not planner.value(component, "useConstantForce"):
+        planner.unsupported(
+            checked, 'useConstantForce="0" (a Cauchy stress on the current areas) is not compiled yet'
+        )
+        return
+    chosen = _indices(planner, checked, "triangleList", 0, all_if_empty=False)
+    triangles = (
+        (_topology_cells(planner, checked) or {}).get("triangles", np.zeros(0, np.int64)).reshape(-1, 3)
+    )
+    points = planner.checked.positions(state.component)
+    if len(chosen) and (points is None or chosen.max() >= len(triangles)):
+        planner.unsupported(
+            checked, f"its triangleList points past the {len(triangles)} triangles of its topology"
+        )
+        return
+    corners = triangles[chosen]
+    areas = [_triangle_area(*(points[corner, :3] for corner in triangle)) for triangle in corners]
+    pressure = np.zeros(min(state.datatype.spatial_dim, 3))
+    given = planner.value(component, "pressure")
+    if given is not None and np.size(given):
+        flat = np.asarray(given, dtype=float).ravel()[: pressure.size]
+        pressure[: flat.size] = flat
+    corner_buffer = planner.buffer(component, "triangles", corners, "i64")
+    area_buffer = planner.buffer(component, "areas", areas)
+    pressure_buffer = planner.buffer(component, "pressure", pressure, role="param")
+    group.forces.append(
+        Op(
+            origin_of(component),
+            [
+                _call(
+                    f"triangle_pressure<{state.cpp_type}>",
+                    state.f,
+                    corner_buffer,
+                    area_buffer,
+                    len(corners),
+                    pressure_buffer,
+                )
+            ],
+        )
+    )
+
+
+def _triangle_area(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """sofa::geometry::Triangle::area in 3-D, operation for operation: 0.5 |(b - a) x (c - a)|."""
+    u = [float(b[k]) - float(a[k]) for k in range(3)]
+    v = [float(c[k]) - float(a[k]) for k in range(3)]
+    cross = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+    return 0.5 * math.sqrt(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
+
+
 def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """UniformVelocityDampingForceField: f -= c v (an explicit force, as SOFA with implicit="0")."""
     found = _target(planner, checked, owner)
@@ -2086,6 +2135,7 @@ LOWERINGS: dict[str, Lowering] = {
     "point_constraint": _lower_point_constraint,
     "plane_force": _lower_plane_force,
     "velocity_damping": _lower_velocity_damping,
+    "triangle_pressure": _lower_triangle_pressure,
     "rigid_mapping": _lower_rigid_mapping,
     "identity_mapping": _lower_subset_mapping,
     "subset_mapping": _lower_subset_mapping,

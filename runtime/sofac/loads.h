@@ -75,6 +75,21 @@ inline double plane_energy(const double* x, const double* normal, const double* 
     return energy;
 }
 
+// ---- TrianglePressureForceField ------------------------------------------------------------------
+
+// useConstantForce: each listed triangle pushes its three corners with (pressure * its rest area) / 3.
+template <class DT>
+inline void triangle_pressure(double* f, const Index* corners, const double* area, Index count,
+                              const double* pressure) {
+    constexpr int S = DT::spatial;
+    for (Index t = 0; t < count; ++t) {
+        double share[S];
+        for (int k = 0; k < S; ++k) share[k] = pressure[k] * area[t] / 3.0;
+        for (int c = 0; c < 3; ++c)
+            for (int k = 0; k < S; ++k) f[DT::deriv * corners[3 * t + c] + k] += share[k];
+    }
+}
+
 // ---- UniformVelocityDampingForceField ------------------------------------------------------------
 
 // f -= c v on every scalar of every DOF (explicit: no df/dv in implicit solves).

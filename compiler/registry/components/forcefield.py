@@ -405,12 +405,13 @@ INTERACTION_ELLIPSOID_FORCE_FIELD = ComponentSpec(
 
 TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
     name="TrianglePressureForceField",
+    kernel="triangle_pressure",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Pressure on selected triangles of the topology.",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="TrianglePressureForceField is not implemented yet",
+    supported=True,
     effects=frozenset({Effect.EXTERNAL_FORCE}),
     fields=(
         FieldSpec("pressure", Coords(deriv=True), doc="pressure vector (force per unit area)"),
