@@ -440,7 +440,7 @@ CASES = [
     Case(
         "unsupported",
         "E222",
-        dyn('    <UniformVelocityDampingForceField dampingCoefficient="0.1"/>\n'),
+        dyn('    <QuadBendingSprings stiffness="10"/>\n'),
         6,
         hint="--allow-unsupported",
     ),
