@@ -32,7 +32,14 @@ REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "scenes"
 EXAMPLE = REPO / "examples" / "hybrid_pendulum.py"
 BUNDLED = sorted(SCENES.glob("*.scn"))
-EXPECTED_BUNDLED = {"hybrid_pendulum.scn", "oscillator.scn", "falling_particle.scn", "beam.scn", "cloth.scn"}
+EXPECTED_BUNDLED = {
+    "hybrid_pendulum.scn",
+    "oscillator.scn",
+    "falling_particle.scn",
+    "beam.scn",
+    "cloth.scn",
+    "liver.scn",
+}
 
 
 def _corpus() -> Path | None:
