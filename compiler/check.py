@@ -594,8 +594,9 @@ class _Checker:
             source = self.checked.components.get(id(checked.src))
             if source is not None and source.spec is not None and source.spec.field(name) is not None:
                 return self.value(source, name, depth + 1)
-        if checked.category is Category.TOPOLOGY and name in CELL_KINDS:
-            # A topological mapping (Hexa2Tetra, Tetra2Triangle...) writes its output container's cells.
+        if checked.category is Category.TOPOLOGY and name in (*CELL_KINDS, "position"):
+            # A topological mapping writes its output container's cells (Hexa2Tetra, Tetra2Triangle...)
+            # or points (Mesh2Point).
             for writer in self.checked:
                 if (
                     writer.category is Category.TOPOLOGICAL_MAPPING

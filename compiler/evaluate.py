@@ -80,6 +80,25 @@ def mesh_loader(ctx: Context) -> Outputs:
     }
 
 
+def string_mesh(ctx: Context) -> Outputs:
+    """StringMeshCreator: ``resolution`` points x / (resolution - 1) on the x axis, edges (i-1, i)."""
+    count = int(ctx.value("resolution"))
+    if count < 2:
+        raise EvaluationError("resolution must be >= 2", "resolution")
+    points = np.zeros((count, 3))
+    points[:, 0] = [(x * 1.0) / (count - 1) for x in range(count)]
+    edges = np.array([[e - 1, e] for e in range(1, count)], dtype=np.int64)
+    empty = np.zeros(0, dtype=np.int64)
+    return {
+        "position": _transform(ctx, points).ravel(),
+        "edges": edges.ravel(),
+        "triangles": empty,
+        "quads": empty,
+        "tetrahedra": empty,
+        "hexahedra": empty,
+    }
+
+
 def sphere_loader(ctx: Context) -> Outputs:
     try:
         spheres = meshes.read_spheres(_file(ctx))
@@ -253,11 +272,91 @@ def hexa_to_quad(ctx: Context) -> Outputs:
     return _surface(ctx, "hexahedra", 8, HEXA_FACES, "quads")
 
 
+# The order in which the edges of each tetrahedron first appear in the edge array of SOFA's
+# tetrahedral containers, as SOFA's regression references of Mesh2PointTopologicalMapping record it
+# (all 914 edges of the liver mesh); it is not the order of Topology.cpp's edgesInTetrahedronArray.
+_CONTAINER_TETRA_EDGES = ((1, 2), (0, 1), (0, 2), (1, 3), (0, 3), (2, 3))
+
+
+def _tetrahedral_container_edges(tetrahedra: np.ndarray) -> np.ndarray:
+    seen: set[tuple[int, int]] = set()
+    edges: list[tuple[int, int]] = []
+    for tetrahedron in tetrahedra.tolist():
+        for a, b in _CONTAINER_TETRA_EDGES:
+            key = (min(tetrahedron[a], tetrahedron[b]), max(tetrahedron[a], tetrahedron[b]))
+            if key not in seen:
+                seen.add(key)
+                edges.append(key)
+    return np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+
+
+def mesh_to_point(ctx: Context) -> Outputs:
+    """Mesh2PointTopologicalMapping's output points (SOFA's init order): per input point
+    p + pointBaryCoords[j]; per edge p0 (1 - fx) + p1 fx; per triangle p0 (1 - fx - fy) + p1 fx + p2 fy;
+    per tetrahedron p0 (1 - fx - fy - fz) + p1 fx + p2 fy + p3 fz. Quads and hexahedra are not evaluated."""
+    from .masses import topology_edges
+
+    position = ctx.linked("input", "position")
+    if position is None or not np.size(position):
+        raise UnknownInput("the input topology's points are not known at compile time")
+    points = np.asarray(position, dtype=float).reshape(-1, 3)
+
+    def coords(name: str) -> np.ndarray:
+        value = ctx.value(name)
+        return np.asarray(value if value is not None else [], dtype=float).reshape(-1, 3)
+
+    def cells(name: str, corners: int) -> np.ndarray:
+        value = ctx.linked("input", name)
+        return np.asarray(value if value is not None else [], dtype=np.int64).reshape(-1, corners)
+
+    for name in ("quadBaryCoords", "hexaBaryCoords"):
+        if coords(name).size:
+            raise UnknownInput(f"{name} is not evaluated yet")
+    out: list[np.ndarray] = []
+    for offset in coords("pointBaryCoords"):
+        out.append(points + offset)
+    per_point = np.stack(out, axis=1).reshape(-1, 3) if out else np.zeros((0, 3))
+    rows: list[np.ndarray] = [per_point]
+    tetrahedra, triangles = cells("tetrahedra", 4), cells("triangles", 3)
+    edge_coords = coords("edgeBaryCoords")
+    if edge_coords.size:
+        edges = cells("edges", 2)
+        if len(tetrahedra):
+            edges = _tetrahedral_container_edges(tetrahedra)
+        elif not len(edges):
+            edges = topology_edges(len(points), triangles=triangles, quads=cells("quads", 4))
+        p0, p1 = points[edges[:, 0]], points[edges[:, 1]]
+        rows.append(np.stack([p0 * (1 - fx) + p1 * fx for fx, _, _ in edge_coords], axis=1).reshape(-1, 3))
+    triangle_coords = coords("triangleBaryCoords")
+    if triangle_coords.size:
+        t = [points[triangles[:, k]] for k in range(3)]
+        rows.append(
+            np.stack(
+                [t[0] * (1 - fx - fy) + t[1] * fx + t[2] * fy for fx, fy, _ in triangle_coords], axis=1
+            ).reshape(-1, 3)
+        )
+    tetra_coords = coords("tetraBaryCoords")
+    if tetra_coords.size:
+        t = [points[tetrahedra[:, k]] for k in range(4)]
+        rows.append(
+            np.stack(
+                [
+                    t[0] * (1 - fx - fy - fz) + t[1] * fx + t[2] * fy + t[3] * fz
+                    for fx, fy, fz in tetra_coords
+                ],
+                axis=1,
+            ).reshape(-1, 3)
+        )
+    return {"position": np.concatenate(rows).ravel()}
+
+
 EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
+    "mesh_to_point": mesh_to_point,
     "hexa_to_tetra": hexa_to_tetra,
     "tetra_to_triangle": tetra_to_triangle,
     "hexa_to_quad": hexa_to_quad,
     "mesh_loader": mesh_loader,
+    "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
     "box_roi": box_roi,

@@ -77,6 +77,8 @@ class _MappingView:
         transpose = mapping.transpose
         self.transpose_f = transpose(parent.f, child.f) if transpose else ""
         self.transpose_df = transpose(parent.df, child.df) if transpose and parent.df and child.df else ""
+        geometric = mapping.geometric
+        self.geometric_df = geometric(parent.dx, parent.df) if geometric and parent.dx and parent.df else ""
 
 
 class _ProjectionView:
@@ -125,6 +127,7 @@ class _GroupView:
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
         self.factor_once = group.factor_once
         self.cg = group.cg
+        self.minres = group.minres
 
 
 def render(plan: Plan) -> str:

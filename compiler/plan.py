@@ -80,6 +80,8 @@ class MappingOp:
     apply: list[str]  # x and v of the child from the parent's
     jacobian: Callable[[Buffer, Buffer], str]  # (parent vector, child vector) -> child = J parent
     transpose: Callable[[Buffer, Buffer], str] | None  # parent += Jᵀ child; None: mapForces="0"
+    # Non-linear mappings: (parent dx, parent df) -> parent df += kfact dJᵀ/dx(child force) dx.
+    geometric: Callable[[Buffer, Buffer], str] | None = None
 
 
 @dataclass
@@ -152,6 +154,7 @@ class Group:
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
+    minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
@@ -371,7 +374,7 @@ class _Planner:
             return
         positions = self.checked.positions(component)
         if positions is None:
-            positions = np.zeros((0, datatype.coord_size))
+            positions = np.zeros((self._mapped_size(component), datatype.coord_size))
         n = len(positions)
         velocity = self.value(component, "velocity")
         v = np.zeros((n, datatype.deriv_size))
@@ -405,6 +408,16 @@ class _Planner:
                 component, "acceleration", np.zeros_like(v), columns=datatype.deriv_size, role="scratch"
             )
         self.states[id(component)] = state
+
+    def _mapped_size(self, state: Component) -> int:
+        """The size a mapping gives its output state at init when the state has no positions of its
+        own (the distance mappings: one DOF per edge of their topology); else 0."""
+        mapping = self.checked.mapping_of(state)
+        if mapping is None or mapping.spec is None or mapping.spec.kernel != "distance_mapping":
+            return 0
+        topology = _topology_of(self, mapping)
+        edges = self.value(topology, "edges") if topology is not None else None
+        return int(np.size(edges) // 2) if edges is not None else 0
 
     def state_of(self, checked: CheckedComponent) -> StatePlan | None:
         return self.states.get(id(checked.state)) if checked.state is not None else None
@@ -444,6 +457,8 @@ class _Planner:
                 "rk4": ("x0", "v0", "dx", "dv"),
                 "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
             }[group.scheme]
+            if group.minres:
+                names = ("r", "r1", "r2", "y", "w", "w2", "v")
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -529,6 +544,17 @@ class _Planner:
             return False  # E221, reported by the checker
         if checked_linear.spec.kernel == "pcg":
             return self._plan_pcg(checked_linear, group)
+        if checked_linear.spec.kernel == "minres":
+            group.linear_solver = linear
+            group.minres = {
+                "iterations": self.buffer(
+                    linear, "iterations", [int(self.value(linear, "iterations") or 25)], "i64"
+                ),
+                "tolerance": self.buffer(
+                    linear, "tolerance", [float(self.value(linear, "tolerance"))], role="param"
+                ),
+            }
+            return True
         if checked_linear.spec.kernel not in ("cg", "direct", "precomputed"):
             self.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
             return False
@@ -931,6 +957,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     group.forces.append(
         Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method)])
     )
+    and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
+    if and_mass and not _lower_hexa_mass(planner, checked, state, group, elements, count, data, method):
+        return
     if prefix != "tetracorot_fem":  # SOFA's potential energy (0 for corotational tetrahedra, as SOFA)
         group.energy.append(
             Op(origin, ["potential += " + _call(f"{prefix}_energy", elements, count, state.x, data, method)])
@@ -959,6 +988,324 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                 f"sofac::{prefix}_element_matrix",
             ),
         )
+
+
+def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """DistanceMapping / SquareDistanceMapping (Vec3d -> Vec1d, one DOF per edge), with their
+    geometric stiffness in the matrix-free products (SOFA's matrixFreeApplyDJT)."""
+    import math
+
+    ends = _mapping_ends(planner, checked, owner)
+    if ends is None:
+        return
+    parent, child, group = ends
+    component = checked.component
+    if parent.datatype.name != "Vec3d" or child.datatype.name != "Vec1d":
+        planner.unsupported(checked, f"{component.type_name} is compiled for Vec3d -> Vec1d only")
+        return
+    topology = _topology_of(planner, checked)
+    edges_value = planner.value(topology, "edges") if topology is not None else None
+    if edges_value is None or not np.size(edges_value):
+        planner.unsupported(checked, "it needs a topology with edges known at compile time")
+        return
+    edges = np.asarray(edges_value, dtype=np.int64).reshape(-1, 2)
+    count = len(edges)
+    if child.size != count:
+        planner.unsupported(checked, f"its output state has {child.size} DOFs for {count} edges")
+        return
+    if not planner.value(component, "applyRestPosition"):
+        planner.unsupported(
+            checked, "applyRestPosition=false (rest positions left unmapped) is not compiled yet"
+        )
+        return
+    kind = 1 if checked.spec is not None and checked.spec.role == "square" else 0
+    lengths = np.zeros(count)
+    if kind == 0:
+        given = planner.value(component, "restLengths")
+        if given is not None and np.size(given) == count:
+            lengths = np.asarray(given, dtype=float).ravel()
+        elif not planner.value(component, "computeDistance"):
+            points = parent.x.initial.reshape(-1, 3).tolist()
+            for i, (a, b) in enumerate(edges.tolist()):
+                d = [points[a][k] - points[b][k] for k in range(3)]
+                lengths[i] = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    mode = {"None": 0, "Exact": 1, "Stabilized": 2}[str(planner.value(component, "geometricStiffness"))]
+    edge_buffer = planner.buffer(component, "edges", edges.ravel(), "i64", columns=2)
+    rest = planner.buffer(component, "restLengths", lengths)
+    direction = planner.buffer(component, "directions", np.zeros(3 * count), columns=3, role="scratch")
+    inverse = planner.buffer(component, "invlengths", np.zeros(count), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin + " [rest positions]",
+            [
+                _call(
+                    "distance_mapping_apply",
+                    parent.rest,
+                    child.rest,
+                    edge_buffer,
+                    count,
+                    rest,
+                    kind,
+                    direction,
+                    inverse,
+                )
+            ],
+        )
+    )
+    maps_forces = planner.value(component, "mapForces") is not False
+    geometric = None
+    if mode and maps_forces:
+
+        def geometric(dx: Buffer, df: Buffer) -> str:
+            return _call(
+                "distance_mapping_djt",
+                df,
+                dx,
+                child.f,
+                edge_buffer,
+                count,
+                direction,
+                inverse,
+                kind,
+                mode,
+                "kfact",
+            )
+
+    group.mappings.append(
+        MappingOp(
+            origin,
+            parent,
+            child,
+            [
+                _call(
+                    "distance_mapping_apply",
+                    parent.x,
+                    child.x,
+                    edge_buffer,
+                    count,
+                    rest,
+                    kind,
+                    direction,
+                    inverse,
+                ),
+                _call("distance_mapping_j", parent.v, child.v, edge_buffer, count, direction),
+            ],
+            lambda up, down: _call("distance_mapping_j", up, down, edge_buffer, count, direction),
+            (lambda up, down: _call("distance_mapping_jt", up, down, edge_buffer, count, direction))
+            if maps_forces
+            else None,
+            geometric,
+        )
+    )
+
+
+def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TriangularFEMForceFieldOptim: corotational membrane triangles ("large" only, as SOFA)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    rest_scale = _written_float(planner, component, "restScale")
+    if rest_scale is not None and rest_scale != 1.0:
+        planner.unsupported(checked, "restScale other than 1 is not compiled yet")
+        return
+    cells = (_topology_cells(planner, checked) or {}).get("triangles")
+    if cells is None or not cells.size:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return
+    count = cells.size // 3
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, "triangles", cells, "i64", columns=3)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+    )
+    material = (young_buffer, _count(young_buffer), poisson_buffer, _count(poisson_buffer))
+    data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(origin, [_call("trifem_optim_init", elements, count, state.rest, *material, 1, data)])
+    )
+    group.forces.append(
+        Op(origin, [_call("trifem_optim_add_force", elements, count, state.x, state.f, data, *material)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "trifem_optim_add_dforce",
+                        elements,
+                        count,
+                        state.dx,
+                        state.df,
+                        "kfact",
+                        data,
+                        *material,
+                    )
+                ],
+            )
+        )
+        matrix = (
+            "[&](const double* d, Index e, int, double* o) { sofac::trifem_optim_element_matrix(d, e, "
+            f"{_ptr(young_buffer)}, {_count(young_buffer)}, {_ptr(poisson_buffer)}, "
+            f"{_count(poisson_buffer)}, o); }}"
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call(
+                "assemble_elements<3>", "A", elements, count, data, 1, offset, "kfact", matrix
+            ),
+        )
+
+
+def _lower_bending_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FastTriangularBendingSprings: one linear bending spring per edge between two triangles."""
+    from . import bending, masses
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    cells = _topology_cells(planner, checked) or {}
+    triangles = cells.get("triangles")
+    if triangles is None or not triangles.size:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, triangles=triangles, quads=cells.get("quads"))
+    stiffness = planner.value(component, "bendingStiffness")
+    min_dist = planner.value(component, "minDistValidity")
+    vid, alpha, lam = bending.bending_springs(
+        planner.checked.positions(state.component),
+        triangles,
+        edges,
+        1.0 if stiffness is None else float(stiffness),
+        1e-6 if min_dist is None else float(min_dist),
+    )
+    count = len(lam)
+    table = (
+        planner.buffer(component, "vid", vid.ravel(), "i64", columns=4),
+        planner.buffer(component, "alpha", alpha.ravel(), columns=4),
+        planner.buffer(component, "lambda", lam),
+        count,
+    )
+    origin = origin_of(component)
+    group.forces.append(Op(origin, [_call("bending_springs_add_force", *table, state.x, state.f)]))
+    group.energy.append(Op(origin, ["potential += " + _call("bending_springs_energy", *table, state.x)]))
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, "kfact")])
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            lambda offset: _call("assemble_bending_springs", "A", offset, *table, "kfact"),
+        )
+
+
+def _lower_hexa_mass(
+    planner: _Planner,
+    checked: CheckedComponent,
+    state: StatePlan,
+    group: Group,
+    elements: Buffer,
+    count: int,
+    data: Buffer,
+    method: int,
+) -> bool:
+    """HexahedronFEMForceFieldAndMass's mass: SOFA's element mass matrices (consistent, or lumped
+    onto the diagonal) in a scalar CSR matrix, and its weight from the particle masses (vol/8)."""
+    from . import element_fem
+
+    component = checked.component
+    if group.scheme != "implicit" and not (group.scheme == "euler" and group.assembled):
+        # SOFA's accFromF is not implemented for this class: only a solve with M works.
+        planner.unsupported(
+            checked, "its mass needs an implicit solver, or explicit Euler with a sparse direct linear solver"
+        )
+        return False
+    if group.scheme != "implicit":
+        group.direct = True
+    lumped = bool(planner.value(component, "lumpedMass"))
+    cells = elements.initial.reshape(-1, 8)
+    if lumped:
+        pattern = element_fem.mass_pattern(np.arange(state.size, dtype=np.int64).reshape(-1, 1), state.size)
+    else:
+        pattern = element_fem.mass_pattern(cells, state.size)
+    density_value = planner.value(component, "density")
+    density = planner.buffer(
+        component, "density", np.atleast_1d(1.0 if density_value is None else float(density_value))
+    )
+    rows = planner.buffer(component, "rowBegin", pattern.row_begin, "i64")
+    cols = planner.buffer(component, "colsIndex", pattern.cols, "i64")
+    values = planner.buffer(component, "massMatrices", np.zeros(pattern.nonzeros), role="scratch")
+    particle = planner.buffer(component, "particleMasses", np.zeros(state.size), role="scratch")
+    csr = (rows, cols, values, state.size)
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "hexa_fem_mass_init",
+                    elements,
+                    count,
+                    state.rest,
+                    data,
+                    method,
+                    density,
+                    rows,
+                    cols,
+                    state.size,
+                    "true" if lumped else "false",
+                    values,
+                    particle,
+                )
+            ],
+        )
+    )
+    planner.add_gravity(
+        group,
+        Op(origin, [_call("mass_gravity<sofac::Vec3d>", state.f, state.size, particle, 1, planner.gravity)]),
+    )
+    if group.scheme == "implicit":
+        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+    _assemble(
+        planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
+    )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "kinetic += " + _call("fem_mass_kinetic_energy", state.v, *csr),
+                "potential += "
+                + _call(
+                    "gravity_potential<sofac::Vec3d>", state.x, state.size, particle, planner.gravity, 1.0
+                ),
+            ],
+        )
+    )
+    return True
 
 
 def _add_mass(
@@ -2122,6 +2469,9 @@ LOWERINGS: dict[str, Lowering] = {
     "tetra_fem": _lower_fem,
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
+    "trifem_optim": _lower_trifem_optim,
+    "distance_mapping": _lower_distance_mapping,
+    "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,
     "diagonal_mass": _lower_diagonal_mass,

@@ -29,6 +29,7 @@
 // computeGlobalMatrix=true (assembled-in-addForce path), von Mises stress, topological changes.
 #pragma once
 
+#include <algorithm>
 #include <cfloat>
 #include <cmath>
 
@@ -935,6 +936,53 @@ inline void hexa_fem_init(const Index* hexa, Index n_hexa, const double* rest_x,
             for (int m = 0; m < 3; ++m) e[HREST + 3 * w + m] = rotated[w][m];
         }
         hexa_element_stiffness(e + HK, rotated, U, V, W, stiffness_coef ? stiffness_coef[i] : 1.0);
+    }
+}
+
+// HexahedronFEMForceFieldAndMass's masses (SOFA's computeElementMass and init), after hexa_fem_init.
+// SOFA's element mass matrix has one value on every node pair of the element, on the 3 diagonal
+// DOF pairs: vol * integrateMass(...) = vol * (8/27 in SOFA's sum) * density, vol the product of the
+// edges 0-1, 0-3, 0-4 of the rotated rest element. It is accumulated into the scalar CSR matrix
+// (row_begin, cols, values: the element node pairs; lumped: the diagonal, holding the row sums).
+// particle[i] (SOFA's _particleMasses, used for the weight) sums vol * density / 8 over the
+// elements of node i, vol from the rest positions.
+inline void hexa_fem_mass_init(const Index* hexa, Index n_hexa, const double* rest_x, const double* element_data,
+                               int method, const double* density, const Index* row_begin, const Index* cols,
+                               Index n_rows, bool lumped, double* values, double* particle) {
+    using namespace fem_detail;
+    const int stride = hexa_fem_data_size(method);
+    const double rho = density[0];
+    for (Index r = 0; r < row_begin[n_rows]; ++r) values[r] = 0.0;
+    for (Index r = 0; r < n_rows; ++r) particle[r] = 0.0;
+    auto entry = [&](Index a, Index b) -> double& {
+        const Index* first = cols + row_begin[a];
+        const Index* last = cols + row_begin[a + 1];
+        return values[std::lower_bound(first, last, b) - cols];
+    };
+    const double t = 1.0;
+    const double integrated = (t * t / 72.0 + t * t / 72.0 + (t * t) * t / 216.0 + t / 24.0 + 1.0 / 8.0 +
+                               (t * t) / 72.0 + t / 24.0 + t / 24.0) *
+                              rho;
+    for (Index i = 0; i < n_hexa; ++i) {
+        const Index* h = hexa + 8 * i;
+        V3 nodes[8];
+        for (int w = 0; w < 8; ++w) nodes[w] = load(rest_x + 3 * h[w]);
+        const double volume = norm(sub(nodes[1], nodes[0])) * norm(sub(nodes[3], nodes[0])) *
+                              norm(sub(nodes[4], nodes[0]));
+        const double mass = (volume * rho) / 8.0;
+        for (int w = 0; w < 8; ++w) particle[h[w]] += mass;
+        const double* e = element_data + i * stride + HREST;
+        V3 q[8];
+        for (int w = 0; w < 8; ++w) q[w] = load(e + 3 * w);
+        const double vol = norm(sub(q[1], q[0])) * norm(sub(q[3], q[0])) * norm(sub(q[4], q[0]));
+        const double m = vol * integrated;
+        for (int a = 0; a < 8; ++a)
+            for (int b = 0; b < 8; ++b) {
+                if (lumped)
+                    entry(h[a], h[a]) += m;
+                else
+                    entry(h[a], h[b]) += m;
+            }
     }
 }
 

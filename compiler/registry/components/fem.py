@@ -161,6 +161,8 @@ HEXAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
 
 HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
     name="HexahedronFEMForceFieldAndMass",
+    kernel="hexa_fem",
+    role="and_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="HexahedronFEMForceField plus the consistent (or lumped) mass of the same elements.",
@@ -206,6 +208,7 @@ TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
 
 TRIANGULAR_FEM_FORCE_FIELD_OPTIM = ComponentSpec(
     name="TriangularFEMForceFieldOptim",
+    kernel="trifem_optim",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Optimised corotational membrane triangles (large displacements only).",

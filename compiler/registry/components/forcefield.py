@@ -300,12 +300,13 @@ TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
 
 FAST_TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     name="FastTriangularBendingSprings",
+    kernel="bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Bending springs across triangle edges (linear bending model).",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="FastTriangularBendingSprings is not implemented yet",
+    supported=True,
     effects=_SPRING_EFFECTS,
     fields=(
         FieldSpec("bendingStiffness", Real(), 1.0, "bending stiffness", valid=MUST_BE_NONNEGATIVE),

@@ -89,6 +89,7 @@ PCG_LINEAR_SOLVER = ComponentSpec(
 
 MIN_RES_LINEAR_SOLVER = ComponentSpec(
     name="MinResLinearSolver",
+    kernel="minres",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="MINRES iterations (symmetric, possibly indefinite systems).",
@@ -139,7 +140,7 @@ SPARSE_LU_SOLVER = ComponentSpec(
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
     doc="Direct sparse LU factorisation (CSparse). Moved out of SOFA's main repository into the "
-    'CSparseSolvers plugin in v23.12. The implicit system matrix is symmetric, so sofac solves it '
+    "CSparseSolvers plugin in v23.12. The implicit system matrix is symmetric, so sofac solves it "
     "with the same sparse factorisation as SparseLDLSolver (the same solution, to round-off).",
     templates=(CRS_SCALAR,),
     default_template=CRS_SCALAR,
@@ -151,6 +152,7 @@ SPARSE_LU_SOLVER = ComponentSpec(
         *LINEAR_SOLVER_FIELDS,
     ),
 )
+
 
 def _eigen(name: str, what: str) -> ComponentSpec:
     return ComponentSpec(

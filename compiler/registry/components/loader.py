@@ -119,6 +119,7 @@ SPHERE_LOADER = ComponentSpec(
 
 STRING_MESH_CREATOR = ComponentSpec(
     name="StringMeshCreator",
+    compute="string_mesh",
     category=Category.LOADER,
     module=_MODULE,
     doc="Generates a 1-D mesh: `resolution` points on the unit segment along x, joined by edges.",

@@ -135,6 +135,7 @@ _DISTANCE_FIELDS = (
 
 DISTANCE_MAPPING = ComponentSpec(
     name="DistanceMapping",
+    kernel="distance_mapping",
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="One scalar per edge of the topology: its length minus the rest length.",
@@ -147,6 +148,8 @@ DISTANCE_MAPPING = ComponentSpec(
 
 SQUARE_DISTANCE_MAPPING = ComponentSpec(
     name="SquareDistanceMapping",
+    kernel="distance_mapping",
+    role="square",
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="One scalar per edge of the topology: its squared length.",

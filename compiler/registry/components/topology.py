@@ -390,6 +390,7 @@ MESH2POINT = _topological_mapping(
     FieldSpec("copyTriangles", Bool(), False, "map input triangles to output triangles"),
     FieldSpec("copyTetrahedra", Bool(), False, "map input tetrahedra to output tetrahedra"),
     module="Sofa.Component.Mapping.Linear",
+    compute="mesh_to_point",
 )
 
 TOPOLOGICAL_CHANGE_PROCESSOR = ComponentSpec(
