@@ -29,6 +29,15 @@ inline void add_scaled(double* out, const double* a, const double* b, double h, 
     for (Index k = 0; k < size; ++k) out[k] = a[k] + h * b[k];
 }
 
+// Symplectic Euler on points in one pass: v += h a, then x += h v (the same numbers as add_scaled
+// followed by advance).
+inline void symplectic_points(double* x, double* v, const double* a, double h, Index size) {
+    for (Index k = 0; k < size; ++k) {
+        v[k] = v[k] + h * a[k];
+        x[k] = x[k] + h * v[k];
+    }
+}
+
 // out = x "+" h * v on coordinates: a translation for points; for rigid frames the orientation
 // turns by the rotation vector h*w, left-multiplied in world axes (SOFA's RigidCoord += Deriv).
 template <class DT>
@@ -60,6 +69,12 @@ inline void mass_gravity(double* f, Index n, const double* mass, Index mass_stri
 
 template <class DT>
 inline void mass_acceleration(double* a, const double* f, Index n, const double* mass, Index mass_stride) {
+    if constexpr (!DT::rigid) {
+        if (mass_stride == 0) {  // one mass for every point: a flat, vectorised division (same quotients)
+            Eigen::Map<Eigen::ArrayXd>(a, DT::deriv * n) = Eigen::Map<const Eigen::ArrayXd>(f, DT::deriv * n) / mass[0];
+            return;
+        }
+    }
     for (Index i = 0; i < n; ++i) {
         const double* mi = mass + i * mass_stride;
         if constexpr (DT::rigid && DT::coord == 7) {
@@ -424,6 +439,12 @@ inline void scale(double* a, double factor, Index size) {
 }
 
 // ---- guards ------------------------------------------------------------------------------------
+
+// Whether every number is finite: a vectorised sum of a * 0, which is NaN as soon as one number is
+// infinite or NaN (the order of the sum does not matter: it is 0 or NaN).
+inline bool all_finite(const double* a, Index size) {
+    return !std::isnan((Eigen::Map<const Eigen::ArrayXd>(a, size) * 0.0).sum());
+}
 
 // Index of the first non-finite number, or -1.
 inline Index first_non_finite(const double* a, Index size) {
