@@ -434,6 +434,26 @@ inline double dot(const double* a, const double* b, Index n, int width) {
     return sum;
 }
 
+// The conjugate gradient's update in one pass: x += alpha p, r -= alpha q; returns the new r.r
+// (summed as dot(r, r, n, width): the same number as the separate passes).
+template <int Width>
+inline double cg_update(double* x, double* r, const double* p, const double* q, double alpha, Index n) {
+    double sum = 0.0;
+    for (Index i = 0; i < n; ++i) {
+        double block = 0.0;
+        SOFAC_UNROLL
+        for (int d = 0; d < Width; ++d) {
+            const Index k = Width * i + d;
+            x[k] = x[k] + alpha * p[k];
+            const double rk = r[k] + -alpha * q[k];
+            r[k] = rk;
+            block = d == 0 ? rk * rk : block + rk * rk;
+        }
+        sum += block;
+    }
+    return sum;
+}
+
 inline void scale(double* a, double factor, Index size) {
     for (Index k = 0; k < size; ++k) a[k] *= factor;
 }
