@@ -1086,9 +1086,7 @@ def _add_springs(
     damped = not planner.prune or bool(np.any(springs[:, 3] != 0.0))
     if not damped and count:
         planner.pruned.setdefault(kd.key, "every spring's damping is zero: no damping term computed")
-    flagged = bool(np.any(elongation.initial)) or not bool(
-        np.all(enabled.initial)
-    )
+    flagged = bool(np.any(elongation.initial)) or not bool(np.all(enabled.initial))
     variant = f"{types}, {'true' if damped else 'false'}, {'true' if flagged else 'false'}"
     origin = origin_of(component)
     jacobians = "nullptr"
@@ -1120,7 +1118,8 @@ def _add_springs(
         Op(
             origin,
             [
-                f"sofac::spring_forces<{variant}>({table}, {_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
+                f"sofac::spring_forces<{variant}>({table}, "
+                f"{_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
                 f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)}, {jacobians});"
             ],
         )
