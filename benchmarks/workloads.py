@@ -5,8 +5,9 @@ For each workload, in this one process:
 - **sofac**: the workload as a generated ``.scn`` scene (``scenegen.py``), ``sofac.load``, warm-up
   steps, then ``--batches`` timed batches of ``sim.step(steps)``;
 - **hand-written**: an independent C++ loop of the same algorithm (``handwritten/w1.cpp``,
-  ``w2.cpp``), compiled with g++ and sofac's optimisation flags (``sofac.build.SCENE_FLAGS`` without
-  the shared-library ones) and timed inside the C++ program, batch by batch, after the same warm-up;
+  ``w2.cpp``), compiled with g++ and the flags sofac uses for large scenes
+  (``sofac.build.LARGE_SCENE_FLAGS`` without the shared-library ones) and timed inside the C++
+  program, batch by batch, after the same warm-up;
 - **NumPy / SciPy**: vectorised NumPy (W1) and a ``scipy.sparse`` matrix with
   ``scipy.sparse.linalg.cg`` (W2), when SciPy is installed;
 - **SOFA**: SOFA's measured figures from ``shared/reference/sofa/timings.md`` (not run here).
@@ -140,10 +141,11 @@ def time_sofac(scene: Path, warmup: int, steps: int, batches: int) -> tuple[list
 
 
 def handwritten_flags() -> list[str]:
-    """sofac's scene flags without those that make a shared library."""
-    from sofac.build import SCENE_FLAGS
+    """The flags sofac compiles the cloth scenes with (a large scene: ``-O3``), without those that
+    make a shared library."""
+    from sofac.build import LARGE_SCENE_FLAGS
 
-    return [f for f in SCENE_FLAGS if f not in ("-shared", "-fPIC", "-fvisibility=hidden", "-w")]
+    return [f for f in LARGE_SCENE_FLAGS if f not in ("-shared", "-fPIC", "-fvisibility=hidden", "-w")]
 
 
 def build_handwritten(name: str, out: Path) -> Path:

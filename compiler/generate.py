@@ -64,6 +64,7 @@ class _StateView:
         self.size = state.size
         self.width = state.datatype.deriv_size
         self.cpp_type = state.cpp_type
+        self.rigid = state.datatype.rigid
         self.stages = state.stages
         self.path_comment = _comment(state.path)
 

@@ -503,7 +503,8 @@ def compile_checked(
     scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
-    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
+    numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
+    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct, numbers=numbers))
     compiled.checked = checked  # the checked scene, for consumers such as rendering (visual models)
     return compiled
 

@@ -1422,6 +1422,14 @@ def _add_springs(
         f"{_ptr(enabled)}, {count}}}"
     )
     types = f"{first.cpp_type}, {second.cpp_type}"
+    # Specialised at compile time: no damping term when every damping is exactly zero (a pruned
+    # effect: setting a damping later needs prune=False), no flag tests when no spring is disabled
+    # or elongation-only (the flags are not tunable).
+    damped = not planner.prune or bool(np.any(springs[:, 3] != 0.0))
+    if not damped and count:
+        planner.pruned.setdefault(kd.key, "every spring's damping is zero: no damping term computed")
+    flagged = bool(np.any(elongation.initial)) or not bool(np.all(enabled.initial))
+    variant = f"{types}, {'true' if damped else 'false'}, {'true' if flagged else 'false'}"
     origin = origin_of(component)
     jacobians = "nullptr"
     if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
@@ -1452,7 +1460,8 @@ def _add_springs(
         Op(
             origin,
             [
-                f"sofac::spring_forces<{types}>({table}, {_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
+                f"sofac::spring_forces<{variant}>({table}, "
+                f"{_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
                 f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)}, {jacobians});"
             ],
         )
