@@ -1134,7 +1134,8 @@ class _EvalContext:
         target = self.checked.links.get(link)
         if not isinstance(target, Component):
             return None
-        return self.checker.value(self.checker.checked.of(target), name)
+        linked = self.checker.checked.of(target)
+        return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
 
     def input_positions(self) -> np.ndarray | None:
         if self.is_set("position"):

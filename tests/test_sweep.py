@@ -252,7 +252,10 @@ def _without_timings(dataset: xr.Dataset) -> xr.Dataset:
 
 def test_a_cluster_sweep_equals_the_serial_sweep_bit_for_bit(dask_client) -> None:
     plan = _beam_plan(200)
-    on_cluster = sweeps.run_plan(plan, scheduler=dask_client)
+    # By address, as `sofac sweep --scheduler tcp://host:8786` connects to a running cluster.
+    address = dask_client.scheduler.address
+    assert address.startswith("tcp://")
+    on_cluster = sweeps.run_plan(plan, scheduler=address)
     serial = sweeps.run_plan(plan, scheduler="synchronous")
     assert list(on_cluster["status"].values) == ["ok"] * 6
     xr.testing.assert_identical(_without_timings(on_cluster), _without_timings(serial))
