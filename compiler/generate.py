@@ -63,6 +63,7 @@ class _StateView:
         self.dx, self.df = state.dx, state.df
         self.size = state.size
         self.width = state.datatype.deriv_size
+        self.coord_width = state.datatype.coord_size
         self.cpp_type = state.cpp_type
         self.stages = state.stages
         self.path_comment = _comment(state.path)
@@ -124,6 +125,7 @@ class _GroupView:
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
         self.factor_once = group.factor_once
         self.cg = group.cg
+        self.static = group.static
 
 
 def render(plan: Plan) -> str:

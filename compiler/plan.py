@@ -151,6 +151,9 @@ class Group:
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
+    # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
+    # parameters; empty for a time integrator.
+    static: dict[str, Buffer] = field(default_factory=dict)
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
@@ -281,7 +284,8 @@ class _Planner:
         effects = []
         for group in groups:
             states = ", ".join(s.path for s in group.states)
-            effects.append(("integration", origin_of(group.solver), f"{group.scheme} scheme over {states}"))
+            scheme = "static (Newton-Raphson)" if group.static else group.scheme
+            effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
         if self.gravity.key not in self.pruned:
             effects.append(
                 ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
@@ -462,12 +466,15 @@ class _Planner:
             "runge_kutta2": "rk2",
             "runge_kutta4": "rk4",
             "euler_implicit": "implicit",
+            "static": "implicit",
         }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
         symplectic = bool(self.value(solver.component, "symplectic")) if scheme == "euler" else False
         group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
-        if scheme == "implicit" and not self._plan_implicit(solver, group):
+        if kernel == "static" and not self._plan_static(solver, group):
+            return None
+        if kernel == "euler_implicit" and not self._plan_implicit(solver, group):
             return None
         if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
             linear = solver.links.get("linearSolver")
@@ -517,6 +524,44 @@ class _Planner:
             group.implicit[name] = self.buffer(
                 component, name, [float(self.value(component, name) or 0.0)], role="param"
             )
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_static(self, solver: CheckedComponent, group: Group) -> bool:
+        """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
+        (its `newtonSolver` link, else the first one in its node or below, else SOFA's defaults with
+        the StaticSolver's deprecated attributes, as SOFA's init forwards them), then the linear solver."""
+        component = solver.component
+        newton = solver.links.get("newtonSolver")
+        if not isinstance(newton, Component):
+            newton = next(
+                (
+                    c
+                    for node in _subtree(component.node)
+                    for c in node.objects
+                    if (spec := self.checked.of(c).spec) is not None and spec.name == "NewtonRaphsonSolver"
+                ),
+                None,
+            )
+        values: dict[str, float] = {}
+        for name, default in _NEWTON_DEFAULTS.items():
+            value = self.value(newton, name) if newton is not None else None
+            values[name] = float(default if value is None else value)
+        if newton is None:
+            for legacy, name in _STATIC_LEGACY_FORWARDS:
+                value = self.value(component, legacy)
+                if value is not None:
+                    values[name] = float(value)
+        owner = newton if newton is not None else component
+        for name, value in values.items():
+            if name.startswith("maxNb"):
+                group.static[name] = self.buffer(owner, name, [max(int(value), 0)], "i64")
+            else:
+                group.static[name] = self.buffer(owner, name, [value], role="param")
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_linear_solver(self, solver: CheckedComponent, group: Group) -> bool:
+        """The implicit group's linear solver: CG (matrix-free, as SOFA's), PCG or a direct solver."""
+        component = solver.component
         linear = solver.links.get("linearSolver")
         if not isinstance(linear, Component):
             linear = self.checked.resolver._linear_solver_below(component.node)
@@ -569,6 +614,38 @@ class _Planner:
                 if group is not None:
                     group.mapped.append(self.states[id(checked.component)])
                     owner[id(checked.component)] = group
+
+
+# NewtonRaphsonSolver's parameters and SOFA's defaults (the maxNb* are counts).
+_NEWTON_DEFAULTS: dict[str, float] = {
+    "maxNbIterationsNewton": 1,
+    "absoluteResidualStoppingThreshold": 1e-5,
+    "relativeInitialStoppingThreshold": 1e-5,
+    "relativeSuccessiveStoppingThreshold": 1e-5,
+    "absoluteEstimateDifferenceThreshold": 0.0,
+    "relativeEstimateDifferenceThreshold": 0.0,
+    "maxNbIterationsLineSearch": 1,
+    "lineSearchCoefficient": 0.5,
+}
+# StaticSolver's deprecated attributes -> the NewtonRaphsonSolver parameter SOFA's init sets from
+# them, in SOFA's order (both relative tolerances land on relativeEstimateDifferenceThreshold).
+_STATIC_LEGACY_FORWARDS = (
+    ("newton_iterations", "maxNbIterationsNewton"),
+    ("absolute_correction_tolerance_threshold", "absoluteEstimateDifferenceThreshold"),
+    ("relative_correction_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+    ("absolute_residual_tolerance_threshold", "absoluteResidualStoppingThreshold"),
+    ("relative_residual_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+)
+
+
+def _subtree(node: Any) -> list[Any]:
+    """A node and its descendants, depth first."""
+    nodes, pending = [], [node]
+    while pending:
+        current = pending.pop(0)
+        nodes.append(current)
+        pending[0:0] = list(current.children)
+    return nodes
 
 
 # --- lowerings ------------------------------------------------------------------------------------
@@ -1909,7 +1986,7 @@ def format_schedule(plan: Plan) -> str:
             "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
             "rk2": "RK2 (midpoint)",
             "rk4": "RK4",
-            "implicit": "implicit Euler",
+            "implicit": "static equilibrium (Newton-Raphson)" if group.static else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
         lines.append(

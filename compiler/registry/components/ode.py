@@ -155,6 +155,7 @@ _STATIC_LEGACY = (
 
 STATIC_SOLVER = ComponentSpec(
     name="StaticSolver",
+    kernel="static",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Static equilibrium f(x) = 0 by Newton-Raphson (a NewtonRaphsonSolver found below, or created).",
