@@ -126,6 +126,8 @@ class _GroupView:
         self.factor_once = group.factor_once
         self.cg = group.cg
         self.static = group.static
+        self.newmark = group.newmark
+        self.first_order = group.first_order
 
 
 def render(plan: Plan) -> str:

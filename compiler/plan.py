@@ -154,6 +154,10 @@ class Group:
     # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
     # parameters; empty for a time integrator.
     static: dict[str, Buffer] = field(default_factory=dict)
+    # NewmarkImplicitSolver (also "implicit"): gamma, beta, and a flag set once the initial
+    # acceleration is computed; empty for other solvers.
+    newmark: dict[str, Buffer] = field(default_factory=dict)
+    first_order: bool = False  # EulerImplicitSolver's firstOrder: (M - h K) v = f, x += h v
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
@@ -284,7 +288,9 @@ class _Planner:
         effects = []
         for group in groups:
             states = ", ".join(s.path for s in group.states)
-            scheme = "static (Newton-Raphson)" if group.static else group.scheme
+            scheme = (
+                "static (Newton-Raphson)" if group.static else "Newmark" if group.newmark else group.scheme
+            )
             effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
         if self.gravity.key not in self.pruned:
             effects.append(
@@ -444,6 +450,8 @@ class _Planner:
                 "rk4": ("x0", "v0", "dx", "dv"),
                 "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
             }[group.scheme]
+            if group.newmark:
+                names += ("a",)  # the previous step's acceleration
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -467,6 +475,7 @@ class _Planner:
             "runge_kutta4": "rk4",
             "euler_implicit": "implicit",
             "static": "implicit",
+            "newmark": "implicit",
         }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
@@ -475,6 +484,8 @@ class _Planner:
         if kernel == "static" and not self._plan_static(solver, group):
             return None
         if kernel == "euler_implicit" and not self._plan_implicit(solver, group):
+            return None
+        if kernel == "newmark" and not self._plan_newmark(solver, group):
             return None
         if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
             linear = solver.links.get("linearSolver")
@@ -516,15 +527,36 @@ class _Planner:
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
         """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
         component = solver.component
-        if self.value(component, "firstOrder"):
-            self.unsupported(solver, "firstOrder is not compiled yet")
-            return False
+        group.first_order = bool(self.value(component, "firstOrder"))
         group.trapezoidal = bool(self.value(component, "trapezoidalScheme"))
         for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
             group.implicit[name] = self.buffer(
                 component, name, [float(self.value(component, name) or 0.0)], role="param"
             )
         return self._plan_linear_solver(solver, group)
+
+    def _plan_newmark(self, solver: CheckedComponent, group: Group) -> bool:
+        """NewmarkImplicitSolver: Rayleigh damping, vdamping, gamma, beta; the linear solver."""
+        component = solver.component
+        for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+            group.implicit[name] = self.buffer(
+                component, name, [float(self.value(component, name) or 0.0)], role="param"
+            )
+        for name, default in (("gamma", 0.5), ("beta", 0.25)):
+            value = self.value(component, name)
+            group.newmark[name] = self.buffer(
+                component, name, [float(default if value is None else value)], role="param"
+            )
+        group.newmark["started"] = self.buffer(component, "started", [0], "i64", role="scratch")
+        if not self._plan_linear_solver(solver, group):
+            return False
+        if group.factor_once:
+            self.unsupported(
+                self.checked.of(group.linear_solver),
+                "PrecomputedLinearSolver under NewmarkImplicitSolver is not compiled yet",
+            )
+            return False
+        return True
 
     def _plan_static(self, solver: CheckedComponent, group: Group) -> bool:
         """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
@@ -1986,7 +2018,11 @@ def format_schedule(plan: Plan) -> str:
             "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
             "rk2": "RK2 (midpoint)",
             "rk4": "RK4",
-            "implicit": "static equilibrium (Newton-Raphson)" if group.static else "implicit Euler",
+            "implicit": "static equilibrium (Newton-Raphson)"
+            if group.static
+            else "Newmark"
+            if group.newmark
+            else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
         lines.append(
