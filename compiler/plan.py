@@ -2040,13 +2040,22 @@ def format_schedule(plan: Plan) -> str:
             ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
         ]
         if group.scheme == "implicit":
+            if group.static:
+                rhs, system = "b = f, projected", "Newton iterations: solve -K dx = f, x += alpha dx"
+            elif group.newmark:
+                rhs = "b = f + (-rm M + (rk + h) K) v + (...) a, projected"
+                system = "solve ((1 + h gamma rm) M - (h^2 beta + h gamma rk) K) a' = b"
+            elif group.first_order:
+                rhs, system = "b = f, projected (firstOrder)", "solve (M - h K) v' = b"
+            else:
+                rhs, system = (
+                    "b = h (f - rm M v + (h + rk) K v), projected",
+                    "solve ((1 + h rm) M - h (h + rk) K) dv = b",
+                )
             sections += [
-                ("b = h (f - rm M v + (h + rk) K v), projected; M dx", [op.origin for op in group.mass_dx]),
+                (f"{rhs}; M dx", [op.origin for op in group.mass_dx]),
                 ("K dx", [op.origin for op in group.stiffness_dx]),
-                (
-                    f"solve ((1 + h rm) M - h (h + rk) K) dv = b with CG ({origin_of(group.linear_solver)})",
-                    [],
-                ),
+                (f"{system} with {origin_of(group.linear_solver)}", []),
             ]
         else:
             sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))
