@@ -63,6 +63,7 @@ class _StateView:
         self.dx, self.df = state.dx, state.df
         self.size = state.size
         self.width = state.datatype.deriv_size
+        self.coord_width = state.datatype.coord_size
         self.cpp_type = state.cpp_type
         self.rigid = state.datatype.rigid
         self.stages = state.stages
@@ -129,6 +130,9 @@ class _GroupView:
         self.factor_once = group.factor_once
         self.cg = group.cg
         self.minres = group.minres
+        self.static = group.static
+        self.newmark = group.newmark
+        self.first_order = group.first_order
 
 
 def render(plan: Plan) -> str:

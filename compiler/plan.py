@@ -158,6 +158,13 @@ class Group:
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
+    # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
+    # parameters; empty for a time integrator.
+    static: dict[str, Buffer] = field(default_factory=dict)
+    # NewmarkImplicitSolver (also "implicit"): gamma, beta, and a flag set once the initial
+    # acceleration is computed; empty for other solvers.
+    newmark: dict[str, Buffer] = field(default_factory=dict)
+    first_order: bool = False  # EulerImplicitSolver's firstOrder: (M - h K) v = f, x += h v
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
@@ -288,7 +295,10 @@ class _Planner:
         effects = []
         for group in groups:
             states = ", ".join(s.path for s in group.states)
-            effects.append(("integration", origin_of(group.solver), f"{group.scheme} scheme over {states}"))
+            scheme = (
+                "static (Newton-Raphson)" if group.static else "Newmark" if group.newmark else group.scheme
+            )
+            effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
         if self.gravity.key not in self.pruned:
             effects.append(
                 ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
@@ -459,6 +469,8 @@ class _Planner:
             }[group.scheme]
             if group.minres:
                 names = ("r", "r1", "r2", "y", "w", "w2", "v")
+            if group.newmark:
+                names += ("a",)  # the previous step's acceleration
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -481,12 +493,18 @@ class _Planner:
             "runge_kutta2": "rk2",
             "runge_kutta4": "rk4",
             "euler_implicit": "implicit",
+            "static": "implicit",
+            "newmark": "implicit",
         }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
         symplectic = bool(self.value(solver.component, "symplectic")) if scheme == "euler" else False
         group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
-        if scheme == "implicit" and not self._plan_implicit(solver, group):
+        if kernel == "static" and not self._plan_static(solver, group):
+            return None
+        if kernel == "euler_implicit" and not self._plan_implicit(solver, group):
+            return None
+        if kernel == "newmark" and not self._plan_newmark(solver, group):
             return None
         if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
             linear = solver.links.get("linearSolver")
@@ -528,14 +546,73 @@ class _Planner:
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
         """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
         component = solver.component
-        if self.value(component, "firstOrder"):
-            self.unsupported(solver, "firstOrder is not compiled yet")
-            return False
+        group.first_order = bool(self.value(component, "firstOrder"))
         group.trapezoidal = bool(self.value(component, "trapezoidalScheme"))
         for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
             group.implicit[name] = self.buffer(
                 component, name, [float(self.value(component, name) or 0.0)], role="param"
             )
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_newmark(self, solver: CheckedComponent, group: Group) -> bool:
+        """NewmarkImplicitSolver: Rayleigh damping, vdamping, gamma, beta; the linear solver."""
+        component = solver.component
+        for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+            group.implicit[name] = self.buffer(
+                component, name, [float(self.value(component, name) or 0.0)], role="param"
+            )
+        for name, default in (("gamma", 0.5), ("beta", 0.25)):
+            value = self.value(component, name)
+            group.newmark[name] = self.buffer(
+                component, name, [float(default if value is None else value)], role="param"
+            )
+        group.newmark["started"] = self.buffer(component, "started", [0], "i64", role="scratch")
+        if not self._plan_linear_solver(solver, group):
+            return False
+        if group.factor_once:
+            self.unsupported(
+                self.checked.of(group.linear_solver),
+                "PrecomputedLinearSolver under NewmarkImplicitSolver is not compiled yet",
+            )
+            return False
+        return True
+
+    def _plan_static(self, solver: CheckedComponent, group: Group) -> bool:
+        """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
+        (its `newtonSolver` link, else the first one in its node or below, else SOFA's defaults with
+        the StaticSolver's deprecated attributes, as SOFA's init forwards them), then the linear solver."""
+        component = solver.component
+        newton = solver.links.get("newtonSolver")
+        if not isinstance(newton, Component):
+            newton = next(
+                (
+                    c
+                    for node in _subtree(component.node)
+                    for c in node.objects
+                    if (spec := self.checked.of(c).spec) is not None and spec.name == "NewtonRaphsonSolver"
+                ),
+                None,
+            )
+        values: dict[str, float] = {}
+        for name, default in _NEWTON_DEFAULTS.items():
+            value = self.value(newton, name) if newton is not None else None
+            values[name] = float(default if value is None else value)
+        if newton is None:
+            for legacy, name in _STATIC_LEGACY_FORWARDS:
+                value = self.value(component, legacy)
+                if value is not None:
+                    values[name] = float(value)
+        owner = newton if newton is not None else component
+        for name, value in values.items():
+            if name.startswith("maxNb"):
+                group.static[name] = self.buffer(owner, name, [max(int(value), 0)], "i64")
+            else:
+                group.static[name] = self.buffer(owner, name, [value], role="param")
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_linear_solver(self, solver: CheckedComponent, group: Group) -> bool:
+        """The implicit group's linear solver: CG (matrix-free, as SOFA's), PCG or a direct solver."""
+        component = solver.component
         linear = solver.links.get("linearSolver")
         if not isinstance(linear, Component):
             linear = self.checked.resolver._linear_solver_below(component.node)
@@ -599,6 +676,38 @@ class _Planner:
                 if group is not None:
                     group.mapped.append(self.states[id(checked.component)])
                     owner[id(checked.component)] = group
+
+
+# NewtonRaphsonSolver's parameters and SOFA's defaults (the maxNb* are counts).
+_NEWTON_DEFAULTS: dict[str, float] = {
+    "maxNbIterationsNewton": 1,
+    "absoluteResidualStoppingThreshold": 1e-5,
+    "relativeInitialStoppingThreshold": 1e-5,
+    "relativeSuccessiveStoppingThreshold": 1e-5,
+    "absoluteEstimateDifferenceThreshold": 0.0,
+    "relativeEstimateDifferenceThreshold": 0.0,
+    "maxNbIterationsLineSearch": 1,
+    "lineSearchCoefficient": 0.5,
+}
+# StaticSolver's deprecated attributes -> the NewtonRaphsonSolver parameter SOFA's init sets from
+# them, in SOFA's order (both relative tolerances land on relativeEstimateDifferenceThreshold).
+_STATIC_LEGACY_FORWARDS = (
+    ("newton_iterations", "maxNbIterationsNewton"),
+    ("absolute_correction_tolerance_threshold", "absoluteEstimateDifferenceThreshold"),
+    ("relative_correction_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+    ("absolute_residual_tolerance_threshold", "absoluteResidualStoppingThreshold"),
+    ("relative_residual_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+)
+
+
+def _subtree(node: Any) -> list[Any]:
+    """A node and its descendants, depth first."""
+    nodes, pending = [], [node]
+    while pending:
+        current = pending.pop(0)
+        nodes.append(current)
+        pending[0:0] = list(current.children)
+    return nodes
 
 
 # --- lowerings ------------------------------------------------------------------------------------
@@ -2536,7 +2645,11 @@ def format_schedule(plan: Plan) -> str:
             "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
             "rk2": "RK2 (midpoint)",
             "rk4": "RK4",
-            "implicit": "implicit Euler",
+            "implicit": "static equilibrium (Newton-Raphson)"
+            if group.static
+            else "Newmark"
+            if group.newmark
+            else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
         lines.append(
@@ -2554,13 +2667,22 @@ def format_schedule(plan: Plan) -> str:
             ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
         ]
         if group.scheme == "implicit":
+            if group.static:
+                rhs, system = "b = f, projected", "Newton iterations: solve -K dx = f, x += alpha dx"
+            elif group.newmark:
+                rhs = "b = f + (-rm M + (rk + h) K) v + (...) a, projected"
+                system = "solve ((1 + h gamma rm) M - (h^2 beta + h gamma rk) K) a' = b"
+            elif group.first_order:
+                rhs, system = "b = f, projected (firstOrder)", "solve (M - h K) v' = b"
+            else:
+                rhs, system = (
+                    "b = h (f - rm M v + (h + rk) K v), projected",
+                    "solve ((1 + h rm) M - h (h + rk) K) dv = b",
+                )
             sections += [
-                ("b = h (f - rm M v + (h + rk) K v), projected; M dx", [op.origin for op in group.mass_dx]),
+                (f"{rhs}; M dx", [op.origin for op in group.mass_dx]),
                 ("K dx", [op.origin for op in group.stiffness_dx]),
-                (
-                    f"solve ((1 + h rm) M - h (h + rk) K) dv = b with CG ({origin_of(group.linear_solver)})",
-                    [],
-                ),
+                (f"{system} with {origin_of(group.linear_solver)}", []),
             ]
         else:
             sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))
