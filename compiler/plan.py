@@ -1543,7 +1543,7 @@ def _add_springs(
     jacobians = "nullptr"
     if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
-        blocks = planner.buffer(component, "dfdx", np.zeros(count * dim * dim), role="scratch")
+        blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
         jacobians = _ptr(blocks)
         if group.direct:
             offset1, offset2 = group.offset(first), group.offset(second)

@@ -273,7 +273,9 @@ inline void assemble_springs(Assembler& A, const Springs& s, const double* jacob
     constexpr int S = D1::spatial;
     using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
     for (Index k = 0; k < s.count; ++k) {
-        const Eigen::Map<const Block> m(jacobians + S * S * k);
+        double values[S * S];
+        spring_block<S>(jacobians, k, values);
+        const Eigen::Map<const Block> m(values);
         const Index a = offset1 + D1::deriv * s.a[k], b = offset2 + D2::deriv * s.b[k];
         A.add_block(a, a, m, -kfact);
         A.add_block(a, b, m, kfact);

@@ -172,8 +172,10 @@ struct Springs {
     Index count;
 };
 
-// With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces:
-// (ks - F/d) n n^T + (F/d) I, with F the whole intensity (elastic and damping), as SOFA does.
+// With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces,
+// (ks - F/d) n n^T + (F/d) I with F the whole intensity (elastic and damping), as SOFA does, in
+// factored form: S + 2 numbers per spring, c = ks - F/d, t = F/d and n (spring_block rebuilds
+// entry (i, j) as (c n_i) n_j [+ t], the very numbers a stored S x S block would hold).
 // `Damped` = false leaves out the damping term (the plan proves every damping is zero: no velocity
 // is read); `Flagged` = false skips the per-spring enabled / elongation-only flags (all springs
 // enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
@@ -204,7 +206,7 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         if (!active) {
             if (jacobians) {
                 SOFAC_UNROLL
-                for (int i = 0; i < S * S; ++i) jacobians[S * S * k + i] = 0.0;
+                for (int i = 0; i < S + 2; ++i) jacobians[(S + 2) * k + i] = 0.0;
             }
             continue;
         }
@@ -231,15 +233,25 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         }
         if (jacobians) {
             const double tangent = intensity * inverse_length;
-            const double c = ks - tangent;
-            double* const m = jacobians + S * S * k;  // row-major
+            double* const m = jacobians + (S + 2) * k;
+            m[0] = ks - tangent;
+            m[1] = tangent;
             SOFAC_UNROLL
-            for (int i = 0; i < S; ++i) {
-                SOFAC_UNROLL
-                for (int j = 0; j < S; ++j) m[S * i + j] = c * u[i] * u[j];
-                m[S * i + i] += tangent;
-            }
+            for (int i = 0; i < S; ++i) m[2 + i] = u[i];
         }
+    }
+}
+
+// Spring k's S x S block (row-major) from the factored form spring_forces stores.
+template <int S>
+inline void spring_block(const double* jacobians, Index k, double* block) {
+    const double* const m = jacobians + (S + 2) * k;
+    SOFAC_UNROLL
+    for (int i = 0; i < S; ++i) {
+        const double cu = m[0] * m[2 + i];
+        SOFAC_UNROLL
+        for (int j = 0; j < S; ++j) block[S * i + j] = cu * m[2 + j];
+        block[S * i + i] += m[1];
     }
 }
 
@@ -254,7 +266,8 @@ inline void spring_dforces(const Springs& s, const double* jacobians, const doub
     const Index count = s.count;
     for (Index k = 0; k < count; ++k) {
         const Index a = sa[k], b = sb[k];
-        const double* const m = jacobians + S * S * k;
+        double m[S * S];
+        spring_block<S>(jacobians, k, m);
         const double* const ya = dx1 + D1::deriv * a;
         const double* const yb = dx2 + D2::deriv * b;
         double w[S];
