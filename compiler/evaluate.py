@@ -290,6 +290,32 @@ def _tetrahedral_container_edges(tetrahedra: np.ndarray) -> np.ndarray:
     return np.asarray(edges, dtype=np.int64).reshape(-1, 2)
 
 
+def transform_engine(ctx: Context) -> Outputs:
+    """TransformEngine on Vec3 points: scale then translation, in SOFA's order (each operation one
+    rounding); inverse: translation by -t first, then scale by 1/s. Rotations are not evaluated."""
+    value = ctx.value("input_position")
+    if value is None or not np.size(value):
+        raise UnknownInput("input_position is not known at compile time")
+    points = np.asarray(value, dtype=float).reshape(-1, 3).copy()
+    scale = np.asarray(ctx.value("scale"), dtype=float)
+    translation = np.asarray(ctx.value("translation"), dtype=float)
+    rotation = np.asarray(ctx.value("rotation"), dtype=float)
+    quaternion = np.asarray(ctx.value("quaternion"), dtype=float)
+    if rotation.any() or not np.array_equal(quaternion, [0.0, 0.0, 0.0, 1.0]):
+        raise UnknownInput("TransformEngine rotations are not evaluated yet")
+    inverse = bool(ctx.value("inverse"))
+    operations = []
+    if not np.array_equal(scale, [1.0, 1.0, 1.0]):
+        factors = 1.0 / scale if inverse else scale
+        operations.append(lambda p: p * factors)
+    if translation.any():
+        shift = -translation if inverse else translation
+        operations.append(lambda p: p + shift)
+    for operation in reversed(operations) if inverse else operations:
+        points = operation(points)
+    return {"output_position": points.ravel()}
+
+
 def mesh_to_point(ctx: Context) -> Outputs:
     """Mesh2PointTopologicalMapping's output points (SOFA's init order): per input point
     p + pointBaryCoords[j]; per edge p0 (1 - fx) + p1 fx; per triangle p0 (1 - fx - fy) + p1 fx + p2 fy;
@@ -352,6 +378,7 @@ def mesh_to_point(ctx: Context) -> Outputs:
 
 EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "mesh_to_point": mesh_to_point,
+    "transform_engine": transform_engine,
     "hexa_to_tetra": hexa_to_tetra,
     "tetra_to_triangle": tetra_to_triangle,
     "hexa_to_quad": hexa_to_quad,

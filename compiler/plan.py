@@ -423,7 +423,9 @@ class _Planner:
         """The size a mapping gives its output state at init when the state has no positions of its
         own (the distance mappings: one DOF per edge of their topology); else 0."""
         mapping = self.checked.mapping_of(state)
-        if mapping is None or mapping.spec is None or mapping.spec.kernel != "distance_mapping":
+        if mapping is None or mapping.spec is None:
+            return 0
+        if mapping.spec.kernel not in ("distance_mapping", "distance_multi_mapping"):
             return 0
         topology = _topology_of(self, mapping)
         edges = self.value(topology, "edges") if topology is not None else None
@@ -530,7 +532,9 @@ class _Planner:
         preconditioner = linear.links.get("preconditioner")
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
-            block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1}.get(spec.kernel if spec else "")
+            block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
+            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner)):
+                return False
             if block is None:
                 self.unsupported(
                     self.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
@@ -541,6 +545,33 @@ class _Planner:
                     preconditioner, "omega", [float(self.value(preconditioner, "omega"))], role="param"
                 )
             group.preconditioner, group.assembled = block, True
+        return True
+
+    def _warp_is_identity(self, warp: CheckedComponent) -> bool:
+        """WarpPreconditioner as sofac compiles it: its RotationMatrixSystem reassembles the main
+        system every step (assemblingRate 1), which resets the rotations to identity, and its solver
+        is a sparse direct one: the preconditioner is then that solver on this step's matrix."""
+        system = warp.links.get("linearSystem")
+        inner = warp.links.get("linearSolver")
+        if not isinstance(inner, Component):
+            solvers = [
+                c
+                for c in warp.component.node.objects
+                if self.checked.of(c).category is Category.LINEAR_SOLVER
+            ]
+            inner = next(
+                (c for c in solvers if getattr(self.checked.of(c).spec, "kernel", "") == "direct"), None
+            )
+        if isinstance(system, Component) and int(self.value(system, "assemblingRate") or 1) != 1:
+            self.unsupported(
+                warp,
+                "a RotationMatrixSystem with assemblingRate > 1 (rotated factorisations) is not compiled yet",
+            )
+            return False
+        spec = self.checked.of(inner).spec if isinstance(inner, Component) else None
+        if spec is None or spec.kernel != "direct":
+            self.unsupported(warp, "its linearSolver must be a sparse direct solver")
+            return False
         return True
 
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
@@ -664,6 +695,9 @@ class _Planner:
                 mapping = self.checked.mapping_of(checked.component)
                 assert mapping is not None
                 source = mapping.links.get("input")
+                if not isinstance(source, Component):  # a multi-mapping: its group is its first input's
+                    inputs = _mapping_inputs(self, mapping)
+                    source = inputs[0] if inputs else None
                 group = owner.get(id(source)) if isinstance(source, Component) else None
                 if (
                     group is None
@@ -1205,6 +1239,339 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
             if maps_forces
             else None,
             geometric,
+        )
+    )
+
+
+def _lower_quad_bending_springs(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """QuadBendingSprings: a spring between the opposite corners of two quads sharing an edge
+    (SOFA's registerEdge / addSpring order, each pair once), rest length from the positions."""
+    import math
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    quads = (_topology_cells(planner, checked) or {}).get("quads")
+    rest = planner.checked.positions(state.component)
+    if quads is None or not quads.size or rest is None:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    stiffness = np.atleast_1d(np.asarray(planner.value(component, "stiffness"), dtype=float))
+    damping = np.atleast_1d(np.asarray(planner.value(component, "damping"), dtype=float))
+    ks, kd = float(stiffness[0]), float(damping[0])
+    low, high = (
+        int(v) for v in np.asarray(planner.value(component, "localRange"), dtype=np.int64).ravel()[:2]
+    )
+    points = [tuple(float(v) for v in row[:3]) for row in np.asarray(rest, dtype=float)]
+    rows = [tuple(float(v) for v in row) for row in _springs_from_fields(planner, checked)]
+    edges: dict[tuple[int, int], tuple[int, int]] = {}
+    springs: set[tuple[int, int]] = set()
+
+    def add(a: int, b: int) -> None:
+        if low >= 0 and a < low and b < low:
+            return
+        if high >= 0 and a > high and b > high:
+            return
+        key = (min(a, b), max(a, b))
+        if key in springs:
+            return
+        springs.add(key)
+        d = [points[a][k] - points[b][k] for k in range(3)]
+        rows.append((a, b, ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+
+    def register(ab: tuple[int, int], cd: tuple[int, int]) -> None:
+        if ab[0] > ab[1]:
+            ab, cd = (ab[1], ab[0]), (cd[1], cd[0])
+        if ab not in edges:
+            edges[ab] = cd
+        else:
+            ef = edges[ab]
+            add(cd[0], ef[0])
+            add(cd[1], ef[1])
+
+    for q in np.asarray(quads, dtype=np.int64).reshape(-1, 4).tolist():
+        register((q[0], q[1]), (q[3], q[2]))
+        register((q[1], q[2]), (q[0], q[3]))
+        register((q[2], q[3]), (q[1], q[0]))
+        register((q[3], q[0]), (q[2], q[1]))
+    _add_springs(planner, checked, np.array(rows, dtype=float).reshape(-1, 5), state, state, group)
+
+
+def _lower_interaction_ellipsoid(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """InteractionEllipsoidForceField: ellipsoids carried by a rigid DOF of object2 push the points of
+    object1 (object2 is read, not pushed: object2_forces must be false)."""
+    component = checked.component
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        ends.append(planner.states.get(id(target)) if isinstance(target, Component) else None)
+    points, frame = ends
+    if points is None or frame is None:
+        planner.unsupported(checked, "object1 and object2 must be MechanicalObjects")
+        return
+    group = owner.get(id(points.component))
+    if group is None:
+        planner.ignored.append((component, "object1 has no ODE solver"))
+        return
+    if points.datatype.name != "Vec3d" or frame.datatype.name != "Rigid3d":
+        planner.unsupported(checked, "it is compiled for Vec3d points and a Rigid3d frame only")
+        return
+    if planner.value(component, "object2_forces") is not False or planner.value(component, "object2_invert"):
+        planner.unsupported(checked, "object2_forces=true or object2_invert=true is not compiled yet")
+        return
+    index = int(planner.value(component, "object2_dof_index") or 0)
+    if not 0 <= index < frame.size:
+        planner.unsupported(checked, f"object2_dof_index {index} is not a DOF of object2")
+        return
+    center_value, radius_value = planner.value(component, "center"), planner.value(component, "vradius")
+    centers = np.asarray(center_value if center_value is not None else [], dtype=float).reshape(-1, 3)
+    radii = np.asarray(radius_value if radius_value is not None else [], dtype=float).reshape(-1, 3)
+    count = max(len(centers), len(radii))
+    table = []
+    for e in range(count):
+        r = radii[min(e, len(radii) - 1)] if len(radii) else np.ones(3)
+        c = centers[min(e, len(centers) - 1)] if len(centers) else np.zeros(3)
+        table.extend([*c.tolist(), *(1 / (float(v) * float(v)) for v in r)])
+    ellipsoids = planner.buffer(component, "ellipsoids", np.asarray(table, dtype=float), columns=6)
+    contacts = planner.buffer(component, "contacts", np.zeros(10 * points.size), columns=10, role="scratch")
+    quaternion = planner.buffer(component, "frame", np.array([0.0, 0.0, 0.0, 1.0]), role="scratch")
+    stiffness, damping = (
+        float(planner.value(component, "stiffness")),
+        float(planner.value(component, "damping")),
+    )
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "ellipsoid_add_force",
+                    points.x,
+                    points.v,
+                    points.f,
+                    points.size,
+                    frame.x,
+                    index,
+                    ellipsoids,
+                    count,
+                    repr(stiffness),
+                    repr(damping),
+                    contacts,
+                    quaternion,
+                )
+            ],
+        )
+    )
+    if group.scheme == "implicit":
+        if group.assembled:
+            planner.unsupported(checked, "a direct solver with an ellipsoid force field is not compiled yet")
+            return
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "ellipsoid_add_dforce",
+                        points.dx,
+                        points.df,
+                        points.size,
+                        contacts,
+                        quaternion,
+                        "kfact",
+                    )
+                ],
+            )
+        )
+
+
+def _mapping_inputs(planner: _Planner, checked: CheckedComponent) -> list[Component]:
+    """The parent states of a mapping: its ``input`` link, or each link of a multi-mapping's list (a
+    node stands for its MechanicalObject)."""
+    from . import links
+
+    single = checked.links.get("input")
+    if isinstance(single, Component):
+        return [single]
+    text = checked.component.get("input")
+    found: list[Component] = []
+    for word in str(text or "").split():
+        path = links.parse_link(word)
+        target = links.resolve(path, checked.component) if path is not None else None
+        if isinstance(target, Node):
+            target = planner.checked.resolver._node_state(target)
+        if isinstance(target, Component):
+            found.append(target)
+    return found
+
+
+def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """UniformVelocityDampingForceField: f -= c v; with implicit="true", B = -c I in the solves."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    value = float(planner.value(component, "dampingCoefficient"))
+    if planner.prune and value == 0.0:
+        planner.pruned[f"{component.path}.dampingCoefficient"] = (
+            "dampingCoefficient is 0: no damping force computed"
+        )
+        return
+    coefficient = planner.buffer(component, "dampingCoefficient", [value], role="param")
+    scalars = state.size * state.datatype.deriv_size
+    origin = origin_of(component)
+    group.forces.append(
+        Op(origin, [_call("velocity_damping_force", state.f, state.v, scalars, f"S.{coefficient.ident}[0]")])
+    )
+    if planner.value(component, "implicit") and group.scheme == "implicit":
+        if group.assembled:
+            planner.unsupported(checked, "implicit damping with a direct solver is not compiled yet")
+            return
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "velocity_damping_dforce",
+                        state.df,
+                        state.dx,
+                        scalars,
+                        f"S.{coefficient.ident}[0]",
+                        "bfact",
+                    )
+                ],
+            )
+        )
+
+
+def _lower_distance_multi_mapping(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """DistanceMultiMapping (Vec3d -> Vec1d): distances between points of two parent states, each
+    edge from a point of the first input to one of the second (geometricStiffness None)."""
+    import math
+
+    component = checked.component
+    inputs = [planner.states.get(id(c)) for c in _mapping_inputs(planner, checked)]
+    target = checked.links.get("output")
+    child = planner.states.get(id(target)) if isinstance(target, Component) else None
+    if len(inputs) != 2 or any(p is None for p in inputs) or child is None:
+        planner.unsupported(checked, "it is compiled for two parent MechanicalObjects only")
+        return
+    first, second = inputs
+    assert first is not None and second is not None
+    group = owner.get(id(child.component))
+    if (
+        group is None
+        or owner.get(id(first.component)) is not group
+        or owner.get(id(second.component)) is not group
+    ):
+        planner.unsupported(checked, "its parents and output must share one ODE solver")
+        return
+    if any(s.datatype.name != "Vec3d" for s in (first, second)) or child.datatype.name != "Vec1d":
+        planner.unsupported(checked, f"{component.type_name} is compiled for Vec3d -> Vec1d only")
+        return
+    if str(planner.value(component, "geometricStiffness")) != "None":
+        planner.unsupported(checked, "its geometric stiffness is not compiled yet (geometricStiffness=0 is)")
+        return
+    if not planner.value(component, "applyRestPosition"):
+        planner.unsupported(
+            checked, "applyRestPosition=false (rest positions left unmapped) is not compiled yet"
+        )
+        return
+    topology = _topology_of(planner, checked)
+    edges_value = planner.value(topology, "edges") if topology is not None else None
+    pairs_value = planner.value(component, "indexPairs")
+    if edges_value is None or not np.size(edges_value) or pairs_value is None:
+        planner.unsupported(checked, "it needs edges and indexPairs known at compile time")
+        return
+    edges = np.asarray(edges_value, dtype=np.int64).reshape(-1, 2)
+    pairs = np.asarray(pairs_value, dtype=np.int64).reshape(-1, 2)
+    if (
+        edges.max() >= len(pairs)
+        or not (pairs[edges[:, 0], 0] == 0).all()
+        or not (pairs[edges[:, 1], 0] == 1).all()
+    ):
+        planner.unsupported(
+            checked, "only edges from a point of the first input to one of the second are compiled"
+        )
+        return
+    count = len(edges)
+    ends_a, ends_b = pairs[edges[:, 0], 1], pairs[edges[:, 1], 1]
+    if ends_a.max() >= first.size or ends_b.max() >= second.size or child.size != count:
+        planner.unsupported(checked, "its indexPairs or output size do not match the states")
+        return
+    lengths = np.zeros(count)
+    given = planner.value(component, "restLengths")
+    if given is not None and np.size(given) == count:
+        lengths = np.asarray(given, dtype=float).ravel()
+    elif not planner.value(component, "computeDistance"):
+        p0, p1 = first.x.initial.reshape(-1, 3).tolist(), second.x.initial.reshape(-1, 3).tolist()
+        for i in range(count):
+            d = [p0[ends_a[i]][k] - p1[ends_b[i]][k] for k in range(3)]
+            lengths[i] = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    a = planner.buffer(component, "endsInFirst", ends_a, "i64")
+    b = planner.buffer(component, "endsInSecond", ends_b, "i64")
+    rest = planner.buffer(component, "restLengths", lengths)
+    direction = planner.buffer(component, "directions", np.zeros(3 * count), columns=3, role="scratch")
+    inverse = planner.buffer(component, "invlengths", np.zeros(count), role="scratch")
+    origin = origin_of(component)
+    table = (a, b, count)
+    group.init.append(
+        Op(
+            origin + " [rest positions]",
+            [
+                _call(
+                    "distance_multi_apply",
+                    first.rest,
+                    second.rest,
+                    child.rest,
+                    *table[:2],
+                    count,
+                    rest,
+                    direction,
+                    inverse,
+                )
+            ],
+        )
+    )
+
+    def jt(up: Buffer, down: Buffer) -> str:
+        other = second.f if up is first.f else second.df
+        return _call("distance_multi_jt", up, other, down, *table, direction)
+
+    def j(up: Buffer, down: Buffer) -> str:
+        other = second.v if up is first.v else second.dx
+        return _call("distance_multi_j", up, other, down, *table, direction)
+
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
+            origin,
+            first,
+            child,
+            [
+                _call(
+                    "distance_multi_apply",
+                    first.x,
+                    second.x,
+                    child.x,
+                    *table[:2],
+                    count,
+                    rest,
+                    direction,
+                    inverse,
+                ),
+                j(first.v, child.v),
+            ],
+            j,
+            jt if maps_forces else None,
         )
     )
 
@@ -2139,32 +2506,6 @@ def _triangle_area(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
     return 0.5 * math.sqrt(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
 
 
-def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """UniformVelocityDampingForceField: f -= c v (an explicit force, as SOFA with implicit="0")."""
-    found = _target(planner, checked, owner)
-    if found is None:
-        return
-    state, group = found
-    component = checked.component
-    if group.scheme == "implicit" and planner.value(component, "implicit"):
-        planner.unsupported(
-            checked, 'implicit="1" (its df/dv in the implicit solve) is not compiled yet; use implicit="0"'
-        )
-        return
-    coefficient = float(planner.value(component, "dampingCoefficient"))
-    key = f"{component.path}.dampingCoefficient"
-    if planner.prune and coefficient == 0.0:
-        planner.pruned[key] = "dampingCoefficient is 0: no damping force computed"
-        return
-    buffer = planner.buffer(component, "dampingCoefficient", [coefficient], role="param")
-    group.forces.append(
-        Op(
-            origin_of(component),
-            [_call("velocity_damping", state.f, state.v, buffer, state.size * state.datatype.deriv_size)],
-        )
-    )
-
-
 def _mapping_ends(
     planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
 ) -> tuple[StatePlan, StatePlan, Group] | None:
@@ -2588,7 +2929,11 @@ LOWERINGS: dict[str, Lowering] = {
     "tetracorot_fem": _lower_fem,
     "hexa_fem": _lower_fem,
     "trifem_optim": _lower_trifem_optim,
+    "quad_bending_springs": _lower_quad_bending_springs,
+    "interaction_ellipsoid": _lower_interaction_ellipsoid,
     "distance_mapping": _lower_distance_mapping,
+    "distance_multi_mapping": _lower_distance_multi_mapping,
+    "velocity_damping": _lower_velocity_damping,
     "bending_springs": _lower_bending_springs,
     "barycentric_mapping": _lower_barycentric_mapping,
     "uniform_mass": _lower_uniform_mass,
@@ -2602,7 +2947,6 @@ LOWERINGS: dict[str, Lowering] = {
     "line_or_plane": _lower_line_or_plane,
     "point_constraint": _lower_point_constraint,
     "plane_force": _lower_plane_force,
-    "velocity_damping": _lower_velocity_damping,
     "triangle_pressure": _lower_triangle_pressure,
     "rigid_mapping": _lower_rigid_mapping,
     "identity_mapping": _lower_subset_mapping,

@@ -440,7 +440,7 @@ CASES = [
     Case(
         "unsupported",
         "E222",
-        dyn('    <QuadBendingSprings stiffness="10"/>\n'),
+        dyn("    <QuadBendingFEMForceField/>\n"),
         6,
         hint="--allow-unsupported",
     ),

@@ -178,11 +178,17 @@ def test_zero_velocity_damping_is_compiled_out(tmp_path: Path) -> None:
     assert kept["dofs"].velocity[0, 0] == pytest.approx(1 - H * 4 / 2 + H * 0, abs=1e-15)
 
 
-def test_implicit_velocity_damping_is_refused_under_implicit_euler(tmp_path: Path) -> None:
-    body = '<UniformVelocityDampingForceField implicit="1"/>'
-    path = particles(tmp_path, body, solver=SOLVERS["implicit-cg"], position="0 0 0")
-    with pytest.raises(SceneError, match=r'implicit="1" .* use implicit="0"'):
-        compile_scene(path)
+def test_implicit_velocity_damping_is_backward_euler(tmp_path: Path) -> None:
+    # implicit="1" puts B = -c I in the implicit system: (m + h c) dv = h (-c v), so
+    # v_{n+1} = v_n / (1 + h c / m), the backward-Euler decay.
+    body = '<UniformVelocityDampingForceField dampingCoefficient="30" implicit="1"/>'
+    sim = sofac.load(
+        particles(tmp_path, body, solver=SOLVERS["implicit-cg"], position="0 0 0", gravity="0 0 0")
+    )
+    sim["dofs"].velocity[0] = [1.0, -2.0, 0.5]
+    sim.step(10)
+    factor = (1 + H * 30 / 2) ** -10
+    assert sim["dofs"].velocity[0] == pytest.approx(factor * np.array([1.0, -2.0, 0.5]), rel=1e-12)
 
 
 # --- TrianglePressureForceField and the surfaces it acts on -------------------------------------

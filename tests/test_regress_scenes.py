@@ -10,10 +10,13 @@ from sofac.regress import Status, run_regression
 
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",
-    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",
+    "Component/SolidMechanics/Spring/FastTriangularBendingSprings.scn",  # with TriangularFEMForceFieldOptim
     "Component/Mapping/NonLinear/DistanceMapping.scn",
     "Component/Topology/Mapping/Mesh2PointTopologicalMapping.scn",
-    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",  # with TriangularFEMForceFieldOptim
+    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",
+    "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
+    "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
+    "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",
 ]
 
 

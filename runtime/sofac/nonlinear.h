@@ -105,4 +105,45 @@ inline void distance_mapping_djt(double* pdf, const double* pdx, const double* c
     }
 }
 
+// DistanceMultiMapping with each edge from a point a_i of parent 0 to a point b_i of parent 1:
+// child_i = |x1_b - x0_a| - rest_i, J = (-u on parent 0, u on parent 1), one matrix per parent
+// (SOFA's applyJ: parent 0's product, then parent 1's added).
+inline void distance_multi_apply(const double* x0, const double* x1, double* cx, const Index* a, const Index* b,
+                                 Index n, const double* rest, double* dir, double* invlen) {
+    for (Index i = 0; i < n; ++i) {
+        double g[3];
+        for (int k = 0; k < 3; ++k) g[k] = x1[3 * b[i] + k] - x0[3 * a[i] + k];
+        const double distance = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        cx[i] = distance - rest[i];
+        double* d = dir + 3 * i;
+        if (distance > DBL_EPSILON) {
+            invlen[i] = 1 / distance;
+            for (int k = 0; k < 3; ++k) d[k] = g[k] * invlen[i];
+        } else {
+            invlen[i] = 0;
+            const double p = 1.0 / std::sqrt(3.0);
+            for (int k = 0; k < 3; ++k) d[k] = p;
+        }
+    }
+}
+
+inline void distance_multi_j(const double* v0, const double* v1, double* cv, const Index* a, const Index* b, Index n,
+                             const double* dir) {
+    for (Index i = 0; i < n; ++i) {
+        const double* d = dir + 3 * i;
+        double first = 0.0, second = 0.0;
+        for (int k = 0; k < 3; ++k) first += -d[k] * v0[3 * a[i] + k];
+        for (int k = 0; k < 3; ++k) second += d[k] * v1[3 * b[i] + k];
+        cv[i] = first + second;
+    }
+}
+
+inline void distance_multi_jt(double* f0, double* f1, const double* cf, const Index* a, const Index* b, Index n,
+                              const double* dir) {
+    for (Index i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) f0[3 * a[i] + k] += -dir[3 * i + k] * cf[i];
+    for (Index i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) f1[3 * b[i] + k] += dir[3 * i + k] * cf[i];
+}
+
 }  // namespace sofac

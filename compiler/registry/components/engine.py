@@ -88,12 +88,13 @@ BOX_ROI = ComponentSpec(
 
 TRANSFORM_ENGINE = ComponentSpec(
     name="TransformEngine",
+    compute="transform_engine",
     category=Category.ENGINE,
     module="Sofa.Component.Engine.Transform",
     doc="Applies scale, rotation and translation (or their inverse) to a list of points.",
     templates=("Vec3d", "Vec1d", "Vec2d", "Rigid2d", "Rigid3d"),
     default_template="Vec3d",
-    unsupported_reason="TransformEngine is not evaluated by sofac yet",
+    supported=True,
     effects=_DATA,
     fields=(
         FieldSpec("input_position", Coords(), doc="input points"),

@@ -264,12 +264,13 @@ JOINT_SPRING_FORCE_FIELD = ComponentSpec(
 
 QUAD_BENDING_SPRINGS = ComponentSpec(
     name="QuadBendingSprings",
+    kernel="quad_bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs across the quads of a mesh that resist bending.",
     templates=("Vec3d", "Vec2d"),
     default_template="Vec3d",
-    unsupported_reason="QuadBendingSprings is not implemented yet",
+    supported=True,
     effects=_SPRING_EFFECTS,
     fields=(
         *_UNIFORM_STIFFNESS,
@@ -387,12 +388,13 @@ ELLIPSOID_FORCE_FIELD = ComponentSpec(
 
 INTERACTION_ELLIPSOID_FORCE_FIELD = ComponentSpec(
     name="InteractionEllipsoidForceField",
+    kernel="interaction_ellipsoid",
     category=Category.INTERACTION_FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Ellipsoid repulsion whose frame is a rigid DOF of object2.",
     templates=("Vec3d,Rigid3d",),
     default_template="Vec3d,Rigid3d",
-    unsupported_reason="InteractionEllipsoidForceField is not implemented yet",
+    supported=True,
     effects=frozenset({Effect.EXTERNAL_FORCE, Effect.STIFFNESS}),
     fields=(
         *_ELLIPSOID_FIELDS,

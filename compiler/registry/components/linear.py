@@ -280,12 +280,13 @@ SSOR_PRECONDITIONER = ComponentSpec(
 
 WARP_PRECONDITIONER = ComponentSpec(
     name="WarpPreconditioner",
+    kernel="warp",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Wraps another (precomputed) solver with per-node rotations.",
     templates=(ROTATION_MATRIX,),
     default_template=ROTATION_MATRIX,
-    unsupported_reason="WarpPreconditioner is not implemented yet",
+    supported=True,
     effects=_SOLVE,
     fields=(FieldSpec("linearSolver", Link("linear_solver"), doc="wrapped solver"), *LINEAR_SOLVER_FIELDS),
 )
@@ -393,7 +394,7 @@ ROTATION_MATRIX_SYSTEM = ComponentSpec(
     doc="Per-node rotation matrix warping another linear system (warped preconditioners).",
     templates=(ROTATION_MATRIX,),
     default_template=ROTATION_MATRIX,
-    unsupported_reason="RotationMatrixSystem (warped preconditioning) is not implemented yet",
+    supported=True,  # with assemblingRate 1, checked where WarpPreconditioner is planned
     effects=_SOLVE,
     fields=(
         FieldSpec("assemblingRate", Int(), 1, "update period in steps", valid=MUST_BE_AT_LEAST_ONE),

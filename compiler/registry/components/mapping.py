@@ -168,6 +168,7 @@ SQUARE_DISTANCE_MAPPING = ComponentSpec(
 
 DISTANCE_MULTI_MAPPING = ComponentSpec(
     name="DistanceMultiMapping",
+    kernel="distance_multi_mapping",
     category=Category.MULTI_MAPPING,
     module=_NONLINEAR,
     doc="Distances between points of several parent states (edges refer to indexPairs).",
