@@ -182,7 +182,7 @@ class SpringSet:
         self.elong = np.ascontiguousarray(rows[:, 5], dtype=np.int64)
         self.on = np.ones(len(rows), dtype=np.int64)
         self.count = len(rows)
-        self.jac = np.zeros(self.count * dim * dim)
+        self.jac = np.zeros(self.count * (dim + 2))  # the factored blocks: c, t and n per spring
 
     def _table(self) -> list:
         return [_i(self.a), _i(self.b), _d(self.ks), _d(self.kd), _d(self.l0), _i(self.elong), _i(self.on)]
