@@ -1122,7 +1122,10 @@ class _EvalContext:
         target = self.checked.links.get(link)
         if not isinstance(target, Component):
             return None
-        return self.checker.value(self.checker.checked.of(target), name)
+        linked = self.checker.checked.of(target)
+        if linked.spec is None:  # an unknown component (reported by itself): nothing to read
+            return None
+        return self.checker.value(linked, name)
 
     def input_positions(self) -> np.ndarray | None:
         if self.is_set("position"):

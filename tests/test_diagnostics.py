@@ -648,3 +648,19 @@ def test_unreachable_codes_are_never_emitted(code: str) -> None:
         if path.name != "diagnostics.py" and code in path.read_text(encoding="utf-8")
     ]
     assert users == [], f"{code} is emitted now: add a case for it to CASES and drop it from UNREACHABLE"
+
+
+def test_topological_mapping_from_an_unknown_component_is_only_diagnosed(tmp_path: Path) -> None:
+    """A misspelled grid as a Hexa2TetraTopologicalMapping's input: E200, not a crash (found by
+    tests/test_mutations.py)."""
+    scene = tmp_path / "misspelled.scn"
+    scene.write_text(
+        '<Node name="root" dt="0.01">\n  <Node name="beam">\n'
+        '    <eRgularGridTopology name="grid" n="3 3 3" min="0 0 0" max="1 1 1"/>\n'
+        '    <TetrahedronSetTopologyContainer name="tetra"/>\n'
+        '    <Hexa2TetraTopologicalMapping input="@grid" output="@tetra"/>\n'
+        "    <MechanicalObject/>\n  </Node>\n</Node>\n"
+    )
+    _, diagnostics = check_file(scene)
+    errors = [d for d in diagnostics if d.severity is Severity.ERROR]
+    assert [(d.code, d.loc.line) for d in errors] == [("E200", 3)]
