@@ -264,3 +264,21 @@ def test_simple_boundary_conditions_pass_sofas_regression_criterion(shared_dir: 
     assert result.status is Status.PASS, result
     # SOFA's own run at the corpus commit is off these references by about 1% (the shared README).
     assert result.error < 1e-4 and result.max_rel < 2e-2
+
+
+def test_implicit_velocity_damping_under_newmark_follows_sofas_recurrence(tmp_path: Path) -> None:
+    # SOFA's NewmarkImplicitSolver (gamma 1/2, beta 1/4) with B = -c I: its right-hand side is
+    # f + B v + h (1 - gamma) B a (f already holds -c v: SOFA counts the damping twice there), its
+    # matrix m - h gamma B; a starts as f / m.
+    solver = '<NewmarkImplicitSolver/><CGLinearSolver iterations="50" tolerance="1e-14" threshold="1e-30"/>'
+    body = '<UniformVelocityDampingForceField dampingCoefficient="30" implicit="1"/>'
+    sim = sofac.load(particles(tmp_path, body, solver=solver, position="0 0 0", gravity="0 0 0"))
+    v = np.array([1.0, -2.0, 0.5])
+    sim["dofs"].velocity[0] = v
+    sim.step(10)
+    m, c, gamma = 2.0, 30.0, 0.5
+    a = -c * v / m
+    for _ in range(10):
+        a_next = (-c * v - c * v - H * (1 - gamma) * c * a) / (m + H * gamma * c)
+        v, a = v + H * ((1 - gamma) * a + gamma * a_next), a_next
+    assert sim["dofs"].velocity[0] == pytest.approx(v, rel=1e-10)
