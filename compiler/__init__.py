@@ -16,7 +16,7 @@ from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = ["SceneError", "Simulation", "SimulationDiverged", "SofacError", "__version__", "load"]
+__all__ = ["SceneError", "Simulation", "SimulationDiverged", "SofacError", "__version__", "load", "sweep"]
 
 _LAZY = {
     "SceneError": "diagnostics",
@@ -24,6 +24,7 @@ _LAZY = {
     "Simulation": "loader",
     "SimulationDiverged": "loader",
     "load": "loader",
+    "sweep": "sweeps",
 }
 
 

@@ -42,12 +42,11 @@ import importlib.util
 import json
 import math
 import re
-import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +54,7 @@ from . import registry
 from .diagnostics import Diagnostics, SceneError, SofacError
 from .loader import Compiled, Simulation, SimulationDiverged, compile_checked
 from .model import Component, Node, Scene
+from .progress import Progress
 
 __all__ = [
     "DEFAULT_SOLVERS",
@@ -558,63 +558,6 @@ def _parse_reference(spec: str, smallest_dt: float) -> Configuration:
     return Configuration(solver, dt)
 
 
-class _Progress:
-    """A progress bar on stderr: tqdm when installed, else a line rewritten in place (a line per
-    configuration when stderr is not a terminal)."""
-
-    def __init__(self, total: int, enabled: bool, stream: TextIO | None = None) -> None:
-        self.total = total
-        self.done = 0
-        self.enabled = enabled
-        self.stream = stream or sys.stderr
-        self.started = time.perf_counter()
-        self._tqdm: Any = None
-        if enabled:
-            try:
-                from tqdm import tqdm  # type: ignore[import-untyped]
-            except ImportError:
-                pass
-            else:
-                self._tqdm = tqdm(total=total, file=self.stream, unit="run", leave=False)
-
-    def start(self, label: str) -> None:
-        if not self.enabled:
-            return
-        if self._tqdm is not None:
-            self._tqdm.set_description(label)
-        elif self.stream.isatty():
-            self._draw(label)
-
-    def advance(self, label: str) -> None:
-        self.done += 1
-        if not self.enabled:
-            return
-        if self._tqdm is not None:
-            self._tqdm.update(1)
-        elif self.stream.isatty():
-            self._draw(label)
-        else:
-            print(f"  [{self.done}/{self.total}] {label}", file=self.stream, flush=True)
-
-    def _draw(self, label: str) -> None:
-        width = 24
-        filled = round(width * self.done / self.total) if self.total else width
-        elapsed = time.perf_counter() - self.started
-        bar = "#" * filled + "." * (width - filled)
-        text = f"\r[{bar}] {self.done}/{self.total} {elapsed:5.0f}s {label}"
-        self.stream.write(f"{text[:100]:<100}")
-        self.stream.flush()
-
-    def close(self) -> None:
-        if not self.enabled:
-            return
-        if self._tqdm is not None:
-            self._tqdm.close()
-        elif self.stream.isatty():
-            self.stream.write("\r" + " " * 100 + "\r")
-            self.stream.flush()
-
-
 def _record(config: Configuration, run: _Run | None, error: str = "") -> Record:
     nan = math.nan
     solver = config.solver
@@ -805,7 +748,7 @@ class _Reference:
     record: Record | None
 
 
-def _numeric_reference(setup: _Setup, bar: _Progress) -> _Reference:
+def _numeric_reference(setup: _Setup, bar: Progress) -> _Reference:
     """Run the reference candidates in turn until one does not diverge."""
     for candidate in setup.reference:
         bar.start(f"reference {candidate.label}")
@@ -893,7 +836,7 @@ def sweep(
         sample_interval=sample_interval,
         data_roots=data_roots,
     )
-    bar = _Progress(len(setup.configs) + len(setup.reference[:1]), progress)
+    bar = Progress(len(setup.configs) + len(setup.reference[:1]), progress)
     records: list[Record] = []
     runs: list[_Run | None] = []
     try:

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import evaluate, links, meshes, registry
 from .diagnostics import Diagnostics, SceneError, SourceLoc
+from .fem_topology import CELL_KINDS
 from .model import Component, Node, Scene
 from .registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from .registry.components.common import MATRIX_TEMPLATE_ALIASES
@@ -593,6 +594,17 @@ class _Checker:
             source = self.checked.components.get(id(checked.src))
             if source is not None and source.spec is not None and source.spec.field(name) is not None:
                 return self.value(source, name, depth + 1)
+        if checked.category is Category.TOPOLOGY and name in (*CELL_KINDS, "position"):
+            # A topological mapping writes its output container's cells (Hexa2Tetra, Tetra2Triangle...)
+            # or points (Mesh2Point).
+            for writer in self.checked:
+                if (
+                    writer.category is Category.TOPOLOGICAL_MAPPING
+                    and writer.links.get("output") is checked.component
+                ):
+                    written = self.value(writer, name, depth + 1)
+                    if written is not None and np.size(written):
+                        return written
         field_spec = checked.spec.field(name)
         return field_spec.default if field_spec else None
 
@@ -667,8 +679,6 @@ class _Checker:
             )
             if topology is not None:
                 value = self.value(self.checked.of(topology), "position")
-                if value is None or np.size(value) == 0:
-                    value = self._mapped_topology_points(topology)
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
             if not count:
@@ -681,18 +691,6 @@ class _Checker:
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
-
-    def _mapped_topology_points(self, topology: Component) -> Any:
-        """The points a topological mapping writes into a container (Mesh2PointTopologicalMapping)."""
-        for other in self.checked:
-            maps_here = (
-                other.category is Category.TOPOLOGICAL_MAPPING and other.links.get("output") is topology
-            )
-            if maps_here and other.spec is not None and other.spec.compute:
-                outputs = self._outputs(other)
-                if outputs and "position" in outputs:
-                    return outputs["position"]
-        return None
 
     def state_size(self, state: Component) -> int | None:
         points = self.positions(state)
@@ -1136,7 +1134,8 @@ class _EvalContext:
         target = self.checked.links.get(link)
         if not isinstance(target, Component):
             return None
-        return self.checker.value(self.checker.checked.of(target), name)
+        linked = self.checker.checked.of(target)
+        return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
 
     def input_positions(self) -> np.ndarray | None:
         if self.is_set("position"):

@@ -347,6 +347,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .render_cli import register as register_render
 
     register_render(commands, _EPILOG)
+    from .sweep_cli import register as register_sweep
+
+    register_sweep(commands, _EPILOG)
 
     version = commands.add_parser("version", help="print sofac's version")
     version.set_defaults(handler=_cmd_version)

@@ -183,7 +183,34 @@ def box_roi(ctx: Context) -> Outputs:
         padded = np.zeros((len(points), 3))
         padded[:, : min(dim, 3)] = points[:, :3]
         inside |= ((padded >= low) & (padded <= high)).all(axis=1)
-    return {"indices": np.flatnonzero(inside).astype(np.int64)}
+    outputs = {"indices": np.flatnonzero(inside).astype(np.int64)}
+    for elements, corners, output in _ROI_ELEMENTS:
+        given = ctx.value(elements)
+        if given is None or not np.size(given) or not ctx.value(f"compute{elements.capitalize()}"):
+            continue
+        cells = np.asarray(given, dtype=np.int64).reshape(-1, corners)
+        if cells.max() >= len(points):
+            raise EvaluationError(f"BoxROI's {elements} use points past its {len(points)} points", elements)
+        if ctx.value("strict"):  # every corner inside
+            chosen = inside[cells].all(axis=1)
+        else:  # the centre inside (SOFA's getCenter: the mean of the corners)
+            centres = np.zeros((len(cells), 3))
+            centres[:, : min(dim, 3)] = points[cells].mean(axis=1)[:, :3]
+            chosen = np.zeros(len(cells), dtype=bool)
+            for box in boxes:
+                chosen |= ((centres >= box[:3]) & (centres <= box[3:])).all(axis=1)
+        outputs[output] = np.flatnonzero(chosen).astype(np.int64)
+    return outputs
+
+
+# BoxROI's element inputs, their corner counts and the output listing those inside.
+_ROI_ELEMENTS = (
+    ("edges", 2, "edgeIndices"),
+    ("triangles", 3, "triangleIndices"),
+    ("quads", 4, "quadIndices"),
+    ("tetrahedra", 4, "tetrahedronIndices"),
+    ("hexahedra", 8, "hexahedronIndices"),
+)
 
 
 def hexa_to_tetra(ctx: Context) -> Outputs:
@@ -212,6 +239,41 @@ def hexa_to_tetra(ctx: Context) -> Outputs:
     mirrored = straight[:, [0, 1, 3, 2]]  # SOFA's swapped pattern: the last two corners exchanged
     tetrahedra = np.where((swaps % 2 == 1)[:, None, None], cells[:, mirrored], cells[:, straight])
     return {"tetrahedra": tetrahedra.reshape(-1)}
+
+
+def _volume_points(ctx: Context) -> np.ndarray | None:
+    """The points of a topological mapping's input elements, when known (to orient surfaces)."""
+    try:
+        points = ctx.input_positions()
+    except UnknownInput:
+        return None
+    return None if points is None else np.asarray(points, dtype=float)[:, :3]
+
+
+def _surface(ctx: Context, volume: str, corners: int, faces: Any, surface: str) -> Outputs:
+    from .fem_topology import boundary_faces
+
+    cells = ctx.linked("input", volume)
+    if cells is None or not np.size(cells):
+        raise UnknownInput(f"the input topology's {volume} are not known at compile time")
+    found = boundary_faces(np.asarray(cells, dtype=np.int64).reshape(-1, corners), faces, _volume_points(ctx))
+    if ctx.value("flipNormals"):
+        found = found[:, ::-1]
+    return {surface: found.reshape(-1)}
+
+
+def tetra_to_triangle(ctx: Context) -> Outputs:
+    """Tetra2TriangleTopologicalMapping: the boundary triangles of the input tetrahedra, outward."""
+    from .fem_topology import TETRA_FACES
+
+    return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
+
+
+def hexa_to_quad(ctx: Context) -> Outputs:
+    """Hexa2QuadTopologicalMapping: the boundary quads of the input hexahedra, outward."""
+    from .fem_topology import HEXA_FACES
+
+    return _surface(ctx, "hexahedra", 8, HEXA_FACES, "quads")
 
 
 # The order in which the edges of each tetrahedron first appear in the edge array of SOFA's
@@ -322,6 +384,8 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "mesh_to_point": mesh_to_point,
     "transform_engine": transform_engine,
     "hexa_to_tetra": hexa_to_tetra,
+    "tetra_to_triangle": tetra_to_triangle,
+    "hexa_to_quad": hexa_to_quad,
     "mesh_loader": mesh_loader,
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,

@@ -108,3 +108,33 @@ def tetrahedra_from_grid(counts: Sequence[int]) -> np.ndarray:
     """The tetrahedra TetrahedronFEMForceField builds on a RegularGridTopology of ``counts`` points."""
     nx, ny, _ = _counts(counts)
     return tetrahedra_from_hexahedra(hexahedra_from_grid(counts), max(nx - 1, 1), max(ny - 1, 1))
+
+
+# The element lists a topology container holds, lowest dimension first.
+CELL_KINDS = ("edges", "triangles", "quads", "tetrahedra", "hexahedra")
+TETRA_FACES = ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2))
+HEXA_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
+
+
+def boundary_faces(
+    cells: np.ndarray, faces: Sequence[Sequence[int]], points: np.ndarray | None
+) -> np.ndarray:
+    """The faces of volume elements that belong to one element only (the surface), in element
+    order; with ``points``, turned to face away from their element's centre (else as ``faces``
+    lists them, outward for positively oriented elements)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    if not len(cells):
+        return np.zeros((0, len(faces[0])), dtype=np.int64)
+    # Element by element, faces in `faces` order (row e * len(faces) + f).
+    all_faces = cells[:, np.array(faces)].reshape(-1, len(faces[0]))
+    owners = np.repeat(np.arange(len(cells)), len(faces))
+    _, first, counts = np.unique(np.sort(all_faces, axis=1), axis=0, return_index=True, return_counts=True)
+    single = np.sort(first[counts == 1])
+    surface, owner = all_faces[single], owners[single]
+    if points is None or cells.max() >= len(points):
+        return surface
+    a, b, c = (points[surface[:, k]] for k in range(3))
+    centres = points[cells[owner]].mean(axis=1)
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), centres - a) > 0
+    surface[inward] = surface[inward][:, ::-1]
+    return surface

@@ -63,7 +63,9 @@ class _StateView:
         self.dx, self.df = state.dx, state.df
         self.size = state.size
         self.width = state.datatype.deriv_size
+        self.coord_width = state.datatype.coord_size
         self.cpp_type = state.cpp_type
+        self.rigid = state.datatype.rigid
         self.stages = state.stages
         self.path_comment = _comment(state.path)
 
@@ -87,6 +89,7 @@ class _ProjectionView:
         self.origin = projection.origin
         self.velocity = projection.velocity
         self.on_v = projection.project(state.v)
+        self.on_x = projection.position(state.x) if projection.position else ""
         self.on_acc = projection.project(state.acc) if state.acc else ""
         self.on_f = projection.project(state.f)
         self.on_df = projection.project(state.df) if state.df else ""
@@ -127,6 +130,9 @@ class _GroupView:
         self.factor_once = group.factor_once
         self.cg = group.cg
         self.minres = group.minres
+        self.static = group.static
+        self.newmark = group.newmark
+        self.first_order = group.first_order
 
 
 def render(plan: Plan) -> str:

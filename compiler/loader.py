@@ -446,6 +446,9 @@ class Simulation:
     def param(self, key: str) -> np.ndarray:
         """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
 
+        Parameters read at every step (stiffnesses of springs, masses, gravity, dt) take effect at the
+        next step; those turned into data when the simulation is initialized (the element
+        stiffnesses from ``youngModulus``/``poissonRatio``) at the next ``reset()``.
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity)."""
         if key in self.plan.pruned:
             raise PrunedEffectError(
@@ -500,7 +503,8 @@ def compile_checked(
     scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
-    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct))
+    numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
+    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct, numbers=numbers))
     compiled.checked = checked  # the checked scene, for consumers such as rendering (visual models)
     return compiled
 

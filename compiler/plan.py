@@ -14,6 +14,7 @@ number and array is a buffer handed to the instance when it is created.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,6 +24,7 @@ import numpy as np
 
 from .check import CheckedComponent, CheckedScene
 from .diagnostics import Diagnostics, SceneError
+from .fem_topology import CELL_KINDS
 from .model import Component, Node
 from .registry import Category
 from .registry.datatypes import DATATYPES, DataType
@@ -92,6 +94,8 @@ class Projection:
     velocity: bool = False  # also projects the velocity after the update
     # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (state offset -> code).
     mark: Callable[[int], str] | None = None
+    # projectPosition: coordinates moved onto the constraint after each step and at init.
+    position: Callable[[Buffer], str] | None = None
 
 
 @dataclass
@@ -154,6 +158,13 @@ class Group:
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
+    # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
+    # parameters; empty for a time integrator.
+    static: dict[str, Buffer] = field(default_factory=dict)
+    # NewmarkImplicitSolver (also "implicit"): gamma, beta, and a flag set once the initial
+    # acceleration is computed; empty for other solvers.
+    newmark: dict[str, Buffer] = field(default_factory=dict)
+    first_order: bool = False  # EulerImplicitSolver's firstOrder: (M - h K) v = f, x += h v
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
@@ -284,7 +295,10 @@ class _Planner:
         effects = []
         for group in groups:
             states = ", ".join(s.path for s in group.states)
-            effects.append(("integration", origin_of(group.solver), f"{group.scheme} scheme over {states}"))
+            scheme = (
+                "static (Newton-Raphson)" if group.static else "Newmark" if group.newmark else group.scheme
+            )
+            effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
         if self.gravity.key not in self.pruned:
             effects.append(
                 ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
@@ -457,6 +471,8 @@ class _Planner:
             }[group.scheme]
             if group.minres:
                 names = ("r", "r1", "r2", "y", "w", "w2", "v")
+            if group.newmark:
+                names += ("a",)  # the previous step's acceleration
             for state in group.states:
                 for name in names:
                     like = state.x if name == "x0" else state.v
@@ -479,12 +495,18 @@ class _Planner:
             "runge_kutta2": "rk2",
             "runge_kutta4": "rk4",
             "euler_implicit": "implicit",
+            "static": "implicit",
+            "newmark": "implicit",
         }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
         symplectic = bool(self.value(solver.component, "symplectic")) if scheme == "euler" else False
         group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
-        if scheme == "implicit" and not self._plan_implicit(solver, group):
+        if kernel == "static" and not self._plan_static(solver, group):
+            return None
+        if kernel == "euler_implicit" and not self._plan_implicit(solver, group):
+            return None
+        if kernel == "newmark" and not self._plan_newmark(solver, group):
             return None
         if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
             linear = solver.links.get("linearSolver")
@@ -555,14 +577,73 @@ class _Planner:
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
         """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
         component = solver.component
-        if self.value(component, "firstOrder"):
-            self.unsupported(solver, "firstOrder is not compiled yet")
-            return False
+        group.first_order = bool(self.value(component, "firstOrder"))
         group.trapezoidal = bool(self.value(component, "trapezoidalScheme"))
         for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
             group.implicit[name] = self.buffer(
                 component, name, [float(self.value(component, name) or 0.0)], role="param"
             )
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_newmark(self, solver: CheckedComponent, group: Group) -> bool:
+        """NewmarkImplicitSolver: Rayleigh damping, vdamping, gamma, beta; the linear solver."""
+        component = solver.component
+        for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+            group.implicit[name] = self.buffer(
+                component, name, [float(self.value(component, name) or 0.0)], role="param"
+            )
+        for name, default in (("gamma", 0.5), ("beta", 0.25)):
+            value = self.value(component, name)
+            group.newmark[name] = self.buffer(
+                component, name, [float(default if value is None else value)], role="param"
+            )
+        group.newmark["started"] = self.buffer(component, "started", [0], "i64", role="scratch")
+        if not self._plan_linear_solver(solver, group):
+            return False
+        if group.factor_once:
+            self.unsupported(
+                self.checked.of(group.linear_solver),
+                "PrecomputedLinearSolver under NewmarkImplicitSolver is not compiled yet",
+            )
+            return False
+        return True
+
+    def _plan_static(self, solver: CheckedComponent, group: Group) -> bool:
+        """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
+        (its `newtonSolver` link, else the first one in its node or below, else SOFA's defaults with
+        the StaticSolver's deprecated attributes, as SOFA's init forwards them), then the linear solver."""
+        component = solver.component
+        newton = solver.links.get("newtonSolver")
+        if not isinstance(newton, Component):
+            newton = next(
+                (
+                    c
+                    for node in _subtree(component.node)
+                    for c in node.objects
+                    if (spec := self.checked.of(c).spec) is not None and spec.name == "NewtonRaphsonSolver"
+                ),
+                None,
+            )
+        values: dict[str, float] = {}
+        for name, default in _NEWTON_DEFAULTS.items():
+            value = self.value(newton, name) if newton is not None else None
+            values[name] = float(default if value is None else value)
+        if newton is None:
+            for legacy, name in _STATIC_LEGACY_FORWARDS:
+                value = self.value(component, legacy)
+                if value is not None:
+                    values[name] = float(value)
+        owner = newton if newton is not None else component
+        for name, value in values.items():
+            if name.startswith("maxNb"):
+                group.static[name] = self.buffer(owner, name, [max(int(value), 0)], "i64")
+            else:
+                group.static[name] = self.buffer(owner, name, [value], role="param")
+        return self._plan_linear_solver(solver, group)
+
+    def _plan_linear_solver(self, solver: CheckedComponent, group: Group) -> bool:
+        """The implicit group's linear solver: CG (matrix-free, as SOFA's), PCG or a direct solver."""
+        component = solver.component
         linear = solver.links.get("linearSolver")
         if not isinstance(linear, Component):
             linear = self.checked.resolver._linear_solver_below(component.node)
@@ -629,6 +710,38 @@ class _Planner:
                 if group is not None:
                     group.mapped.append(self.states[id(checked.component)])
                     owner[id(checked.component)] = group
+
+
+# NewtonRaphsonSolver's parameters and SOFA's defaults (the maxNb* are counts).
+_NEWTON_DEFAULTS: dict[str, float] = {
+    "maxNbIterationsNewton": 1,
+    "absoluteResidualStoppingThreshold": 1e-5,
+    "relativeInitialStoppingThreshold": 1e-5,
+    "relativeSuccessiveStoppingThreshold": 1e-5,
+    "absoluteEstimateDifferenceThreshold": 0.0,
+    "relativeEstimateDifferenceThreshold": 0.0,
+    "maxNbIterationsLineSearch": 1,
+    "lineSearchCoefficient": 0.5,
+}
+# StaticSolver's deprecated attributes -> the NewtonRaphsonSolver parameter SOFA's init sets from
+# them, in SOFA's order (both relative tolerances land on relativeEstimateDifferenceThreshold).
+_STATIC_LEGACY_FORWARDS = (
+    ("newton_iterations", "maxNbIterationsNewton"),
+    ("absolute_correction_tolerance_threshold", "absoluteEstimateDifferenceThreshold"),
+    ("relative_correction_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+    ("absolute_residual_tolerance_threshold", "absoluteResidualStoppingThreshold"),
+    ("relative_residual_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+)
+
+
+def _subtree(node: Any) -> list[Any]:
+    """A node and its descendants, depth first."""
+    nodes, pending = [], [node]
+    while pending:
+        current = pending.pop(0)
+        nodes.append(current)
+        pending[0:0] = list(current.children)
+    return nodes
 
 
 # --- lowerings ------------------------------------------------------------------------------------
@@ -703,9 +816,6 @@ def _lower_uniform_mass(planner: _Planner, checked: CheckedComponent, owner: dic
     _add_mass(planner, checked, state, group, buffer, 0)
 
 
-_CELL_KINDS = ("edges", "triangles", "quads", "tetrahedra", "hexahedra")
-
-
 def _topology_of(planner: _Planner, checked: CheckedComponent) -> Component | None:
     """The topology a component uses: its ``topology`` link, else the one in its context."""
     topology = checked.links.get("topology")
@@ -726,16 +836,10 @@ def _topology_cells(planner: _Planner, checked: CheckedComponent) -> dict[str, n
     if topology is None:
         return None
     cells: dict[str, np.ndarray] = {}
-    for kind in (*_CELL_KINDS, "resolution"):
+    for kind in (*CELL_KINDS, "resolution"):
         value = planner.value(topology, kind)
         if value is not None and np.size(value):
             cells[kind] = np.asarray(value, dtype=np.int64).ravel()
-    for other in planner.checked:  # elements written into it by a topological mapping
-        if other.category is Category.TOPOLOGICAL_MAPPING and other.links.get("output") is topology:
-            for kind in _CELL_KINDS:
-                value = planner.value(other.component, kind)
-                if kind not in cells and value is not None and np.size(value):
-                    cells[kind] = np.asarray(value, dtype=np.int64).ravel()
     return cells
 
 
@@ -1396,9 +1500,13 @@ def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner:
         return
     state, group = found
     component = checked.component
-    coefficient = planner.buffer(
-        component, "dampingCoefficient", [float(planner.value(component, "dampingCoefficient"))], role="param"
-    )
+    value = float(planner.value(component, "dampingCoefficient"))
+    if planner.prune and value == 0.0:
+        planner.pruned[f"{component.path}.dampingCoefficient"] = (
+            "dampingCoefficient is 0: no damping force computed"
+        )
+        return
+    coefficient = planner.buffer(component, "dampingCoefficient", [value], role="param")
     scalars = state.size * state.datatype.deriv_size
     origin = origin_of(component)
     group.forces.append(
@@ -1873,11 +1981,19 @@ def _add_springs(
         f"{_ptr(enabled)}, {count}}}"
     )
     types = f"{first.cpp_type}, {second.cpp_type}"
+    # Specialised at compile time: no damping term when every damping is exactly zero (a pruned
+    # effect: setting a damping later needs prune=False), no flag tests when no spring is disabled
+    # or elongation-only (the flags are not tunable).
+    damped = not planner.prune or bool(np.any(springs[:, 3] != 0.0))
+    if not damped and count:
+        planner.pruned.setdefault(kd.key, "every spring's damping is zero: no damping term computed")
+    flagged = bool(np.any(elongation.initial)) or not bool(np.all(enabled.initial))
+    variant = f"{types}, {'true' if damped else 'false'}, {'true' if flagged else 'false'}"
     origin = origin_of(component)
     jacobians = "nullptr"
     if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
-        blocks = planner.buffer(component, "dfdx", np.zeros(count * dim * dim), role="scratch")
+        blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
         jacobians = _ptr(blocks)
         if group.direct:
             offset1, offset2 = group.offset(first), group.offset(second)
@@ -1903,7 +2019,8 @@ def _add_springs(
         Op(
             origin,
             [
-                f"sofac::spring_forces<{types}>({table}, {_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
+                f"sofac::spring_forces<{variant}>({table}, "
+                f"{_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
                 f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)}, {jacobians});"
             ],
         )
@@ -2174,16 +2291,24 @@ def _fixed_indices(planner: _Planner, checked: CheckedComponent, state: StatePla
     return _indices(planner, checked, "indices", state.size, all_if_empty=False)
 
 
-def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+def _projected_target(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group] | None:
+    """A projective constraint's state and group; None (kept out, with why) on a mapped state."""
     found = _target(planner, checked, owner)
-    if found is None:
-        return
-    state, group = found
-    if state.acc is None:
+    if found is not None and found[0].acc is None:
         planner.ignored.append(
             (checked.component, "on a mapped state: projections act on independent states")
         )
+        return None
+    return found
+
+
+def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _projected_target(planner, checked, owner)
+    if found is None:
         return
+    state, group = found
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
     t = state.cpp_type
     group.projections.append(
@@ -2198,15 +2323,10 @@ def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, 
 
 
 def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    found = _target(planner, checked, owner)
+    found = _projected_target(planner, checked, owner)
     if found is None:
         return
     state, group = found
-    if state.acc is None:
-        planner.ignored.append(
-            (checked.component, "on a mapped state: projections act on independent states")
-        )
-        return
     width = state.datatype.deriv_size
     directions = planner.value(checked.component, "fixedDirections")
     flags = np.zeros(width, dtype=np.int64)
@@ -2228,6 +2348,245 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
             lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices), mask),
         )
     )
+
+
+def _unit_vector(
+    planner: _Planner, component: Component, name: str, width: int, zero: int | None
+) -> np.ndarray:
+    """A direction field as SOFA normalises it (times 1/|n|); a zero vector becomes the unit vector
+    along axis ``zero``, or stays zero (no constraint) when ``zero`` is None."""
+    given = np.zeros(width)
+    value = planner.value(component, name)
+    if value is not None:
+        flat = np.asarray(value, dtype=float).ravel()[:width]
+        given[: flat.size] = flat
+    norm = math.sqrt(sum(float(c) * float(c) for c in given))
+    if norm == 0.0:
+        if zero is not None:
+            given[zero] = 1.0
+        return given
+    inverse = 1.0 / norm
+    return np.array([float(c) * inverse for c in given])
+
+
+def _lower_line_or_plane(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """Line- and PlaneProjectiveConstraint: responses and velocities through the block n n^T (line)
+    or I - n n^T (plane) of the listed points; positions onto the line / plane after each step."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.assembled:
+        planner.unsupported(
+            checked,
+            "with a sparse direct solver (SOFA does not project the assembled matrix for it either); "
+            "use CGLinearSolver",
+        )
+        return
+    line = checked.spec is not None and checked.spec.role == "line"
+    width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
+    direction = _unit_vector(
+        planner, component, "direction" if line else "normal", width, 0 if line else None
+    )
+    outer = np.array([[float(a) * float(b) for b in direction] for a in direction])
+    block = outer if line else np.eye(width) - outer
+    origin = np.zeros(width)
+    given = planner.value(component, "origin")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[:width]
+        origin[: flat.size] = flat
+    indices = planner.buffer(component, "indices", _indices(planner, checked, "indices", state.size), "i64")
+    block_buffer = planner.buffer(component, "projection", block)
+    origin_buffer = planner.buffer(component, "origin", origin)
+    direction_buffer = planner.buffer(component, "direction" if line else "normal", direction)
+    t = state.cpp_type
+    onto = "project_onto_line" if line else "project_onto_plane"
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            lambda vector: _call(f"project_block<{t}>", vector, indices, _count(indices), block_buffer),
+            velocity=True,
+            position=lambda x: _call(
+                f"{onto}<{t}>", x, indices, _count(indices), origin_buffer, direction_buffer
+            ),
+        )
+    )
+
+
+def _lower_point_constraint(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """PointProjectiveConstraint: the listed DOFs (all with fixAll) held at ``point``."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    indices = planner.buffer(component, "indices", _fixed_indices(planner, checked, state), "i64")
+    target = np.zeros(state.datatype.coord_size)
+    given = planner.value(component, "point")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[: target.size]
+        target[: flat.size] = flat
+    target_buffer = planner.buffer(component, "point", target)
+    t = state.cpp_type
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
+            velocity=True,
+            mark=lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices)),
+            position=lambda x: _call(f"project_onto_point<{t}>", x, indices, _count(indices), target_buffer),
+        )
+    )
+
+
+def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """PlaneForceField: a penalty on the points under the plane (stiffness in implicit solves)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.assembled:
+        planner.unsupported(
+            checked, "its contact-dependent stiffness is not assembled for direct solvers yet"
+        )
+        return
+    width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
+    normal = np.zeros(width)
+    flat = np.asarray(planner.value(component, "normal"), dtype=float).ravel()[:width]
+    normal[: flat.size] = flat
+    first, last = (int(v) for v in planner.value(component, "localRange"))
+    begin = first if first >= 0 else 0
+    end = last + 1 if last >= 0 and last + 1 < state.size else state.size
+    bilateral = "true" if planner.value(component, "bilateral") else "false"
+    contact = planner.buffer(component, "contacts", np.zeros(state.size), "i64", role="scratch")
+    normal_buffer = planner.buffer(component, "normal", normal, role="param")
+    parameters = {
+        name: planner.buffer(component, name, [float(planner.value(component, name))], role="param")
+        for name in ("d", "stiffness", "damping", "maxForce")
+    }
+    origin = origin_of(component)
+    t = state.cpp_type
+    group.forces.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"plane_forces<{t}>",
+                    state.f,
+                    state.x,
+                    state.v,
+                    contact,
+                    normal_buffer,
+                    parameters["d"],
+                    parameters["stiffness"],
+                    parameters["damping"],
+                    parameters["maxForce"],
+                    bilateral,
+                    begin,
+                    end,
+                )
+            ],
+        )
+    )
+    if group.scheme == "implicit":
+        stiffness = parameters["stiffness"]
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        f"plane_dforces<{t}>",
+                        state.df,
+                        state.dx,
+                        contact,
+                        normal_buffer,
+                        stiffness,
+                        "kfact",
+                        begin,
+                        end,
+                    )
+                ],
+            )
+        )
+    group.energy.append(
+        Op(
+            origin,
+            [
+                "potential += "
+                + _call(
+                    f"plane_energy<{t}>",
+                    state.x,
+                    normal_buffer,
+                    parameters["d"],
+                    parameters["stiffness"],
+                    bilateral,
+                    begin,
+                    end,
+                )
+            ],
+        )
+    )
+
+
+def _lower_triangle_pressure(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TrianglePressureForceField with useConstantForce: pressure x rest area on the listed triangles."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if not planner.value(component, "useConstantForce"):
+        planner.unsupported(
+            checked, 'useConstantForce="0" (a Cauchy stress on the current areas) is not compiled yet'
+        )
+        return
+    chosen = _indices(planner, checked, "triangleList", 0, all_if_empty=False)
+    triangles = (
+        (_topology_cells(planner, checked) or {}).get("triangles", np.zeros(0, np.int64)).reshape(-1, 3)
+    )
+    points = planner.checked.positions(state.component)
+    if len(chosen) and (points is None or chosen.max() >= len(triangles)):
+        planner.unsupported(
+            checked, f"its triangleList points past the {len(triangles)} triangles of its topology"
+        )
+        return
+    corners = triangles[chosen]
+    areas = [_triangle_area(*(points[corner, :3] for corner in triangle)) for triangle in corners]
+    pressure = np.zeros(min(state.datatype.spatial_dim, 3))
+    given = planner.value(component, "pressure")
+    if given is not None and np.size(given):
+        flat = np.asarray(given, dtype=float).ravel()[: pressure.size]
+        pressure[: flat.size] = flat
+    corner_buffer = planner.buffer(component, "triangles", corners, "i64")
+    area_buffer = planner.buffer(component, "areas", areas)
+    pressure_buffer = planner.buffer(component, "pressure", pressure, role="param")
+    group.forces.append(
+        Op(
+            origin_of(component),
+            [
+                _call(
+                    f"triangle_pressure<{state.cpp_type}>",
+                    state.f,
+                    corner_buffer,
+                    area_buffer,
+                    len(corners),
+                    pressure_buffer,
+                )
+            ],
+        )
+    )
+
+
+def _triangle_area(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """sofa::geometry::Triangle::area in 3-D, operation for operation: 0.5 |(b - a) x (c - a)|."""
+    u = [float(b[k]) - float(a[k]) for k in range(3)]
+    v = [float(c[k]) - float(a[k]) for k in range(3)]
+    cross = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+    return 0.5 * math.sqrt(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
 
 
 def _mapping_ends(
@@ -2670,6 +3029,10 @@ LOWERINGS: dict[str, Lowering] = {
     "rest_shape_springs": _lower_rest_shape,
     "fixed": _lower_fixed,
     "partial_fixed": _lower_partial_fixed,
+    "line_or_plane": _lower_line_or_plane,
+    "point_constraint": _lower_point_constraint,
+    "plane_force": _lower_plane_force,
+    "triangle_pressure": _lower_triangle_pressure,
     "rigid_mapping": _lower_rigid_mapping,
     "identity_mapping": _lower_subset_mapping,
     "subset_mapping": _lower_subset_mapping,
@@ -2711,7 +3074,11 @@ def format_schedule(plan: Plan) -> str:
             "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
             "rk2": "RK2 (midpoint)",
             "rk4": "RK4",
-            "implicit": "implicit Euler",
+            "implicit": "static equilibrium (Newton-Raphson)"
+            if group.static
+            else "Newmark"
+            if group.newmark
+            else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
         lines.append(
@@ -2729,13 +3096,22 @@ def format_schedule(plan: Plan) -> str:
             ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
         ]
         if group.scheme == "implicit":
+            if group.static:
+                rhs, system = "b = f, projected", "Newton iterations: solve -K dx = f, x += alpha dx"
+            elif group.newmark:
+                rhs = "b = f + (-rm M + (rk + h) K) v + (...) a, projected"
+                system = "solve ((1 + h gamma rm) M - (h^2 beta + h gamma rk) K) a' = b"
+            elif group.first_order:
+                rhs, system = "b = f, projected (firstOrder)", "solve (M - h K) v' = b"
+            else:
+                rhs, system = (
+                    "b = h (f - rm M v + (h + rk) K v), projected",
+                    "solve ((1 + h rm) M - h (h + rk) K) dv = b",
+                )
             sections += [
-                ("b = h (f - rm M v + (h + rk) K v), projected; M dx", [op.origin for op in group.mass_dx]),
+                (f"{rhs}; M dx", [op.origin for op in group.mass_dx]),
                 ("K dx", [op.origin for op in group.stiffness_dx]),
-                (
-                    f"solve ((1 + h rm) M - h (h + rk) K) dv = b with CG ({origin_of(group.linear_solver)})",
-                    [],
-                ),
+                (f"{system} with {origin_of(group.linear_solver)}", []),
             ]
         else:
             sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from .diagnostics import SofacError
+from .fem_topology import CELL_KINDS
 from .model import Component, Node
 from .registry import Category
 
@@ -65,7 +66,6 @@ _AXES: tuple[RGBA, RGBA, RGBA] = ((0.95, 0.2, 0.2, 1.0), (0.2, 0.9, 0.2, 1.0), (
 
 # Force fields whose element edges the force-field layer draws (FEM, mesh springs, ...).
 _ELEMENT_FORCEFIELD_WORDS = ("FEM", "Spring", "Hyperelastic", "Elastic")
-_CELL_KINDS = ("edges", "triangles", "quads", "tetrahedra", "hexahedra")
 
 
 # --- display flags ------------------------------------------------------------------------------
@@ -443,30 +443,6 @@ def _edges_of(cells: Mapping[str, np.ndarray]) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.int64)
     edges = np.sort(np.concatenate(pairs), axis=1)
     return np.unique(edges, axis=0)
-
-
-# The faces of volume elements (corner numbering as SOFA's); _boundary turns each surface face to
-# face away from its element.
-_TETRA_FACES = ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2))
-_HEXA_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
-
-
-def _boundary(cells: np.ndarray, faces: Sequence[Sequence[int]], points: np.ndarray) -> np.ndarray:
-    """The faces of volume elements that belong to one element only (the surface), turned to face
-    away from their element's centre."""
-    cells = np.asarray(cells, dtype=np.int64)
-    if not len(cells) or cells.max() >= len(points):
-        return np.zeros((0, len(faces[0])), dtype=np.int64)
-    all_faces = np.concatenate([cells[:, list(face)] for face in faces])
-    owners = np.tile(np.arange(len(cells)), len(faces))
-    _, first, counts = np.unique(np.sort(all_faces, axis=1), axis=0, return_index=True, return_counts=True)
-    single = first[counts == 1]
-    surface, owner = all_faces[single], owners[single]
-    a, b, c = (points[surface[:, k]] for k in range(3))
-    centres = points[cells[owner]].mean(axis=1)
-    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), centres - a) > 0
-    surface[inward] = surface[inward][:, ::-1]
-    return surface
 
 
 def _nice_step(length: float) -> float:
@@ -908,57 +884,17 @@ class _SceneBuilder:
                 return found[-1]
         return None
 
-    def cells(self, topology: Component | None, depth: int = 0) -> dict[str, np.ndarray]:
-        """The elements of a topology, with those a topological mapping writes into it: its computed
-        output, else the surface of its input's volume elements (Tetra2Triangle: the boundary
-        triangles; Hexa2Quad: the boundary quads; Quad2Triangle: each quad split in two)."""
+    def cells(self, topology: Component | None) -> dict[str, np.ndarray]:
+        """The elements of a topology, with those a topological mapping writes into it (the checker
+        evaluates Hexa2Tetra, Tetra2Triangle, Hexa2Quad)."""
         cells: dict[str, np.ndarray] = {}
-        if topology is None or depth > 8:
+        if topology is None:
             return cells
-        for kind in (*_CELL_KINDS, "resolution", "bounds"):
+        for kind in (*CELL_KINDS, "resolution", "bounds"):
             value = self.value(topology, kind)
             if value is not None and np.size(value):
                 cells[kind] = np.asarray(value, dtype=float if kind == "bounds" else np.int64).ravel()
-        for other in self.checked:
-            if (
-                other.category is not Category.TOPOLOGICAL_MAPPING
-                or other.links.get("output") is not topology
-            ):
-                continue
-            for kind in _CELL_KINDS:
-                value = self.value(other.component, kind)
-                if kind not in cells and value is not None and np.size(value):
-                    cells[kind] = np.asarray(value, dtype=np.int64).ravel()
-            source = other.links.get("input")
-            name = other.spec.name if other.spec is not None else ""
-            if not isinstance(source, Component) or any(k in cells for k in ("triangles", "quads")):
-                continue
-            given = self.cells(source, depth + 1)
-            points = self._points_of(source)
-            if name.startswith("Tetra2Triangle") and "tetrahedra" in given and points is not None:
-                cells["triangles"] = _boundary(
-                    given["tetrahedra"].reshape(-1, 4), _TETRA_FACES, points
-                ).ravel()
-            elif name.startswith("Hexa2Quad") and "hexahedra" in given and points is not None:
-                cells["quads"] = _boundary(given["hexahedra"].reshape(-1, 8), _HEXA_FACES, points).ravel()
-            elif name.startswith("Quad2Triangle") and "quads" in given:
-                quads = given["quads"].reshape(-1, 4)
-                cells["triangles"] = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]).ravel()
         return cells
-
-    def _points_of(self, topology: Component) -> np.ndarray | None:
-        """A topology's points: its own, else those of the nearest state above it."""
-        own = _reshape(self.value(topology, "position"), 3, float)
-        if len(own):
-            return own
-        node = topology.node
-        for candidate in (node, *node.ancestors()):
-            for component in candidate.objects:
-                item = self.checked.components.get(id(component))
-                if item is not None and item.category is Category.STATE:
-                    positions = self.checked.positions(component)
-                    return None if positions is None else _as_points3(positions)
-        return None
 
     # --- visual models ----------------------------------------------------------------------------
     def _visual(self, item: Any) -> _Visual | None:

@@ -200,6 +200,7 @@ CASES = [
     ("c1_beam_tetfem_cg", {"dofs": "c1_beam_tetfem_cg.csv"}),
     ("c2_beam_tetfem_ldl", {"dofs": "c2_beam_tetfem_ldl.csv"}),
     ("c3_beam_hexafem_cg", {"dofs": "c3_beam_hexafem_cg.csv"}),
+    ("e_beam_large_cg25", {"dofs": "e_beam_large_cg25.csv"}),  # 23814 tetrahedra, CG capped at 25
     ("a_pendulum_euler_explicit", {"dofs": "a_pendulum_euler_explicit.every100.csv"}),
     ("a2_pendulum_euler_explicit_totalmass", {"dofs": "a2_pendulum_euler_explicit_totalmass.every100.csv"}),
     ("b1_pendulum_rk4", {"dofs": "b1_pendulum_rk4.every100.csv"}),
@@ -320,14 +321,14 @@ def test_compiler_failure_is_a_sofac_error_with_a_log(
 
 def test_unsupported_component_names_itself_and_its_line(tmp_path: Path) -> None:
     body = (
-        '<Node name="n">\n<NewmarkImplicitSolver/>\n<CGLinearSolver/>\n<MechanicalObject/>\n'
+        '<Node name="n">\n<VariationalSymplecticSolver/>\n<CGLinearSolver/>\n<MechanicalObject/>\n'
         '<UniformMass vertexMass="1"/>\n</Node>'
     )
     with pytest.raises(sofac.SceneError) as failure:
         sofac.load(scene(tmp_path, body))
     first = failure.value.diagnostics[0]
     assert first.code == "E222" and first.loc.line == 2
-    assert "unsupported component NewmarkImplicitSolver at line 2" in first.message
+    assert "unsupported component VariationalSymplecticSolver at line 2" in first.message
 
 
 def test_scene_text_never_reaches_the_code(tmp_path: Path) -> None:

@@ -648,3 +648,16 @@ def test_unreachable_codes_are_never_emitted(code: str) -> None:
         if path.name != "diagnostics.py" and code in path.read_text(encoding="utf-8")
     ]
     assert users == [], f"{code} is emitted now: add a case for it to CASES and drop it from UNREACHABLE"
+
+
+def test_topological_mapping_from_an_unknown_component_gives_diagnostics(tmp_path: Path) -> None:
+    # A misspelled grid feeding Hexa2Tetra (found by tests/test_mutations.py): the evaluator must not
+    # ask a component of unknown type for its values.
+    scene = tmp_path / "misspelled.scn"
+    scene.write_text(
+        '<Node name="root">\n  <Node name="beam">\n    <eRgularGridTopology name="grid" n="3 3 3"/>\n'
+        '    <TetrahedronSetTopologyContainer name="volume"/>\n'
+        '    <Hexa2TetraTopologicalMapping input="@grid" output="@volume"/>\n  </Node>\n</Node>\n'
+    )
+    _, diags = check_file(scene)
+    assert [(d.code, d.loc.line) for d in diags] == [("E200", 3)]

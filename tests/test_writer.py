@@ -32,7 +32,14 @@ REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "scenes"
 EXAMPLE = REPO / "examples" / "hybrid_pendulum.py"
 BUNDLED = sorted(SCENES.glob("*.scn"))
-EXPECTED_BUNDLED = {"hybrid_pendulum.scn", "oscillator.scn", "falling_particle.scn", "beam.scn", "cloth.scn"}
+EXPECTED_BUNDLED = {
+    "hybrid_pendulum.scn",
+    "oscillator.scn",
+    "falling_particle.scn",
+    "beam.scn",
+    "cloth.scn",
+    "liver.scn",
+}
 
 
 def _corpus() -> Path | None:
@@ -142,11 +149,18 @@ def test_bundled_scene_parse_scene_matches_private_reader(path: Path) -> None:
 
 @pytest.mark.parametrize("path", BUNDLED, ids=[p.name for p in BUNDLED])
 def test_bundled_scene_is_self_contained(path: Path) -> None:
+    """No includes; the files a scene reads (liver.scn's meshes) are bundled beside it."""
     scene = read_private(path.read_text(encoding="utf-8"))
     for component in scene.root.components():
         assert component.tag not in {"include", "Object"}
-        for name in ("filename", "fileMesh", "fileTopology", "href", "src"):
+        for name in ("fileMesh", "fileTopology", "href"):
             assert component.get(name) is None, f"{path.name}: {component.path} reads a file"
+        source = component.get("src")
+        assert source is None or source.startswith("@"), f"{path.name}: {component.path} reads a file"
+        filename = component.get("filename")
+        if filename is not None:
+            target = (SCENES / filename).resolve()
+            assert target.parent == SCENES.resolve() and target.is_file(), f"{path.name}: {filename}"
 
 
 def _corpus_scenes() -> list[Path]:

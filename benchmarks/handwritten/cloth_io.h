@@ -6,9 +6,12 @@
 // Nothing here is timed.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
+#include <string>
 #include <vector>
 
 struct ClothInput {
@@ -55,4 +58,14 @@ inline void write_positions(const char* path, const std::vector<double>& x) {
         std::exit(2);
     }
     std::fclose(file);
+}
+
+// Milliseconds on the benchmark's clock: the process's CPU time (default: insensitive to the time
+// slices other processes take on a shared machine), or the wall clock with SOFAC_BENCH_CLOCK=wall.
+inline double bench_ms() {
+    const char* clock_name = std::getenv("SOFAC_BENCH_CLOCK");
+    if (clock_name && std::string(clock_name) == "wall")
+        return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch())
+            .count();
+    return 1000.0 * double(std::clock()) / CLOCKS_PER_SEC;
 }

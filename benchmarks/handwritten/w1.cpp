@@ -2,7 +2,7 @@
 //   usage: w1 INPUT OUTPUT dt vertex_mass stiffness gravity_y warmup steps batches
 // Each step: f = m g + spring forces (k (d - L0) along the spring, no damping: W1 has none);
 // v += dt f / m on the free particles; x += dt v. Prints one JSON line with the ms per step of
-// each timed batch (steady_clock around the batch only).
+// each timed batch (bench_ms() around the batch only: CPU time by default).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -66,10 +66,9 @@ int main(int argc, char** argv) {
     for (long s = 0; s < warmup; ++s) step();
     std::printf("{\"ms_per_step\": [");
     for (long batch = 0; batch < batches; ++batch) {
-        const auto start = std::chrono::steady_clock::now();
+        const double start = bench_ms();
         for (long s = 0; s < steps; ++s) step();
-        const std::chrono::duration<double, std::milli> took = std::chrono::steady_clock::now() - start;
-        std::printf("%s%.17g", batch ? ", " : "", took.count() / double(steps));
+        std::printf("%s%.17g", batch ? ", " : "", (bench_ms() - start) / double(steps));
     }
     std::printf("]}\n");
     write_positions(argv[2], x);

@@ -130,10 +130,9 @@ int main(int argc, char** argv) {
     for (long s = 0; s < warmup; ++s) step();
     std::printf("{\"ms_per_step\": [");
     for (long batch = 0; batch < batches; ++batch) {
-        const auto start = std::chrono::steady_clock::now();
+        const double start = bench_ms();
         for (long s = 0; s < steps; ++s) step();
-        const std::chrono::duration<double, std::milli> took = std::chrono::steady_clock::now() - start;
-        std::printf("%s%.17g", batch ? ", " : "", took.count() / double(steps));
+        std::printf("%s%.17g", batch ? ", " : "", (bench_ms() - start) / double(steps));
     }
     std::printf("], \"fewest_cg_iterations\": %ld}\n", fewest_iterations);
     write_positions(argv[2], x);

@@ -71,9 +71,15 @@ private:
     std::size_t cursor_ = 0;
 };
 
+// Eigen's CHOLMOD LDL^T, with access to the factor for cholmod_solve2.
+class CholmodLdlt : public Eigen::CholmodSimplicialLDLT<Eigen::SparseMatrix<double>> {
+public:
+    cholmod_factor* factor() const { return m_cholmodFactor; }
+};
+
 struct DirectSolver {
     Eigen::SparseMatrix<double> matrix;
-    Eigen::CholmodSimplicialLDLT<Eigen::SparseMatrix<double>> factorization;
+    CholmodLdlt factorization;
     Assembler assembler;
     std::vector<char> fixed;  // per scalar DOF: projected out (row and column cleared, diagonal 1)
     Eigen::VectorXd rhs, solution;
@@ -81,6 +87,14 @@ struct DirectSolver {
     bool factored = false;  // PrecomputedLinearSolver: factorised once, on the first step
 
     DirectSolver() { factorization.cholmod().print = 0; }  // failures are reported, not printed
+    DirectSolver(const DirectSolver&) = delete;
+    DirectSolver& operator=(const DirectSolver&) = delete;
+    ~DirectSolver() {
+        cholmod_free_dense(&x_, &factorization.cholmod());
+        cholmod_free_dense(&y_, &factorization.cholmod());
+        cholmod_free_dense(&e_, &factorization.cholmod());
+        cholmod_free_sparse(&permuted_, &factorization.cholmod());
+    }
 
     void resize(Index n) {
         fixed.assign(static_cast<std::size_t>(n), 0);
@@ -98,18 +112,68 @@ struct DirectSolver {
                 if (fixed[it.row()] || fixed[it.col()]) it.valueRef() = it.row() == it.col() ? 1.0 : 0.0;
     }
 
-    // After the values are assembled: the projection, then the numeric factorisation.
+    // After the values are assembled: the projection, then the numeric factorisation. What
+    // cholmod_factorize does for a simplicial factor (Eigen's factorize calls it), step by step, so
+    // that the permuted upper triangle it factors, S = triu(A(p,p)'), is allocated once and then
+    // refilled in place (cholmod_factorize allocates and frees it on every call).
     void factor() {
         project();
-        factorization.factorize(matrix);
-        ok = factorization.info() == Eigen::Success;
+        cholmod_common& common = factorization.cholmod();
+        cholmod_factor* L = factorization.factor();
+        const Eigen::SparseMatrix<double>& values = matrix;
+        cholmod_sparse a = Eigen::viewAsCholmod(values.selfadjointView<Eigen::Lower>());
+        if (L == nullptr || L->is_super || a.stype >= 0) {  // not the simplicial lower case: Eigen's path
+            factorization.factorize(matrix);
+            ok = factorization.info() == Eigen::Success;
+            return;
+        }
+        common.status = CHOLMOD_OK;
+        cholmod_allocate_work(a.nrow, 2 * a.nrow, 0, &common);  // kept in `common` after the first call
+        int* perm = L->ordering == CHOLMOD_NATURAL ? nullptr : static_cast<int*>(L->Perm);
+        if (permuted_ == nullptr) permuted_ = cholmod_ptranspose(&a, 2, perm, nullptr, 0, &common);
+        else cholmod_transpose_sym(&a, 2, perm, permuted_, &common);
+        if (permuted_ == nullptr || common.status < CHOLMOD_OK) {
+            ok = false;
+            return;
+        }
+        double beta[2] = {0.0, 0.0};
+        L->is_ll = common.final_ll ? 1 : 0;
+        cholmod_rowfac(permuted_, nullptr, beta, 0, a.nrow, L, &common);
+        if (common.status >= CHOLMOD_OK && !common.final_asis)
+            cholmod_change_factor(L->xtype, L->is_ll, 0, common.final_pack, common.final_monotonic, L, &common);
+        ok = common.status >= CHOLMOD_OK && L->minor == L->n;
     }
 
-    // A failed factorisation yields NaN, which the step's divergence guard reports.
+    // A failed factorisation yields NaN, which the step's divergence guard reports. The same
+    // solve as Eigen's (cholmod_solve), through cholmod_solve2 with CHOLMOD's result and workspace
+    // vectors kept from one step to the next: no allocation after the first solve.
     void solve() {
-        if (ok) solution = factorization.solve(rhs);
-        else solution.setConstant(std::numeric_limits<double>::quiet_NaN());
+        if (!ok) {
+            solution.setConstant(std::numeric_limits<double>::quiet_NaN());
+            return;
+        }
+        cholmod_dense b{};
+        b.nrow = b.nzmax = b.d = static_cast<std::size_t>(rhs.size());
+        b.ncol = 1;
+        b.x = rhs.data();
+        b.xtype = CHOLMOD_REAL;
+        b.dtype = CHOLMOD_DOUBLE;
+        // The simplicial solve leaves its workspace Y (4 x n, leading dimension 4) marked as 1 x n,
+        // which would make the next call reallocate it: restore the shape it was allocated with.
+        if (y_ && y_->nzmax >= 4 * y_->ncol) y_->nrow = y_->d = 4;
+        if (!cholmod_solve2(CHOLMOD_A, factorization.factor(), &b, nullptr, &x_, nullptr, &y_, &e_,
+                            &factorization.cholmod())) {
+            solution.setConstant(std::numeric_limits<double>::quiet_NaN());
+            return;
+        }
+        std::copy_n(static_cast<const double*>(x_->x), rhs.size(), solution.data());
     }
+
+private:
+    cholmod_dense* x_ = nullptr;  // cholmod_solve2's solution and workspaces, reused
+    cholmod_dense* y_ = nullptr;
+    cholmod_dense* e_ = nullptr;
+    cholmod_sparse* permuted_ = nullptr;  // triu(A(p,p)'), the matrix the numeric factorisation reads
 };
 
 // (Block) Jacobi preconditioner of PCGLinearSolver: z = D^-1 r with D the diagonal (block size 1)
@@ -209,7 +273,9 @@ inline void assemble_springs(Assembler& A, const Springs& s, const double* jacob
     constexpr int S = D1::spatial;
     using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
     for (Index k = 0; k < s.count; ++k) {
-        const Eigen::Map<const Block> m(jacobians + S * S * k);
+        double values[S * S];
+        spring_block<S>(jacobians, k, values);
+        const Eigen::Map<const Block> m(values);
         const Index a = offset1 + D1::deriv * s.a[k], b = offset2 + D2::deriv * s.b[k];
         A.add_block(a, a, m, -kfact);
         A.add_block(a, b, m, kfact);

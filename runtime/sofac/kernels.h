@@ -9,6 +9,9 @@
 
 #include "types.h"
 
+// Complete unrolling of the short loops over a point's coordinates (g++ -O2 keeps them as loops).
+#define SOFAC_UNROLL _Pragma("GCC unroll 16")
+
 namespace sofac {
 
 // ---- vector operations -------------------------------------------------------------------------
@@ -24,6 +27,15 @@ inline void copy(double* out, const double* in, Index size) {
 // out = a + h * b (derivative-shaped arrays)
 inline void add_scaled(double* out, const double* a, const double* b, double h, Index size) {
     for (Index k = 0; k < size; ++k) out[k] = a[k] + h * b[k];
+}
+
+// Symplectic Euler on points in one pass: v += h a, then x += h v (the same numbers as add_scaled
+// followed by advance).
+inline void symplectic_points(double* x, double* v, const double* a, double h, Index size) {
+    for (Index k = 0; k < size; ++k) {
+        v[k] = v[k] + h * a[k];
+        x[k] = x[k] + h * v[k];
+    }
 }
 
 // out = x "+" h * v on coordinates: a translation for points; for rigid frames the orientation
@@ -57,6 +69,12 @@ inline void mass_gravity(double* f, Index n, const double* mass, Index mass_stri
 
 template <class DT>
 inline void mass_acceleration(double* a, const double* f, Index n, const double* mass, Index mass_stride) {
+    if constexpr (!DT::rigid) {
+        if (mass_stride == 0) {  // one mass for every point: a flat, vectorised division (same quotients)
+            Eigen::Map<Eigen::ArrayXd>(a, DT::deriv * n) = Eigen::Map<const Eigen::ArrayXd>(f, DT::deriv * n) / mass[0];
+            return;
+        }
+    }
     for (Index i = 0; i < n; ++i) {
         const double* mi = mass + i * mass_stride;
         if constexpr (DT::rigid && DT::coord == 7) {
@@ -154,53 +172,118 @@ struct Springs {
     Index count;
 };
 
-// With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces:
-// (ks - F/d) n n^T + (F/d) I, with F the whole intensity (elastic and damping), as SOFA does.
-template <class D1, class D2>
+// With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces,
+// (ks - F/d) n n^T + (F/d) I with F the whole intensity (elastic and damping), as SOFA does, in
+// factored form: S + 2 numbers per spring, c = ks - F/d, t = F/d and n (spring_block rebuilds
+// entry (i, j) as (c n_i) n_j [+ t], the very numbers a stored S x S block would hold).
+// `Damped` = false leaves out the damping term (the plan proves every damping is zero: no velocity
+// is read); `Flagged` = false skips the per-spring enabled / elongation-only flags (all springs
+// enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
+// fixed-size expressions use (left to right), so every variant gives the same numbers bit for bit.
+template <class D1, class D2, bool Damped = true, bool Flagged = true>
 inline void spring_forces(const Springs& s, const double* x1, const double* v1, double* f1, const double* x2,
                           const double* v2, double* f2, double* jacobians) {
     static_assert(D1::spatial == D2::spatial, "springs join points of the same dimension");
     constexpr int S = D1::spatial;
-    using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
-    for (Index k = 0; k < s.count; ++k) {
-        const Index a = s.a[k], b = s.b[k];
-        VecN<S> u = point<D2>(x2, b) - point<D1>(x1, a);
-        const double d = u.norm();
-        if (!s.enabled[k] || !(d > 1.0e-9) || (s.elongation_only[k] && !(d > s.rest_length[k]))) {
-            if (jacobians) Eigen::Map<Block>(jacobians + S * S * k).setZero();
+    const Index* const sa = s.a;
+    const Index* const sb = s.b;
+    const double* const stiffness = s.stiffness;
+    const double* const rest = s.rest_length;
+    const Index count = s.count;
+    for (Index k = 0; k < count; ++k) {
+        const Index a = sa[k], b = sb[k];
+        const double* const xa = x1 + D1::coord * a;
+        const double* const xb = x2 + D2::coord * b;
+        double u[S];
+        SOFAC_UNROLL
+        for (int i = 0; i < S; ++i) u[i] = xb[i] - xa[i];
+        double squared = u[0] * u[0];
+        SOFAC_UNROLL
+        for (int i = 1; i < S; ++i) squared += u[i] * u[i];
+        const double d = std::sqrt(squared);
+        bool active = d > 1.0e-9;
+        if constexpr (Flagged) active = active && s.enabled[k] && !(s.elongation_only[k] && !(d > rest[k]));
+        if (!active) {
+            if (jacobians) {
+                SOFAC_UNROLL
+                for (int i = 0; i < S + 2; ++i) jacobians[(S + 2) * k + i] = 0.0;
+            }
             continue;
         }
         const double inverse_length = 1.0 / d;
-        u *= inverse_length;
-        const double elongation = d - s.rest_length[k];
-        const double relative_speed = u.dot(linear<D2>(v2, b) - linear<D1>(v1, a));
-        const double intensity = s.stiffness[k] * elongation + s.damping[k] * relative_speed;
-        const VecN<S> force = u * intensity;
-        linear<D1>(f1, a) += force;
-        linear<D2>(f2, b) -= force;
+        SOFAC_UNROLL
+        for (int i = 0; i < S; ++i) u[i] *= inverse_length;
+        const double ks = stiffness[k];
+        double intensity = ks * (d - rest[k]);
+        if constexpr (Damped) {
+            const double* const va = v1 + D1::deriv * a;
+            const double* const vb = v2 + D2::deriv * b;
+            double relative_speed = u[0] * (vb[0] - va[0]);
+            SOFAC_UNROLL
+            for (int i = 1; i < S; ++i) relative_speed += u[i] * (vb[i] - va[i]);
+            intensity += s.damping[k] * relative_speed;
+        }
+        double* const fa = f1 + D1::deriv * a;
+        double* const fb = f2 + D2::deriv * b;
+        SOFAC_UNROLL
+        for (int i = 0; i < S; ++i) {
+            const double force = u[i] * intensity;
+            fa[i] += force;
+            fb[i] -= force;
+        }
         if (jacobians) {
             const double tangent = intensity * inverse_length;
-            Eigen::Map<Block> m(jacobians + S * S * k);
-            for (int i = 0; i < S; ++i) {
-                for (int j = 0; j < S; ++j) m(i, j) = (s.stiffness[k] - tangent) * u[i] * u[j];
-                m(i, i) += tangent;
-            }
+            double* const m = jacobians + (S + 2) * k;
+            m[0] = ks - tangent;
+            m[1] = tangent;
+            SOFAC_UNROLL
+            for (int i = 0; i < S; ++i) m[2 + i] = u[i];
         }
     }
 }
 
-// df_a += kfact dF/dx (dx_b - dx_a), df_b -= the same, with the blocks of the last force pass.
+// Spring k's S x S block (row-major) from the factored form spring_forces stores.
+template <int S>
+inline void spring_block(const double* jacobians, Index k, double* block) {
+    const double* const m = jacobians + (S + 2) * k;
+    SOFAC_UNROLL
+    for (int i = 0; i < S; ++i) {
+        const double cu = m[0] * m[2 + i];
+        SOFAC_UNROLL
+        for (int j = 0; j < S; ++j) block[S * i + j] = cu * m[2 + j];
+        block[S * i + i] += m[1];
+    }
+}
+
+// df_a += kfact dF/dx (dx_b - dx_a), df_b -= the same, with the blocks of the last force pass
+// (row sums left to right, then the factor: as Eigen's (m * w) * kfact).
 template <class D1, class D2>
 inline void spring_dforces(const Springs& s, const double* jacobians, const double* dx1, double* df1,
                            const double* dx2, double* df2, double kfact) {
     constexpr int S = D1::spatial;
-    using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
-    for (Index k = 0; k < s.count; ++k) {
-        const Index a = s.a[k], b = s.b[k];
-        const Eigen::Map<const Block> m(jacobians + S * S * k);
-        const VecN<S> dforce = m * (linear<D2>(dx2, b) - linear<D1>(dx1, a)) * kfact;
-        linear<D1>(df1, a) += dforce;
-        linear<D2>(df2, b) -= dforce;
+    const Index* const sa = s.a;
+    const Index* const sb = s.b;
+    const Index count = s.count;
+    for (Index k = 0; k < count; ++k) {
+        const Index a = sa[k], b = sb[k];
+        double m[S * S];
+        spring_block<S>(jacobians, k, m);
+        const double* const ya = dx1 + D1::deriv * a;
+        const double* const yb = dx2 + D2::deriv * b;
+        double w[S];
+        SOFAC_UNROLL
+        for (int j = 0; j < S; ++j) w[j] = yb[j] - ya[j];
+        double* const fa = df1 + D1::deriv * a;
+        double* const fb = df2 + D2::deriv * b;
+        SOFAC_UNROLL
+        for (int i = 0; i < S; ++i) {
+            double row = m[S * i] * w[0];
+            SOFAC_UNROLL
+            for (int j = 1; j < S; ++j) row += m[S * i + j] * w[j];
+            const double dforce = row * kfact;
+            fa[i] += dforce;
+            fb[i] -= dforce;
+        }
     }
 }
 
@@ -364,11 +447,37 @@ inline double dot(const double* a, const double* b, Index n, int width) {
     return sum;
 }
 
+// The conjugate gradient's update in one pass: x += alpha p, r -= alpha q; returns the new r.r
+// (summed as dot(r, r, n, width): the same number as the separate passes).
+template <int Width>
+inline double cg_update(double* x, double* r, const double* p, const double* q, double alpha, Index n) {
+    double sum = 0.0;
+    for (Index i = 0; i < n; ++i) {
+        double block = 0.0;
+        SOFAC_UNROLL
+        for (int d = 0; d < Width; ++d) {
+            const Index k = Width * i + d;
+            x[k] = x[k] + alpha * p[k];
+            const double rk = r[k] + -alpha * q[k];
+            r[k] = rk;
+            block = d == 0 ? rk * rk : block + rk * rk;
+        }
+        sum += block;
+    }
+    return sum;
+}
+
 inline void scale(double* a, double factor, Index size) {
     for (Index k = 0; k < size; ++k) a[k] *= factor;
 }
 
 // ---- guards ------------------------------------------------------------------------------------
+
+// Whether every number is finite: a vectorised sum of a * 0, which is NaN as soon as one number is
+// infinite or NaN (the order of the sum does not matter: it is 0 or NaN).
+inline bool all_finite(const double* a, Index size) {
+    return !std::isnan((Eigen::Map<const Eigen::ArrayXd>(a, size) * 0.0).sum());
+}
 
 // Index of the first non-finite number, or -1.
 inline Index first_non_finite(const double* a, Index size) {

@@ -13,6 +13,8 @@ _PROJECTION = frozenset({Effect.PROJECTION})
 _SIX = ("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d", "Rigid2d")
 
 _INDICES = FieldSpec("indices", Ints(), doc="constrained DOFs", indexes="state")
+# Line, Plane, Point and LinearVelocity constraints start with index 0 in their list (SOFA's constructors).
+_INDICES_FROM_0 = FieldSpec("indices", Ints(), (0,), "constrained DOFs (default: 0)", indexes="state")
 _DRAW_SIZE = FieldSpec("drawSize", Real(), 0.0, "display size (0: points)")
 
 _FIXED_FIELDS = (
@@ -60,6 +62,8 @@ PARTIAL_FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="LineProjectiveConstraint",
+    kernel="line_or_plane",
+    role="line",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a line (they may only slide along it).",
@@ -69,7 +73,7 @@ LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     supported=True,
     effects=_PROJECTION,
     fields=(
-        _INDICES,
+        _INDICES_FROM_0,
         FieldSpec("origin", Reals(), doc="a point of the line"),
         FieldSpec("direction", Reals(), doc="direction of the line"),
         _DRAW_SIZE,
@@ -79,6 +83,8 @@ LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PlaneProjectiveConstraint",
+    kernel="line_or_plane",
+    role="plane",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a plane (they may only move within it).",
@@ -88,7 +94,7 @@ PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     supported=True,
     effects=_PROJECTION,
     fields=(
-        _INDICES,
+        _INDICES_FROM_0,
         FieldSpec("origin", Reals(), doc="a point of the plane"),
         FieldSpec("normal", Reals(), doc="normal of the plane"),
         _DRAW_SIZE,
@@ -98,6 +104,7 @@ PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 POINT_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PointProjectiveConstraint",
+    kernel="point_constraint",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a fixed target point.",
@@ -107,7 +114,7 @@ POINT_PROJECTIVE_CONSTRAINT = ComponentSpec(
     supported=True,
     effects=_PROJECTION,
     fields=(
-        _INDICES,
+        _INDICES_FROM_0,
         FieldSpec("point", Reals(), doc="target point"),
         FieldSpec("fixAll", Bool(), False, "project every DOF"),
         _DRAW_SIZE,

@@ -344,6 +344,7 @@ CONSTANT_FORCE_FIELD = ComponentSpec(
 
 PLANE_FORCE_FIELD = ComponentSpec(
     name="PlaneForceField",
+    kernel="plane_force",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Penalty repulsion of points below the plane x.normal = d: f = -stiffness delta n + damping.",
@@ -408,12 +409,13 @@ INTERACTION_ELLIPSOID_FORCE_FIELD = ComponentSpec(
 
 TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
     name="TrianglePressureForceField",
+    kernel="triangle_pressure",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Pressure on selected triangles of the topology.",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="TrianglePressureForceField is not implemented yet",
+    supported=True,
     effects=frozenset({Effect.EXTERNAL_FORCE}),
     fields=(
         FieldSpec("pressure", Coords(deriv=True), doc="pressure vector (force per unit area)"),

@@ -134,6 +134,26 @@ SPARSE_CHOLESKY_SOLVER = ComponentSpec(
 )
 
 
+SPARSE_LU_SOLVER = ComponentSpec(
+    name="SparseLUSolver",
+    kernel="direct",
+    category=Category.LINEAR_SOLVER,
+    module="CSparseSolvers",
+    doc="Direct sparse LU factorisation (CSparse). Moved out of SOFA's main repository into the "
+    "CSparseSolvers plugin in v23.12. The implicit system matrix is symmetric, so sofac solves it "
+    "with the same sparse factorisation as SparseLDLSolver (the same solution, to round-off).",
+    templates=(CRS_SCALAR,),
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("tolerance", Real(), 0.001, "tolerance of the factorisation (CSparse's pivoting)"),
+        _ORDERING,
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+
 def _eigen(name: str, what: str) -> ComponentSpec:
     return ComponentSpec(
         name=name,
@@ -443,6 +463,7 @@ COMPONENTS = (
     MIN_RES_LINEAR_SOLVER,
     SPARSE_LDL_SOLVER,
     SPARSE_CHOLESKY_SOLVER,
+    SPARSE_LU_SOLVER,
     EIGEN_SIMPLICIAL_LDLT,
     EIGEN_SIMPLICIAL_LLT,
     EIGEN_SPARSE_LU,

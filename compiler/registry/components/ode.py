@@ -101,6 +101,7 @@ RUNGE_KUTTA4_SOLVER = ComponentSpec(
 
 NEWMARK_IMPLICIT_SOLVER = ComponentSpec(
     name="NewmarkImplicitSolver",
+    kernel="newmark",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Implicit Newmark-beta scheme with Rayleigh damping (gamma 1/2, beta 1/4: average acceleration).",
@@ -155,6 +156,7 @@ _STATIC_LEGACY = (
 
 STATIC_SOLVER = ComponentSpec(
     name="StaticSolver",
+    kernel="static",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Static equilibrium f(x) = 0 by Newton-Raphson (a NewtonRaphsonSolver found below, or created).",

@@ -366,6 +366,7 @@ HEXA2QUAD = _topological_mapping(
     "Hexa2QuadTopologicalMapping",
     "Writes the boundary quads of the input hexahedra to the output container.",
     FieldSpec("flipNormals", Bool(), False, "reverse the quad orientation"),
+    compute="hexa_to_quad",
 )
 TETRA2TRIANGLE = _topological_mapping(
     "Tetra2TriangleTopologicalMapping",
@@ -374,6 +375,7 @@ TETRA2TRIANGLE = _topological_mapping(
     FieldSpec("noNewTriangles", Bool(), False, "do not add triangles on topological changes"),
     FieldSpec("noInitialTriangles", Bool(), False, "start with no triangles"),
     FieldSpec("modifier", Link("topology_helper"), doc="output modifier"),
+    compute="tetra_to_triangle",
 )
 MESH2POINT = _topological_mapping(
     "Mesh2PointTopologicalMapping",

@@ -1,0 +1,93 @@
+"""No heap allocation inside a step, checked with a counting allocator.
+
+A small C library (tests/data/alloc/count_alloc.c) is preloaded into a fresh Python process
+(LD_PRELOAD, glibc): it forwards malloc, calloc, realloc and the aligned allocators to glibc and
+counts the calls a thread makes between sofac_alloc_count_start() and sofac_alloc_count_stop().
+Every C++ ``new`` and every allocation by Eigen or CHOLMOD ends in one of these. The scenes are
+stepped a few times first (the first steps may size workspaces: CHOLMOD's solve and the permuted
+matrix of the factorisation are allocated once), then the native step (the compiled library, called
+through the host module) is counted over 1 and 20 steps: both must allocate nothing."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHIM = Path(__file__).resolve().parent / "data" / "alloc" / "count_alloc.c"
+
+PROBE = r"""
+import ctypes, json, sys
+import sofac
+
+counter = ctypes.CDLL(None)
+counter.sofac_alloc_count_stop.restype = ctypes.c_long
+
+
+def counted(action):
+    counter.sofac_alloc_count_start()
+    action()
+    return counter.sofac_alloc_count_stop()
+
+
+results = {"control": counted(lambda: bytearray(1 << 20))}
+for path in sys.argv[1:]:
+    sim = sofac.load(path)
+    native = sim._native  # the compiled step, without the Python wrapper's bookkeeping
+    native.step(3)
+    results[path] = [counted(lambda: native.step(1)), counted(lambda: native.step(20))]
+print(json.dumps(results))
+"""
+
+
+@pytest.fixture(scope="module")
+def shim(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        pytest.skip("the counting allocator needs glibc")
+    compiler = shutil.which("cc") or shutil.which("gcc")
+    if compiler is None:
+        pytest.skip("no C compiler")
+    out = tmp_path_factory.mktemp("alloc") / "libcount_alloc.so"
+    subprocess.run([compiler, "-O2", "-shared", "-fPIC", str(SHIM), "-o", str(out)], check=True)
+    return out
+
+
+def allocations(shim: Path, scenes: list[Path]) -> dict[str, list[int]]:
+    env = {**os.environ, "LD_PRELOAD": str(shim), "OPENBLAS_NUM_THREADS": "1"}
+    result = subprocess.run(
+        [sys.executable, "-c", PROBE, *map(str, scenes)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    counts = json.loads(result.stdout.strip().splitlines()[-1])
+    assert counts.pop("control") >= 1  # the counter sees allocations made in the window
+    return counts
+
+
+def test_bundled_scenes_do_not_allocate_in_a_step(shim: Path) -> None:
+    # explicit rigid + mapping, explicit springs, implicit CG springs, implicit CG FEM
+    names = ["hybrid_pendulum.scn", "oscillator.scn", "cloth.scn", "beam.scn"]
+    counts = allocations(shim, [REPO / "scenes" / name for name in names])
+    assert counts == {str(REPO / "scenes" / name): [0, 0] for name in names}
+
+
+def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -> None:
+    scenes = [
+        shared_dir / "corpus/sofa/Demos/liver.scn",  # CG, tetrahedral FEM, barycentric mapping
+        shared_dir / "reference/sofa/scenes/c2_beam_tetfem_ldl.scn",  # SparseLDLSolver: factorised each step
+        shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
+        shared_dir / "corpus/sofa/Component/LinearSolver/Preconditioner/FEMBAR_PCG_JacobiPreconditioner.scn",
+    ]
+    counts = allocations(shim, scenes)
+    assert counts == {str(path): [0, 0] for path in scenes}
