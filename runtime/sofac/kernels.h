@@ -106,6 +106,13 @@ inline void mass_acceleration(double* a, const double* f, Index n, const double*
 template <class DT>
 inline void mass_multiply(double* df, const double* dx, Index n, const double* mass, Index mass_stride,
                           double mfact) {
+    if constexpr (!DT::rigid) {
+        if (mass_stride == 0) {  // one mass: the factor (mfact m) once, then a flat, vectorised pass
+            const double factor = mfact * mass[0];
+            for (Index k = 0; k < DT::deriv * n; ++k) df[k] += factor * dx[k];
+            return;
+        }
+    }
     for (Index i = 0; i < n; ++i) {
         const double* mi = mass + i * mass_stride;
         if constexpr (DT::rigid && DT::coord == 7) {
