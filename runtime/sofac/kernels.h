@@ -61,6 +61,15 @@ inline void advance(double* out, const double* x, const double* v, double h, Ind
 // axes: SOFA neither rotates the inertia with the body nor adds the gyroscopic term.
 template <class DT>
 inline void mass_gravity(double* f, Index n, const double* mass, Index mass_stride, const double* g) {
+    if (mass_stride == 0) {  // one mass: the weight m g computed once (f may alias nothing then)
+        double weight[DT::spatial];
+        for (int d = 0; d < DT::spatial; ++d) weight[d] = mass[0] * g[d];
+        for (Index i = 0; i < n; ++i) {
+            SOFAC_UNROLL
+            for (int d = 0; d < DT::spatial; ++d) f[DT::deriv * i + d] += weight[d];
+        }
+        return;
+    }
     for (Index i = 0; i < n; ++i) {
         const double m = mass[i * mass_stride];
         for (int d = 0; d < DT::spatial; ++d) f[DT::deriv * i + d] += m * g[d];
@@ -97,6 +106,13 @@ inline void mass_acceleration(double* a, const double* f, Index n, const double*
 template <class DT>
 inline void mass_multiply(double* df, const double* dx, Index n, const double* mass, Index mass_stride,
                           double mfact) {
+    if constexpr (!DT::rigid) {
+        if (mass_stride == 0) {  // one mass: the factor (mfact m) once, then a flat, vectorised pass
+            const double factor = mfact * mass[0];
+            for (Index k = 0; k < DT::deriv * n; ++k) df[k] += factor * dx[k];
+            return;
+        }
+    }
     for (Index i = 0; i < n; ++i) {
         const double* mi = mass + i * mass_stride;
         if constexpr (DT::rigid && DT::coord == 7) {
