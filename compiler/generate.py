@@ -88,7 +88,7 @@ class _ProjectionView:
         state = projection.state
         self.origin = projection.origin
         self.velocity = projection.velocity
-        self.on_v = projection.project(state.v)
+        self.on_v = (projection.project_velocity or projection.project)(state.v)
         self.on_x = projection.position(state.x) if projection.position else ""
         self.on_acc = projection.project(state.acc) if state.acc else ""
         self.on_f = projection.project(state.f)

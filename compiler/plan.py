@@ -96,6 +96,8 @@ class Projection:
     mark: Callable[[int], str] | None = None
     # projectPosition: coordinates moved onto the constraint after each step and at init.
     position: Callable[[Buffer], str] | None = None
+    # projectVelocity, when it is not ``project`` (an imposed velocity rather than a filter).
+    project_velocity: Callable[[Buffer], str] | None = None
 
 
 @dataclass
@@ -2442,6 +2444,69 @@ def _lower_point_constraint(planner: _Planner, checked: CheckedComponent, owner:
     )
 
 
+def _lower_linear_velocity(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """LinearVelocityProjectiveConstraint: the listed DOFs move at a velocity interpolated between key
+    times (SOFA's findKeyTimes at each step's start time), integrated explicitly from their last
+    projected positions; their solver increments are zeroed while it is active."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.rigid:
+        planner.unsupported(checked, "on rigid DOFs it is not compiled yet (Vec types only)")
+        return
+    if group.assembled:
+        planner.unsupported(checked, "with a sparse direct solver it is not compiled yet; use CGLinearSolver")
+        return
+    width, coord = state.datatype.deriv_size, state.datatype.coord_size
+    times = np.asarray(planner.value(component, "keyTimes"), dtype=float).ravel()
+    given = planner.value(component, "velocities")  # SOFA starts the list with one zero velocity
+    velocities = np.asarray(given if given is not None and np.size(given) else np.zeros(width), dtype=float)
+    velocities = velocities.reshape(-1, width)
+    if len(times) != len(velocities):
+        planner.unsupported(checked, f"it has {len(times)} keyTimes but {len(velocities)} velocities")
+        return
+    coordinates = _indices(planner, checked, "coordinates", 0, all_if_empty=False)
+    if len(coordinates) and (coordinates.min() < 0 or coordinates.max() >= width):
+        planner.unsupported(checked, f"its coordinates must be between 0 and {width - 1}")
+        return
+    indices = planner.buffer(component, "indices", _fixed_indices(planner, checked, state), "i64")
+    count = len(indices.initial)
+    memory = planner.buffer(component, "memory", np.zeros(4 + 2 * width + count * coord), role="scratch")
+    time_buffer = planner.buffer(component, "keyTimes", times)
+    velocity_buffer = planner.buffer(component, "velocities", velocities, columns=width)
+    coordinate_buffer = planner.buffer(component, "coordinates", coordinates, "i64")
+    t = state.cpp_type
+    after_end = "true" if planner.value(component, "continueAfterEnd") else "false"
+    keyed = (
+        f"sofac::KeyedVelocity<{t}>{{{_ptr(memory)}, {_ptr(time_buffer)}, {_ptr(velocity_buffer)}, "
+        f"{len(times)}, {after_end}}}"
+    )
+    selected = (indices, _count(indices))
+    chosen = (coordinate_buffer, _count(coordinate_buffer))
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            lambda vector: _call(f"keyed_velocity_response<{t}>", keyed, vector, *selected, "S.time"),
+            velocity=True,
+            position=lambda x: _call(
+                f"keyed_velocity_position<{t}>",
+                keyed,
+                x,
+                *selected,
+                *chosen,
+                "S.time",
+                f"S.{planner.dt.ident}[0]",
+            ),
+            project_velocity=lambda v: _call(
+                f"keyed_velocity_velocity<{t}>", keyed, v, *selected, *chosen, "S.time"
+            ),
+        )
+    )
+
+
 def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """PlaneForceField: a penalty on the points under the plane (stiffness in implicit solves)."""
     found = _target(planner, checked, owner)
@@ -3031,6 +3096,7 @@ LOWERINGS: dict[str, Lowering] = {
     "partial_fixed": _lower_partial_fixed,
     "line_or_plane": _lower_line_or_plane,
     "point_constraint": _lower_point_constraint,
+    "linear_velocity": _lower_linear_velocity,
     "plane_force": _lower_plane_force,
     "triangle_pressure": _lower_triangle_pressure,
     "rigid_mapping": _lower_rigid_mapping,

@@ -282,3 +282,54 @@ def test_implicit_velocity_damping_under_newmark_follows_sofas_recurrence(tmp_pa
         a_next = (-c * v - c * v - H * (1 - gamma) * c * a) / (m + H * gamma * c)
         v, a = v + H * ((1 - gamma) * a + gamma * a_next), a_next
     assert sim["dofs"].velocity[0] == pytest.approx(v, rel=1e-10)
+
+
+# --- LinearVelocityProjectiveConstraint -----------------------------------------------------------
+
+
+def _keyed_positions(
+    x0: np.ndarray, steps: int, keys: list[tuple[float, np.ndarray]], dt: float
+) -> np.ndarray:
+    """SOFA's recurrence for a DOF under LinearVelocityProjectiveConstraint: at each step's start
+    time t (and once at init, t = 0) x = x_previous + v(t) dt, v(t) linear between the keys."""
+
+    def velocity(t: float) -> np.ndarray:
+        (t0, v0), (t1, v1) = keys
+        return v1 if t > t1 else (v1 - v0) * ((t - t0) / (t1 - t0)) + v0  # after the end: the last one
+
+    x, t = x0 + velocity(0.0) * dt, 0.0
+    for _ in range(steps):
+        x = x + velocity(t) * dt
+        t += dt
+    return x
+
+
+@pytest.mark.parametrize("solver", list(SOLVERS))
+def test_linear_velocity_drives_its_dofs_between_key_times(tmp_path: Path, solver: str) -> None:
+    body = (
+        '<LinearVelocityProjectiveConstraint indices="0" keyTimes="0 1" velocities="0 0 0  2 0 -1"/>'
+        '<SpringForceField spring="0 1 50 0 1"/>'
+    )
+    sim = sofac.load(particles(tmp_path, body, solver=SOLVERS[solver], position="0 0 0  1 0 0"))
+    sim.step(8)
+    keys = [(0.0, np.zeros(3)), (1.0, np.array([2.0, 0.0, -1.0]))]
+    assert sim["dofs"].position[0] == pytest.approx(_keyed_positions(np.zeros(3), 8, keys, H), abs=1e-14)
+    assert sim["dofs"].velocity[0] == pytest.approx(keys[1][1] * (7 * H), abs=1e-14)  # v(t) at the last start
+    assert sim["dofs"].position[1, 0] > 1.0  # the spring drags the free particle along
+
+
+def test_linear_velocity_on_some_coordinates_and_after_its_end(tmp_path: Path) -> None:
+    body = (
+        '<LinearVelocityProjectiveConstraint indices="0" keyTimes="0 0.05" velocities="0 0 0  0 3 0" '
+        'coordinates="1" continueAfterEnd="1"/>'
+    )
+    sim = sofac.load(particles(tmp_path, body, solver="<EulerExplicitSolver/>", position="0 0 0"))
+    sim.step(30)
+    # y follows the keys, then keeps the last velocity (continueAfterEnd); gravity (along -y) does
+    # not move it: that coordinate is imposed. x and z are free and feel no force.
+    assert sim["dofs"].velocity[0, 1] == pytest.approx(3.0, abs=1e-14)
+    keys = [(0.0, np.zeros(3)), (0.05, np.array([0.0, 3.0, 0.0]))]
+    assert sim["dofs"].position[0, 1] == pytest.approx(
+        _keyed_positions(np.zeros(3), 30, keys, H)[1], abs=1e-14
+    )
+    assert sim["dofs"].position[0, [0, 2]].tolist() == [0.0, 0.0]

@@ -15,6 +15,7 @@
 
 #include <cmath>
 
+#include "kernels.h"
 #include "types.h"
 
 namespace sofac {
@@ -245,6 +246,106 @@ template <class DT>
 inline void project_onto_point(double* x, const Index* indices, Index count, const double* target) {
     for (Index k = 0; k < count; ++k)
         for (int c = 0; c < DT::coord; ++c) x[DT::coord * indices[k] + c] = target[c];
+}
+
+// ---- LinearVelocityProjectiveConstraint ------------------------------------------------------------
+
+// The constraint's memory (SOFA's members), one array: [prevT, nextT, finished, captured,
+// prevV (deriv), nextV (deriv), xP (count x coord: the constrained DOFs' last projected positions)].
+// Every projection first runs SOFA's findKeyTimes at the step's start time while not finished.
+template <class DT>
+struct KeyedVelocity {
+    double* memory;
+    const double* key_times;
+    const double* key_velocities;  // keys x deriv
+    Index keys;
+    bool continue_after_end;
+
+    double& previous_time() const { return memory[0]; }
+    double& next_time() const { return memory[1]; }
+    double* previous_velocity() const { return memory + 4; }
+    double* next_velocity() const { return memory + 4 + DT::deriv; }
+    double* last_positions() const { return memory + 4 + 2 * DT::deriv; }
+
+    void find_key_times(double time) const {
+        if (memory[2] != 0.0 || keys == 0) return;
+        if (time > key_times[keys - 1]) {
+            for (int c = 0; c < DT::deriv; ++c) previous_velocity()[c] = next_velocity()[c];
+            next_time() = INFINITY;
+            memory[2] = 1.0;
+            return;
+        }
+        if (time < key_times[0]) return;
+        next_time() = key_times[0];
+        previous_time() = next_time();
+        for (Index k = 0; k < keys; ++k) {
+            const bool passed = key_times[k] <= time;
+            (passed ? previous_time() : next_time()) = key_times[k];
+            double* velocity = passed ? previous_velocity() : next_velocity();
+            for (int c = 0; c < DT::deriv; ++c) velocity[c] = key_velocities[DT::deriv * k + c];
+            if (!passed) return;  // the first key after `time`
+        }
+    }
+
+    bool active() const {
+        return (memory[2] == 0.0 || continue_after_end) && next_time() != previous_time();
+    }
+
+    // The velocity at `time`: interpolated between the keys, the last one once finished.
+    void velocity(double time, double* out) const {
+        const double ratio = (time - previous_time()) / (next_time() - previous_time());
+        for (int c = 0; c < DT::deriv; ++c)
+            out[c] = memory[2] != 0.0 ? previous_velocity()[c]
+                                      : (next_velocity()[c] - previous_velocity()[c]) * ratio + previous_velocity()[c];
+    }
+};
+
+// projectResponse: zero the whole derivative of the listed DOFs while the constraint is active.
+template <class DT>
+inline void keyed_velocity_response(const KeyedVelocity<DT>& k, double* dx, const Index* indices, Index count,
+                                    double time) {
+    k.find_key_times(time);
+    if (k.active()) project_fixed<DT>(dx, indices, count);
+}
+
+// projectVelocity: the listed DOFs (their `coordinates`, or all) at the key-interpolated velocity.
+template <class DT>
+inline void keyed_velocity_velocity(const KeyedVelocity<DT>& k, double* v, const Index* indices, Index count,
+                                    const Index* coordinates, Index n_coordinates, double time) {
+    k.find_key_times(time);
+    if (!k.active()) return;
+    double velocity[DT::deriv];
+    k.velocity(time, velocity);
+    for (Index i = 0; i < count; ++i)
+        for (Index c = 0; c < (n_coordinates ? n_coordinates : DT::deriv); ++c) {
+            const Index j = n_coordinates ? coordinates[c] : c;
+            v[DT::deriv * indices[i] + j] = velocity[j];
+        }
+}
+
+// projectPosition: x = xP + v dt for the listed DOFs, then xP = x (xP captured at the first call).
+template <class DT>
+inline void keyed_velocity_position(const KeyedVelocity<DT>& k, double* x, const Index* indices, Index count,
+                                    const Index* coordinates, Index n_coordinates, double time, double dt) {
+    static_assert(!DT::rigid, "LinearVelocityProjectiveConstraint is compiled for Vec types only");
+    double* last = k.last_positions();
+    if (k.memory[3] == 0.0) {
+        for (Index i = 0; i < count; ++i)
+            for (int c = 0; c < DT::coord; ++c) last[DT::coord * i + c] = x[DT::coord * indices[i] + c];
+        k.memory[3] = 1.0;
+    }
+    k.find_key_times(time);
+    if (!k.active()) return;
+    double velocity[DT::deriv];
+    k.velocity(time, velocity);
+    for (Index i = 0; i < count; ++i) {
+        double* p = x + DT::coord * indices[i];
+        for (Index c = 0; c < (n_coordinates ? n_coordinates : DT::coord); ++c) {
+            const Index j = n_coordinates ? coordinates[c] : c;
+            p[j] = last[DT::coord * i + j] + velocity[j] * dt;
+        }
+        for (int c = 0; c < DT::coord; ++c) last[DT::coord * i + c] = p[c];
+    }
 }
 
 }  // namespace sofac

@@ -126,6 +126,7 @@ _KEYED = ("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d")
 
 LINEAR_VELOCITY_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="LinearVelocityProjectiveConstraint",
+    kernel="linear_velocity",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Imposes a velocity on the selected DOFs, interpolated linearly between key times.",
@@ -135,8 +136,8 @@ LINEAR_VELOCITY_PROJECTIVE_CONSTRAINT = ComponentSpec(
     supported=True,
     effects=_PROJECTION,
     fields=(
-        _INDICES,
-        FieldSpec("keyTimes", Reals(), doc="key times"),
+        _INDICES_FROM_0,
+        FieldSpec("keyTimes", Reals(), (0.0,), "key times (default: 0)"),
         FieldSpec("velocities", Coords(deriv=True), doc="velocity at each key time"),
         FieldSpec("coordinates", Ints(), doc="coordinates the velocity applies to (default: all)"),
         FieldSpec("continueAfterEnd", Bool(), False, "keep the last velocity after the last key time"),
