@@ -8,16 +8,16 @@ from __future__ import annotations
 import ctypes
 import gzip
 import math
-import shutil
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 from sofac import barycentric, meshes
 from sofac.barycentric import RegularGrid, SparseGrid, barycentric_embedding, barycentric_map, mapper_for
-from sofac.build import eigen_include
 from sofac.masses import mesh_matrix_mass, mesh_matrix_mass_multiply, topology_edges
 
 RUNTIME = Path(__file__).resolve().parents[1] / "runtime"
@@ -493,32 +493,10 @@ API double mmm_energy(const double* v, const double* vm, Index n, const Index* e
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
-
-def _i(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.int64 and a.flags.c_contiguous
-    return a.ctypes.data_as(I64)
-
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("mapping")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", "-Werror"]
-    command += [f"-I{RUNTIME}", f"-I{eigen_include()}", "shim.cpp", "-o", "shim.so"]
-    result = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "mapping", SHIM)
     library.mmm_energy.restype = ctypes.c_double
     for name in ("apply", "apply_jt"):
         getattr(library, name).argtypes = [D, D, I64, D, ctypes.c_int64, ctypes.c_int, ctypes.c_int]

@@ -10,16 +10,15 @@ Validation/cantilever_beam regression scenes run through sofac.load against SOFA
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 from sofac import element_fem
-from sofac.build import eigen_include
 from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid
-from sofac.resources import resource_dir
 
 SHIM = r"""
 #include "sofac/element_fem.h"
@@ -85,34 +84,12 @@ API void mass_assemble(const Index* rows, const Index* cols, const double* v, In
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
 FRAME, IDENTITY, POLAR, STABLE_POLAR = 0, 1, 2, 3
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
-
-def _i(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.int64 and a.flags.c_contiguous
-    return a.ctypes.data_as(I64)
 
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("element_fem")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O2", "-ffp-contract=off", "-shared", "-fPIC", "-fvisibility=hidden"]
-    command += ["-Wall", "-Werror"]
-    command += [f"-I{resource_dir('runtime')}", f"-I{eigen_include()}", "shim.cpp", "-o", "shim.so"]
-    result = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=180)
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "element_fem", SHIM)
     n, count, real, integer = ctypes.c_int, ctypes.c_int64, ctypes.c_double, ctypes.c_int
     signatures = {
         "stiffness": [n, I64, count, D, D, count, D, count, D],

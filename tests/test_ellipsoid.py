@@ -4,15 +4,13 @@ against finite differences; QuadBendingSprings' springs from a grid of quads."""
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac.build import eigen_include
+from kernel_shim import D, build_shim
+from kernel_shim import doubles as _d
 from sofac.loader import compile_scene
-from sofac.resources import resource_dir
 
 SHIM = r"""
 #include "sofac/loads.h"
@@ -26,28 +24,11 @@ API void dforce(const double* dx, double* df, Index n, const double* contacts, c
     sofac::ellipsoid_add_dforce(dx, df, n, contacts, q, k);
 }
 """
-D = ctypes.POINTER(ctypes.c_double)
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
 
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("ellipsoid")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O2", "-ffp-contract=off", "-shared", "-fPIC", "-fvisibility=hidden"]
-    command += ["-Wall", "-Werror", f"-I{resource_dir('runtime')}", f"-I{eigen_include()}"]
-    result = subprocess.run(
-        [*command, "shim.cpp", "-o", "shim.so"], cwd=folder, capture_output=True, text=True, timeout=180
-    )
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "ellipsoid", SHIM)
     n, real = ctypes.c_int64, ctypes.c_double
     library.force.argtypes = [D, D, D, n, D, D, n, real, real, D, D]
     library.dforce.argtypes = [D, D, n, D, D, real]

@@ -10,16 +10,15 @@ trajectories (../shared/reference/sofa scenes c1, c2, c3), which they reproduce 
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac.build import eigen_include
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid, tetrahedra_from_hexahedra
-from sofac.resources import resource_dir
 
 SHIM = r"""
 #include "sofac/fem.h"
@@ -145,37 +144,14 @@ API int implicit_step(int hexa, const Index* el, Index ne, double* x, double* v,
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
 SMALL, LARGE, POLAR, SVD = 0, 1, 2, 3
 TET_METHODS = (SMALL, LARGE, POLAR, SVD)
 HEX_METHODS = (SMALL, LARGE, POLAR)
 
 
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
-
-def _i(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.int64 and a.flags.c_contiguous
-    return a.ctypes.data_as(I64)
-
-
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("fem")
-    (folder / "shim.cpp").write_text(SHIM)
-    # -ffp-contract=off: no fused multiply-adds (SOFA's reference build, x86-64 without -march, has none)
-    command = [compiler, "-std=c++17", "-O2", "-ffp-contract=off", "-shared", "-fPIC", "-fvisibility=hidden"]
-    command += ["-Wall", "-Werror"]
-    command += [f"-I{resource_dir('runtime')}", f"-I{eigen_include()}", "shim.cpp", "-o", "shim.so"]
-    result = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=120)
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "fem", SHIM)
     library.tet_energy.restype = ctypes.c_double
     library.hex_energy.restype = ctypes.c_double
     for name in ("tet_dforce", "hex_dforce"):

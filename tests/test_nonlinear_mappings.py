@@ -5,15 +5,13 @@ against finite differences of J^T(x) f."""
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 import sofac
-from sofac.build import eigen_include
-from sofac.resources import resource_dir
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
 
 SHIM = r"""
 #include "sofac/nonlinear.h"
@@ -35,29 +33,10 @@ API void djt(double* pdf, const double* pdx, const double* cf, const Index* e, I
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("nonlinear")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O2", "-ffp-contract=off", "-shared", "-fPIC", "-fvisibility=hidden"]
-    command += ["-Wall", "-Werror", f"-I{resource_dir('runtime')}", f"-I{eigen_include()}"]
-    result = subprocess.run(
-        [*command, "shim.cpp", "-o", "shim.so"], cwd=folder, capture_output=True, text=True, timeout=180
-    )
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "nonlinear", SHIM)
     n, integer, real = ctypes.c_int64, ctypes.c_int, ctypes.c_double
     library.apply.argtypes = [D, D, I64, n, D, integer, D, D]
     library.j.argtypes = [D, D, I64, n, D]

@@ -4,16 +4,15 @@ exact plane-stress linear triangle, its derivative and assembled matrix against 
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 from sofac.bending import bending_springs
-from sofac.build import eigen_include
 from sofac.loader import compile_scene
-from sofac.resources import resource_dir
 
 SHIM = r"""
 #include "sofac/shell.h"
@@ -75,34 +74,10 @@ API void tri_matrix(const double* d, Index i, const double* e, Index ne, const d
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
-
-def _i(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.int64 and a.flags.c_contiguous
-    return a.ctypes.data_as(I64)
-
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("shell")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O2", "-ffp-contract=off", "-shared", "-fPIC", "-fvisibility=hidden"]
-    command += ["-Wall", "-Werror", f"-I{resource_dir('runtime')}", f"-I{eigen_include()}"]
-    result = subprocess.run(
-        [*command, "shim.cpp", "-o", "shim.so"], cwd=folder, capture_output=True, text=True, timeout=180
-    )
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "shell", SHIM)
     count, real = ctypes.c_int64, ctypes.c_double
     library.tri_init.argtypes = [I64, count, D, D, count, D, count, D]
     library.tri_force.argtypes = [I64, count, D, D, D, D, count, D, count]

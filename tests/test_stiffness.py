@@ -15,13 +15,12 @@ with damping it is exact only at zero relative velocity (checked both ways below
 from __future__ import annotations
 
 import ctypes
-import shutil
-import subprocess
 
 import numpy as np
 import pytest
-from sofac.build import SUITESPARSE_INCLUDE, eigen_include
-from sofac.resources import resource_dir
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 
 SHIM = r"""
 #include "sofac/direct.h"
@@ -109,35 +108,10 @@ API void rest_assemble(const Index* idx, const double* ks, Index nks, Index n, I
 }
 """
 
-D = ctypes.POINTER(ctypes.c_double)
-I64 = ctypes.POINTER(ctypes.c_int64)
-
-
-def _d(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.float64 and a.flags.c_contiguous
-    return a.ctypes.data_as(D)
-
-
-def _i(a: np.ndarray) -> ctypes._Pointer:
-    assert a.dtype == np.int64 and a.flags.c_contiguous
-    return a.ctypes.data_as(I64)
-
 
 @pytest.fixture(scope="module")
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
-    compiler = shutil.which("g++")
-    if compiler is None:
-        pytest.skip("g++ is not installed")
-    folder = tmp_path_factory.mktemp("stiffness")
-    (folder / "shim.cpp").write_text(SHIM)
-    command = [compiler, "-std=c++17", "-O1", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", "-Werror"]
-    if not (SUITESPARSE_INCLUDE / "cholmod.h").is_file():
-        pytest.skip("SuiteSparse is not installed")
-    command += [f"-I{resource_dir('runtime')}", f"-I{eigen_include()}", f"-I{SUITESPARSE_INCLUDE}"]
-    command += ["shim.cpp", "-o", "shim.so", "-lcholmod"]
-    result = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stderr
-    library = ctypes.CDLL(str(folder / "shim.so"))
+    library = build_shim(tmp_path_factory, "stiffness", SHIM, optimize="-O1", cholmod=True)
     for n in (1, 2, 3):
         getattr(library, f"dforces{n}").argtypes = [
             I64,
