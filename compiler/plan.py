@@ -1249,6 +1249,27 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
     )
 
 
+def _triangle_target(
+    planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group, dict[str, np.ndarray]] | None:
+    """A triangle-based component's state (Vec3d), group and topology cells, triangles included."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return None
+    state, group = found
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(
+            checked, f"{checked.component.type_name} on {state.datatype.name} is not compiled yet"
+        )
+        return None
+    cells = _topology_cells(planner, checked) or {}
+    triangles = cells.get("triangles")
+    if triangles is None or not triangles.size or planner.checked.positions(state.component) is None:
+        planner.unsupported(checked, "it needs triangles known at compile time")
+        return None
+    return state, group, cells
+
+
 def _lower_triangular_bending_springs(
     planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]
 ) -> None:
@@ -1259,20 +1280,13 @@ def _lower_triangular_bending_springs(
 
     from . import masses
 
-    found = _target(planner, checked, owner)
+    found = _triangle_target(planner, checked, owner)
     if found is None:
         return
-    state, group = found
+    state, group, cells = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
-        return
-    cells = _topology_cells(planner, checked) or {}
-    triangles = cells.get("triangles")
+    triangles = cells["triangles"]
     rest = planner.checked.positions(state.component)
-    if triangles is None or not triangles.size or rest is None:
-        planner.unsupported(checked, "it needs triangles known at compile time")
-        return
     edges = cells.get("edges")
     if edges is None or not edges.size:
         edges = masses.topology_edges(state.size, triangles=triangles)
@@ -1663,22 +1677,16 @@ def _lower_distance_multi_mapping(
 
 def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """TriangularFEMForceFieldOptim: corotational membrane triangles ("large" only, as SOFA)."""
-    found = _target(planner, checked, owner)
+    found = _triangle_target(planner, checked, owner)
     if found is None:
         return
-    state, group = found
+    state, group, topology = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
-        return
     rest_scale = _written_float(planner, component, "restScale")
     if rest_scale is not None and rest_scale != 1.0:
         planner.unsupported(checked, "restScale other than 1 is not compiled yet")
         return
-    cells = (_topology_cells(planner, checked) or {}).get("triangles")
-    if cells is None or not cells.size:
-        planner.unsupported(checked, "it needs triangles known at compile time")
-        return
+    cells = topology["triangles"]
     count = cells.size // 3
     young = planner.value(component, "youngModulus")
     poisson = planner.value(component, "poissonRatio")
@@ -1736,19 +1744,12 @@ def _lower_bending_springs(planner: _Planner, checked: CheckedComponent, owner: 
     """FastTriangularBendingSprings: one linear bending spring per edge between two triangles."""
     from . import bending, masses
 
-    found = _target(planner, checked, owner)
+    found = _triangle_target(planner, checked, owner)
     if found is None:
         return
-    state, group = found
+    state, group, cells = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
-        return
-    cells = _topology_cells(planner, checked) or {}
-    triangles = cells.get("triangles")
-    if triangles is None or not triangles.size:
-        planner.unsupported(checked, "it needs triangles known at compile time")
-        return
+    triangles = cells["triangles"]
     edges = cells.get("edges")
     if edges is None or not edges.size:
         edges = masses.topology_edges(state.size, triangles=triangles, quads=cells.get("quads"))
