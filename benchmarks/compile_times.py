@@ -36,6 +36,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from machine import describe
+
 REPO = Path(__file__).resolve().parents[1]
 COLD_TARGET_S = 3.0
 WARM_TARGET_MS = 50.0
@@ -68,14 +70,6 @@ class Result:
 
 
 def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
     from sofac import build
 
     compiler = build.compiler()
@@ -84,11 +78,8 @@ def machine() -> str:
         compiler = version.stdout.splitlines()[0] if version.stdout else compiler
     except OSError:
         pass
-    load = f", load average {os.getloadavg()[0]:.1f}" if hasattr(os, "getloadavg") else ""
-    return (
-        f"{cpu}, {os.cpu_count()} logical CPUs{load}, {platform.system()} {platform.release()}; "
-        f"{compiler}; Python {platform.python_version()}"
-    )
+    system = f"{platform.system()} {platform.release()}"
+    return f"{describe()}, {system}; {compiler}; Python {platform.python_version()}"
 
 
 def build_host() -> tuple[float, bool]:

@@ -34,6 +34,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import scenegen  # noqa: E402
+from machine import describe  # noqa: E402
 
 # N such that 3 N^2 runs from ~10^3 to ~10^6 DOFs, about two sizes per decade.
 SIZES = (18, 32, 58, 100, 183, 333, 577)
@@ -119,19 +120,6 @@ def slope(dofs: Sequence[float], seconds: Sequence[float]) -> float:
     return float(np.polyfit(np.log(dofs), np.log(seconds), 1)[0])
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = " ".join(f"{x:.2f}" for x in os.getloadavg()) if hasattr(os, "getloadavg") else "?"
-    return f"{cpu}, {os.cpu_count()} logical CPUs, load average {load}, Python {platform.python_version()}"
-
-
 def plot(rows: list[dict[str, float]], out: Path, note: str) -> None:
     import matplotlib
 
@@ -194,7 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the rows as JSON")
     parser.add_argument("--markdown", type=Path, help="also write the table as Markdown")
     args = parser.parse_args(argv)
-    before = machine()
+    before = f"{describe()}, Python {platform.python_version()}"
     rows = measure(args.sizes, args.seconds, args.batches)
     note = f"{time.strftime('%Y-%m-%d %H:%M')}; {before}"
     text = table(rows)

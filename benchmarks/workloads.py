@@ -32,7 +32,6 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import shutil
 import statistics
 import subprocess
@@ -55,6 +54,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(HERE))
 
 import scenegen  # noqa: E402
+from machine import describe  # noqa: E402
 
 HANDWRITTEN = HERE / "handwritten"
 ALL = ("w1", "w2", "w3", "w3ldl", "beam", "liver")
@@ -102,19 +102,6 @@ def find_shared() -> Path | None:
     if os.environ.get("SOFAC_SHARED"):
         candidates.append(Path(os.environ["SOFAC_SHARED"]))
     return next((c for c in candidates if (c / "corpus" / "sofa").is_dir()), None)
-
-
-def machine_note() -> str:
-    cpu = platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = " ".join(f"{x:.2f}" for x in os.getloadavg())
-    return f"{cpu}, {os.cpu_count()} logical CPUs, load average {load}"
 
 
 # ---- sofac ------------------------------------------------------------------------------------
@@ -567,7 +554,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("workloads: no C++ compiler (g++ or $CXX)", file=sys.stderr)
         return 2
     started = datetime.datetime.now()
-    before = machine_note()
+    before = describe()
     with tempfile.TemporaryDirectory(prefix="sofac-bench-") as tmp:
         setup = Setup(
             n=args.n,
@@ -582,7 +569,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         rows, checks = run(args.only, setup, lambda s: print(f"... {s}", file=sys.stderr, flush=True))
     cells = table(rows, sofa=args.n == 100)
-    header = f"{started:%Y-%m-%d %H:%M}; {args.clock} clock; before: {before}; after: {machine_note()}"
+    header = f"{started:%Y-%m-%d %H:%M}; {args.clock} clock; before: {before}; after: {describe()}"
     print(header)
     print(render(cells, markdown=False))
     print(checks_text(checks))
