@@ -158,7 +158,7 @@ class Parameter:
 _COMPONENT = re.compile(r"^(.*)\[(\d+)\]$")
 
 
-def resolve_parameter(text: str, sizes: Mapping[str, int]) -> Parameter:
+def resolve_parameter(text: str, sizes: Mapping[str, int | None]) -> Parameter:
     """Find ``text`` (a full key, a key without the leading slash, or ``component.field`` when the
     component's name is unique) among the scene's tunable parameters ``sizes`` ({key: length})."""
     match = _COMPONENT.match(text.strip())
@@ -176,6 +176,8 @@ def resolve_parameter(text: str, sizes: Mapping[str, int]) -> Parameter:
         )
     key = candidates[0]
     size = sizes[key]
+    if size is None:  # a parameter compiled out (the caller says so): nothing to check its index against
+        return Parameter(key, component)
     if component is None and size != 1:
         raise SweepError(f"--param {text}: {key} has {size} components; sweep one with {text}[i]")
     if component is not None and not 0 <= component < size:
@@ -387,9 +389,8 @@ def plan_sweep(
     path = Path(scene).resolve()
     compiled = compile_scene(path, data_roots=data_roots, prune=prune, rigid_model=rigid_model)
     sim = compiled.instantiate()
-    sizes = {key: int(view.size) for key, view in sim.params().items()}
-    for key in compiled.plan.pruned:
-        sizes.setdefault(key, 0)
+    sizes: dict[str, int | None] = {key: int(view.size) for key, view in sim.params().items()}
+    sizes.update({key: None for key in compiled.plan.pruned if key not in sizes})  # no buffer: no size
 
     def resolved(text: str) -> Parameter:
         parameter = resolve_parameter(text, sizes)

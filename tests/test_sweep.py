@@ -338,3 +338,18 @@ def test_calibration_example_recovers_the_modulus() -> None:
     modulus, runs = example.calibrate(measured, scheduler="synchronous")
     assert modulus == pytest.approx(true_modulus, rel=1e-3)
     assert runs < 40
+
+
+def test_a_parameter_compiled_out_names_the_way_to_keep_it(tmp_path: Path) -> None:
+    # A zero damping coefficient has no code and no buffer: the message says why and what to do.
+    text = OSCILLATOR.read_text().replace(
+        '<SpringForceField template="Vec3d" name="spring"',
+        '<UniformVelocityDampingForceField name="damper" dampingCoefficient="0"/>\n'
+        '        <SpringForceField template="Vec3d" name="spring"',
+    )
+    scene = tmp_path / "damped.scn"
+    scene.write_text(text)
+    with pytest.raises(SweepError, match=r"damper\.dampingCoefficient: dampingCoefficient is 0.*--no-prune"):
+        sweeps.plan_sweep(scene, {"damper.dampingCoefficient": [0.1, 1.0]})
+    kept = sweeps.plan_sweep(scene, {"damper.dampingCoefficient": [0.1, 1.0]}, prune=False, steps=5)
+    assert [p.key for p in kept.job.parameters] == ["/oscillator/damper.dampingCoefficient"]
