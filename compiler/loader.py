@@ -29,6 +29,10 @@ class PrunedEffectError(SofacError):
     """A run-time change that needs code the compiler left out (e.g. gravity on a zero-gravity scene)."""
 
 
+class ParameterNeedsReset(SofacError):
+    """A parameter read only when the simulation is initialised was changed between steps."""
+
+
 Snapshot = dict[str, tuple[np.ndarray, np.ndarray]]  # state path -> (position, velocity) copies
 
 
@@ -195,6 +199,13 @@ class Simulation:
         self._snapshot: Snapshot | None = None  # preallocated copies, refilled at each chunk
         self._snapshot_step = 0
         self._snapshot_time = 0.0
+        # Parameters read only at init, with the values the instance was initialised with.
+        self._init_params = [
+            (buffer.key, view)
+            for buffer, view in zip(self.plan.buffers, self._views, strict=True)
+            if buffer.key in self.plan.init_only
+        ]
+        self._init_values = [view.copy() for _, view in self._init_params]
 
     #: Steps per call of the compiled step: between two chunks, ``step()`` checks the energy bound
     #: (if any) and copies the independent states for ``SimulationDiverged.last_finite``.
@@ -233,6 +244,7 @@ class Simulation:
             raise ValueError("n must be >= 0")
         if energy_bound is not None and np.isnan(energy_bound):
             raise ValueError("energy_bound must be a number")
+        self._check_init_params()
         chunk = max(1, int(self.chunk))
         remaining = int(n)
         while remaining > 0:
@@ -417,6 +429,15 @@ class Simulation:
     def _finite(self) -> bool:
         return all(self._state_finite(s) for s in self._independent)
 
+    def _check_init_params(self) -> None:
+        for (key, view), value in zip(self._init_params, self._init_values, strict=True):
+            if not np.array_equal(view, value, equal_nan=True):
+                raise ParameterNeedsReset(
+                    f"{key} was changed after the simulation was initialised, but it is only read then "
+                    "(it sets up data such as element stiffnesses): call reset() to restart with the new "
+                    "value, or set it back"
+                )
+
     def reset(self) -> None:
         """Back to the initial state and time 0 (tuned parameters are kept)."""
         for buffer, view in zip(self.plan.buffers, self._views, strict=True):
@@ -425,6 +446,7 @@ class Simulation:
         self._native.time = 0.0
         self._steps = 0
         self._native.init()
+        self._init_values = [view.copy() for _, view in self._init_params]
 
     # --- inspection ----------------------------------------------------------------------------
     def objects(self) -> list[str]:
@@ -448,7 +470,8 @@ class Simulation:
 
         Parameters read at every step (stiffnesses of springs, masses, gravity, dt) take effect at the
         next step; those turned into data when the simulation is initialized (the element
-        stiffnesses from ``youngModulus``/``poissonRatio``) at the next ``reset()``.
+        stiffnesses from ``youngModulus``/``poissonRatio``: ``plan.init_only``) at the next
+        ``reset()``, and ``step()`` raises ParameterNeedsReset if one was changed without it.
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity)."""
         if key in self.plan.pruned:
             raise PrunedEffectError(

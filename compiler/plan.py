@@ -195,6 +195,9 @@ class Plan:
     # parameter at run time needs a recompilation (load(..., prune=False) keeps them).
     pruned: dict[str, str] = field(default_factory=dict)
     effects: list[tuple[str, str, str]] = field(default_factory=list)  # (effect, origin, detail)
+    # Parameters read only when an instance is initialised (element stiffness from youngModulus...):
+    # a change takes effect at the next reset(), which the Python API enforces.
+    init_only: frozenset[str] = frozenset()
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
@@ -290,6 +293,25 @@ class _Planner:
             ignored=self.ignored,
             pruned=self.pruned,
             effects=self._effects(groups),
+            init_only=self._init_only(groups),
+        )
+
+    def _init_only(self, groups: list[Group]) -> frozenset[str]:
+        """The parameters the init code reads and no per-step code does."""
+
+        def code(kinds: tuple[str, ...]) -> str:
+            return "\n".join(
+                line for g in groups for kind in kinds for op in getattr(g, kind) for line in op.code
+            )
+
+        init = code(("init",))
+        step = code(("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy"))
+        return frozenset(
+            buffer.key
+            for buffer in self.buffers
+            if buffer.role == "param"
+            and re.search(rf"S\.{buffer.ident}\b", init)
+            and not re.search(rf"S\.{buffer.ident}\b", step)
         )
 
     def _effects(self, groups: list[Group]) -> list[tuple[str, str, str]]:

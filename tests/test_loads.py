@@ -333,3 +333,27 @@ def test_linear_velocity_on_some_coordinates_and_after_its_end(tmp_path: Path) -
         _keyed_positions(np.zeros(3), 30, keys, H)[1], abs=1e-14
     )
     assert sim["dofs"].position[0, [0, 2]].tolist() == [0.0, 0.0]
+
+
+# --- parameters read only at init ------------------------------------------------------------------
+
+
+def test_a_parameter_read_only_at_init_needs_a_reset() -> None:
+    from sofac.loader import ParameterNeedsReset
+
+    beam = Path(__file__).resolve().parents[1] / "scenes" / "beam.scn"
+    sim = sofac.load(beam)
+    assert sim.plan.init_only == {"/beam/fem.youngModulus", "/beam/fem.poissonRatio"}
+    sim.param("/beam/mass.vertexMass")[0] *= 1.5  # read at every step: no reset needed
+    sim.step(2)
+    sim.param("/beam/fem.youngModulus")[0] = 4e6
+    with pytest.raises(ParameterNeedsReset, match=r"/beam/fem\.youngModulus .* call reset\(\)"):
+        sim.step(1)
+    assert sim.steps == 2  # nothing ran
+    sim.reset()
+    sim.step(50)
+    stiff = sim["dofs"].position[-1, 1]
+    sim.param("/beam/fem.youngModulus")[0] = 1e6
+    sim.reset()
+    sim.step(50)
+    assert stiff > sim["dofs"].position[-1, 1]  # the stiffer beam sags less
