@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from .masses import EPSILON, as_cells, topology_edges
+from .masses import EPSILON, as_cells, cross_rows, topology_edges
 
 # Trilinear weights of a hexahedron with coordinates (fx, fy, fz), per node 0..7, as SOFA writes them.
 _HEXA_ORDER_MESH = (0, 1, 3, 2, 4, 5, 7, 6)  # the mesh / grid mappers' summation order
@@ -190,17 +190,6 @@ def _inverse_of_transpose(rows: np.ndarray, failed: str) -> tuple[np.ndarray, np
     return out, ok
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
-
-
 def _norm2(v: np.ndarray) -> np.ndarray:
     return v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2]
 
@@ -232,12 +221,12 @@ def _frames(points: np.ndarray, kind: str, elements: np.ndarray, failed: str) ->
         rule = _HEXA
     elif kind == "triangles":
         a, b = p[1] - p[0], p[2] - p[0]
-        rows = np.stack([a, b, _cross(a, b)], axis=1)
+        rows = np.stack([a, b, cross_rows(a, b)], axis=1)
         centers = (p[0] + p[1] + p[2]) / 3
         rule = _TRIANGLE
     elif kind == "quads":
         a, b = p[1] - p[0], p[3] - p[0]
-        rows = np.stack([a, b, _cross(a, b)], axis=1)
+        rows = np.stack([a, b, cross_rows(a, b)], axis=1)
         centers = (p[0] + p[1] + p[2] + p[3]) * 0.25
         rule = _QUAD
     else:

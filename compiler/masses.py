@@ -138,7 +138,8 @@ def _norm2(v: np.ndarray) -> np.ndarray:
     return result
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products, in sofa::type::cross's operation order."""
     return np.stack(
         [
             a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
@@ -157,10 +158,11 @@ def _lengths(p0: np.ndarray, p1: np.ndarray) -> np.ndarray:
     return np.sqrt(_norm2(p1 - p0))
 
 
-def _triangle_areas(n0: np.ndarray, n1: np.ndarray, n2: np.ndarray) -> np.ndarray:
+def triangle_areas(n0: np.ndarray, n1: np.ndarray, n2: np.ndarray) -> np.ndarray:
+    """sofa::geometry::Triangle::area of each row's triangle, operation for operation."""
     dimension = n0.shape[1]
     if dimension == 3:
-        return 0.5 * np.sqrt(_norm2(_cross(n1 - n0, n2 - n0)))
+        return 0.5 * np.sqrt(_norm2(cross_rows(n1 - n0, n2 - n0)))
     if dimension == 2:  # SOFA's 2-D formula is signed (negative for clockwise triangles)
         x0, y0, x1, y1, x2, y2 = n0[:, 0], n0[:, 1], n1[:, 0], n1[:, 1], n2[:, 0], n2[:, 1]
         return 0.5 * (x0 * y1 + x1 * y2 + x2 * y0 - x1 * y0 - x2 * y1 - x0 * y2)
@@ -172,7 +174,7 @@ def _triangle_areas(n0: np.ndarray, n1: np.ndarray, n2: np.ndarray) -> np.ndarra
 
 
 def _tetrahedron_volumes(n0: np.ndarray, n1: np.ndarray, n2: np.ndarray, n3: np.ndarray) -> np.ndarray:
-    return np.abs(_dot3(_cross(n1 - n0, n2 - n0), n3 - n0) / 6.0)
+    return np.abs(_dot3(cross_rows(n1 - n0, n2 - n0), n3 - n0) / 6.0)
 
 
 def element_measures(positions: Any, cells: Any, kind: str) -> np.ndarray:
@@ -189,9 +191,9 @@ def element_measures(positions: Any, cells: Any, kind: str) -> np.ndarray:
     if kind == "edges":
         return _lengths(n[0], n[1])
     if kind == "triangles":
-        return _triangle_areas(n[0], n[1], n[2])
+        return triangle_areas(n[0], n[1], n[2])
     if kind == "quads":
-        return _triangle_areas(n[0], n[1], n[2]) + _triangle_areas(n[0], n[2], n[3])
+        return triangle_areas(n[0], n[1], n[2]) + triangle_areas(n[0], n[2], n[3])
     if kind == "tetrahedra":
         return _tetrahedron_volumes(n[0], n[1], n[2], n[3])
     if kind == "hexahedra":

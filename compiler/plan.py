@@ -2643,7 +2643,9 @@ def _lower_triangle_pressure(planner: _Planner, checked: CheckedComponent, owner
         )
         return
     corners = triangles[chosen]
-    areas = [_triangle_area(*(points[corner, :3] for corner in triangle)) for triangle in corners]
+    from . import masses
+
+    areas = masses.triangle_areas(*(points[corners[:, k], :3] for k in range(3)))
     pressure = np.zeros(min(state.datatype.spatial_dim, 3))
     given = planner.value(component, "pressure")
     if given is not None and np.size(given):
@@ -2667,14 +2669,6 @@ def _lower_triangle_pressure(planner: _Planner, checked: CheckedComponent, owner
             ],
         )
     )
-
-
-def _triangle_area(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
-    """sofa::geometry::Triangle::area in 3-D, operation for operation: 0.5 |(b - a) x (c - a)|."""
-    u = [float(b[k]) - float(a[k]) for k in range(3)]
-    v = [float(c[k]) - float(a[k]) for k in range(3)]
-    cross = (u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
-    return 0.5 * math.sqrt(cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2])
 
 
 def _mapping_ends(
