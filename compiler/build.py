@@ -196,9 +196,10 @@ def build(
 SUITESPARSE_INCLUDE = Path("/usr/include/suitesparse")
 
 
-def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0) -> Built:
-    """A generated scene's library (linked with CHOLMOD when it uses a sparse direct solver);
-    ``numbers``, the size of its data, picks the optimisation level (scene_flags)."""
+def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0, openmp: bool = False) -> Built:
+    """A generated scene's library (linked with CHOLMOD when it uses a sparse direct solver, with
+    OpenMP when it has element loops split over threads); ``numbers``, the size of its data, picks
+    the optimisation level (scene_flags)."""
     includes: tuple[Path, ...] = (resource_dir("runtime"), eigen_include())
     libraries: tuple[str, ...] = ()
     if direct_solver:
@@ -213,7 +214,7 @@ def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0) -
         source,
         kind="scenes",
         name="scene.so",
-        flags=scene_flags(numbers),
+        flags=scene_flags(numbers) + (("-fopenmp",) if openmp else ()),
         includes=includes,
         libraries=libraries,
     )

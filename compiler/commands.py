@@ -53,10 +53,20 @@ def _scene(args: argparse.Namespace) -> Path:
     return path
 
 
+def _threads(args: argparse.Namespace) -> int:
+    from .cli import UsageError
+
+    if args.threads < 1:
+        raise UsageError("--threads must be >= 1")
+    return int(args.threads)
+
+
 def _compile(args: argparse.Namespace):  # -> loader.Compiled
     from . import loader
 
-    return loader.compile_scene(_scene(args), data_roots=[Path(p) for p in args.data_path or ()])
+    return loader.compile_scene(
+        _scene(args), data_roots=[Path(p) for p in args.data_path or ()], threads=_threads(args)
+    )
 
 
 def cmd_compile(args: argparse.Namespace) -> int:
@@ -80,7 +90,7 @@ def cmd_emit(args: argparse.Namespace) -> int:
             checked, diagnostics = check.check_file(_scene(args))
             if checked is None or diagnostics.has_errors():
                 raise SceneError(diagnostics.sorted())
-            sys.stdout.write(generate.render(plan.plan_scene(checked, diagnostics)))
+            sys.stdout.write(generate.render(plan.plan_scene(checked, diagnostics, threads=_threads(args))))
     except _Failed:
         return EXIT_ERRORS
     return EXIT_OK
@@ -197,11 +207,21 @@ def register(commands: argparse._SubParsersAction, epilog: str) -> None:
         )
         return parser
 
-    scene_parser(
-        "compile", "compile a scene (or take it from the cache) and print the library's path"
+    def threaded(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+        parser.add_argument(
+            "--threads",
+            type=int,
+            default=1,
+            metavar="N",
+            help="run large element loops (FEM) on N OpenMP threads, same numbers as 1 (default 1: off)",
+        )
+        return parser
+
+    threaded(
+        scene_parser("compile", "compile a scene (or take it from the cache) and print the library's path")
     ).set_defaults(handler=cmd_compile)
-    scene_parser("emit", "print the C++ generated for a scene").set_defaults(handler=cmd_emit)
-    run = scene_parser("run", "compile and run a scene, printing where its states end up")
+    threaded(scene_parser("emit", "print the C++ generated for a scene")).set_defaults(handler=cmd_emit)
+    run = threaded(scene_parser("run", "compile and run a scene, printing where its states end up"))
     run.add_argument("--steps", type=int, default=100, help="number of steps (default 100)")
     run.add_argument("--dt", type=float, help="time step (default: the scene's)")
     run.add_argument(

@@ -511,23 +511,29 @@ def sofa_name(component: Any) -> str:
 
 
 def compile_scene(
-    path: str | Path, *, data_roots: Sequence[Path] = (), prune: bool = True, rigid_model: str = "sofa"
+    path: str | Path,
+    *,
+    data_roots: Sequence[Path] = (),
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
 ) -> Compiled:
     """Check, plan, generate and build a scene (or take it from the cache)."""
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
-    return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model)
+    return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
 
 
 def compile_checked(
-    checked: Any, diagnostics: Any = None, *, prune: bool = True, rigid_model: str = "sofa"
+    checked: Any, diagnostics: Any = None, *, prune: bool = True, rigid_model: str = "sofa", threads: int = 1
 ) -> Compiled:
-    scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model)
+    scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
-    compiled = Compiled(scene_plan, source, build.build_scene(source, direct_solver=direct, numbers=numbers))
+    built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
+    compiled = Compiled(scene_plan, source, built)
     compiled.checked = checked  # the checked scene, for consumers such as rendering (visual models)
     return compiled
 
@@ -539,10 +545,14 @@ def load(
     data_roots: Sequence[Path] = (),
     prune: bool = True,
     rigid_model: str = "sofa",
+    threads: int = 1,
 ) -> Simulation:
-    """Compile (or fetch from the cache) and instantiate a scene."""
+    """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
+    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread."""
     started = time.perf_counter()
-    sim = compile_scene(path, data_roots=data_roots, prune=prune, rigid_model=rigid_model).instantiate()
+    sim = compile_scene(
+        path, data_roots=data_roots, prune=prune, rigid_model=rigid_model, threads=threads
+    ).instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
         sim.dt = dt

@@ -198,6 +198,8 @@ class Plan:
     # Parameters read only when an instance is initialised (element stiffness from youngModulus...):
     # a change takes effect at the next reset(), which the Python API enforces.
     init_only: frozenset[str] = frozenset()
+    # OpenMP threads for large element loops and independent groups (1: serial, built without OpenMP)
+    threads: int = 1
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
@@ -214,12 +216,18 @@ def origin_of(component: Component) -> str:
 
 class _Planner:
     def __init__(
-        self, checked: CheckedScene, diagnostics: Diagnostics, prune: bool = True, rigid_model: str = "sofa"
+        self,
+        checked: CheckedScene,
+        diagnostics: Diagnostics,
+        prune: bool = True,
+        rigid_model: str = "sofa",
+        threads: int = 1,
     ) -> None:
         self.checked = checked
         self.diags = diagnostics
         self.prune = prune
         self.rigid_model = rigid_model
+        self.threads = threads
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
@@ -294,6 +302,7 @@ class _Planner:
             pruned=self.pruned,
             effects=self._effects(groups),
             init_only=self._init_only(groups),
+            threads=self.threads,
         )
 
     def _init_only(self, groups: list[Group]) -> frozenset[str]:
@@ -1070,6 +1079,43 @@ _FEM_KINDS = {
 }
 
 
+# Element loops are split over threads only when each thread gets this many elements: below it,
+# starting the threads costs more than they save.
+MIN_ELEMENTS_PER_THREAD = 1024
+
+
+def element_split(cells: np.ndarray, chunks: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A split of an element loop over ``chunks`` threads that keeps the serial sums (runtime
+    parallel.h): the chunks' element bounds, each element corner's deferred slot (-1: added
+    directly) and each slot's node. A node belongs to the first chunk touching it; later chunks
+    defer their contributions to it, numbered in serial (element, corner) order."""
+    count, corners = cells.shape
+    bounds = np.linspace(0, count, chunks + 1).round().astype(np.int64)
+    chunk = np.repeat(np.arange(chunks), np.diff(bounds))
+    owner = np.full(int(cells.max()) + 1, chunks, dtype=np.int64)
+    np.minimum.at(owner, cells, np.broadcast_to(chunk[:, None], cells.shape))
+    deferred = (chunk[:, None] > owner[cells]).ravel()
+    slot_of = np.full(count * corners, -1, dtype=np.int64)
+    slot_of[deferred] = np.arange(int(deferred.sum()))
+    return bounds, slot_of, cells.ravel()[deferred].astype(np.int64)
+
+
+def _split_argument(planner: _Planner, component: Component, cells: np.ndarray, corners: int) -> list[str]:
+    """The ElementSplit argument of an element kernel when the scene is compiled for threads and
+    the loop is large enough; else nothing (the serial loop)."""
+    count = cells.size // corners
+    if planner.threads < 2 or count < MIN_ELEMENTS_PER_THREAD * planner.threads:
+        return []
+    bounds, slot_of, slot_node = element_split(cells.reshape(count, corners), planner.threads)
+    parts = [
+        planner.buffer(component, name, data, "i64")
+        for name, data in (("split_bounds", bounds), ("split_slots", slot_of), ("split_nodes", slot_node))
+    ]
+    deferred = planner.buffer(component, "split_deferred", np.zeros(3 * slot_node.size), role="scratch")
+    fields = [_ptr(parts[0]), str(planner.threads), _ptr(parts[1]), _ptr(parts[2]), str(slot_node.size)]
+    return [f"sofac::ElementSplit{{{', '.join([*fields, _ptr(deferred)])}}}"]
+
+
 def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     found = _target(planner, checked, owner)
     if found is None:
@@ -1125,8 +1171,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
             ],
         )
     )
+    split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
     group.forces.append(
-        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method)])
+        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)])
     )
     and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
     if and_mass and not _lower_hexa_mass(planner, checked, state, group, elements, count, data, method):
@@ -1139,7 +1186,19 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         group.stiffness_dx.append(
             Op(
                 origin,
-                [_call(f"{prefix}_add_dforce", elements, count, state.dx, state.df, "kfact", data, method)],
+                [
+                    _call(
+                        f"{prefix}_add_dforce",
+                        elements,
+                        count,
+                        state.dx,
+                        state.df,
+                        "kfact",
+                        data,
+                        method,
+                        *split,
+                    )
+                ],
             )
         )
         _assemble(
@@ -3128,15 +3187,19 @@ def plan_scene(
     *,
     prune: bool = True,
     rigid_model: str = "sofa",
+    threads: int = 1,
 ) -> Plan:
     """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled.
     With ``prune``, effects the scene makes vanish (zero gravity) get no code. ``rigid_model="exact"``
     turns rigid inertias with their bodies and keeps the gyroscopic term (explicit solvers; SOFA's
-    model, the default, applies the inertia in world axes)."""
+    model, the default, applies the inertia in world axes). ``threads`` > 1 splits large element
+    loops over that many OpenMP threads, with the serial results bit for bit."""
     if rigid_model not in ("sofa", "exact"):
         raise ValueError(f"rigid_model must be 'sofa' or 'exact', not {rigid_model!r}")
+    if not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be a positive integer, not {threads!r}")
     return _Planner(
-        checked, diagnostics if diagnostics is not None else Diagnostics(), prune, rigid_model
+        checked, diagnostics if diagnostics is not None else Diagnostics(), prune, rigid_model, threads
     ).run()
 
 

@@ -33,6 +33,7 @@
 #include <cfloat>
 #include <cmath>
 
+#include "parallel.h"
 #include "types.h"
 
 namespace sofac {
@@ -539,107 +540,123 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
     }
 }
 
-// f += internal force at positions x; stores each element's current rotation (large/polar/svd).
-inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
-                                int method) {
+// The internal force of element i at positions x, F (12 numbers) to add to its nodes; stores the
+// element's current rotation (large/polar/svd).
+inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, double* element_data, int method,
+                               double* out) {
     using namespace fem_detail;
-    const int stride = tetra_fem_data_size(method);
-    for (Index i = 0; i < n; ++i) {
-        double* e = element_data + i * stride;
-        const Index* t = tetra + 4 * i;
-        double D[12];
-        double F[12];
-        if (method == 0) {
-            const double* p0 = x + 3 * t[0];
-            D[0] = D[1] = D[2] = 0.0;
-            for (int k = 1; k < 4; ++k) {
-                const double* pk = x + 3 * t[k];
-                for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
-            }
-            tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
-            for (int k = 0; k < 4; ++k)
-                for (int m = 0; m < 3; ++m) f[3 * t[k] + m] += F[3 * k + m];
-            continue;
+    double* e = element_data + i * tetra_fem_data_size(method);
+    const Index* t = tetra + 4 * i;
+    double D[12];
+    double F[12];
+    if (method == 0) {
+        const double* p0 = x + 3 * t[0];
+        D[0] = D[1] = D[2] = 0.0;
+        for (int k = 1; k < 4; ++k) {
+            const double* pk = x + 3 * t[k];
+            for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
         }
-        const V3 p[4] = {load(x + 3 * t[0]), load(x + 3 * t[1]), load(x + 3 * t[2]), load(x + 3 * t[3])};
-        M3 r02;  // world -> local
-        if (method == 1) {
-            r02 = tetra_frame(p[0], p[1], p[2]);
-        } else if (method == 2) {
-            r02 = polar_rotation(edge_rows(p[0], p[1], p[2], p[3]));
-        } else {
-            const M3 A = edge_rows(p[0], p[1], p[2], p[3]);
-            const M3 defo = mul(A, load_m(e + TINITINV));
-            if (determinant(defo) < 1e-6)  // inverted or flat element: SVD with degenerate handling
-                r02 = mul_nt(svd_stable_rotation(defo), load_m(e + TINITROT));
-            else
-                r02 = polar_rotation(A);
-        }
-        const M3 rot = transposed(r02);
-        store_m(e + TROT, rot);
-        V3 q[4];
-        for (int k = 0; k < 4; ++k) q[k] = mul(r02, p[k]);
-        if (method == 1) {
-            // SOFA subtracts node 0 only where the local coordinates are not zero by construction
-            // and sets the displacement of those to exactly 0.
-            q[1][0] -= q[0][0];
-            q[2][0] -= q[0][0];
-            q[2][1] -= q[0][1];
-            q[3] = sub(q[3], q[0]);
-            const double* r = e + TREST;
-            D[0] = D[1] = D[2] = 0.0;
-            D[3] = r[0] - q[1][0];
-            D[4] = 0.0;
-            D[5] = 0.0;
-            D[6] = r[1] - q[2][0];
-            D[7] = r[2] - q[2][1];
-            D[8] = 0.0;
-            D[9] = r[3] - q[3][0];
-            D[10] = r[4] - q[3][1];
-            D[11] = r[5] - q[3][2];
-        } else {
-            for (int k = 0; k < 4; ++k)
-                for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TREST + 3 * k + m] - q[k][m];
-        }
-        tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
-        for (int k = 0; k < 4; ++k) {
-            const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
-            for (int m = 0; m < 3; ++m) f[3 * t[k] + m] += fk[m];
-        }
+        tetra_compute_force(out, D, e + TJ, e + TMAT, 1.0, false);
+        return;
+    }
+    const V3 p[4] = {load(x + 3 * t[0]), load(x + 3 * t[1]), load(x + 3 * t[2]), load(x + 3 * t[3])};
+    M3 r02;  // world -> local
+    if (method == 1) {
+        r02 = tetra_frame(p[0], p[1], p[2]);
+    } else if (method == 2) {
+        r02 = polar_rotation(edge_rows(p[0], p[1], p[2], p[3]));
+    } else {
+        const M3 A = edge_rows(p[0], p[1], p[2], p[3]);
+        const M3 defo = mul(A, load_m(e + TINITINV));
+        if (determinant(defo) < 1e-6)  // inverted or flat element: SVD with degenerate handling
+            r02 = mul_nt(svd_stable_rotation(defo), load_m(e + TINITROT));
+        else
+            r02 = polar_rotation(A);
+    }
+    const M3 rot = transposed(r02);
+    store_m(e + TROT, rot);
+    V3 q[4];
+    for (int k = 0; k < 4; ++k) q[k] = mul(r02, p[k]);
+    if (method == 1) {
+        // SOFA subtracts node 0 only where the local coordinates are not zero by construction
+        // and sets the displacement of those to exactly 0.
+        q[1][0] -= q[0][0];
+        q[2][0] -= q[0][0];
+        q[2][1] -= q[0][1];
+        q[3] = sub(q[3], q[0]);
+        const double* r = e + TREST;
+        D[0] = D[1] = D[2] = 0.0;
+        D[3] = r[0] - q[1][0];
+        D[4] = 0.0;
+        D[5] = 0.0;
+        D[6] = r[1] - q[2][0];
+        D[7] = r[2] - q[2][1];
+        D[8] = 0.0;
+        D[9] = r[3] - q[3][0];
+        D[10] = r[4] - q[3][1];
+        D[11] = r[5] - q[3][2];
+    } else {
+        for (int k = 0; k < 4; ++k)
+            for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TREST + 3 * k + m] - q[k][m];
+    }
+    tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+    for (int k = 0; k < 4; ++k) {
+        const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
+        for (int m = 0; m < 3; ++m) out[3 * k + m] = fk[m];
     }
 }
 
-// df += kfactor * (df/dx) dx with SOFA's df/dx = -R (J K J^T) R^T, R the rotation of the last
-// add_force (the initial rotation before any add_force); small: -J K J^T. The derivative of the
-// rotation is neglected, as in SOFA (exact at zero strain, an approximation elsewhere).
-inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
-                                 const double* element_data, int method) {
+// f += internal force at positions x; stores each element's current rotation (large/polar/svd).
+// With a split, the elements run on its threads (same numbers, see parallel.h).
+inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
+                                int method, const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) { tetra_fem_force_of(tetra, i, x, element_data, method, out); };
+    if (split.chunks > 1)
+        split_elements<4>(split, tetra, f, element);
+    else
+        serial_elements<4>(n, tetra, f, element);
+}
+
+// -kfactor * (df/dx) dx of element i (12 numbers to add), with SOFA's df/dx = -R (J K J^T) R^T, R
+// the rotation of the last add_force (the initial rotation before any add_force); small:
+// -J K J^T. The derivative of the rotation is neglected, as in SOFA (exact at zero strain, an
+// approximation elsewhere). SOFA subtracts R F from df; adding -(R F) rounds the same.
+inline void tetra_fem_dforce_of(const Index* tetra, Index i, const double* dx, double kfactor,
+                                const double* element_data, int method, double* out) {
     using namespace fem_detail;
-    const int stride = tetra_fem_data_size(method);
-    for (Index i = 0; i < n; ++i) {
-        const double* e = element_data + i * stride;
-        const Index* t = tetra + 4 * i;
-        double X[12];
-        double F[12];
-        if (method == 0) {
-            for (int k = 0; k < 4; ++k)
-                for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
-            tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
-            for (int k = 0; k < 4; ++k)
-                for (int m = 0; m < 3; ++m) df[3 * t[k] + m] += -F[3 * k + m];
-            continue;
-        }
-        const M3 rot = load_m(e + TROT);
-        for (int k = 0; k < 4; ++k) {
-            const V3 l = mul_t(rot, load(dx + 3 * t[k]));
-            for (int m = 0; m < 3; ++m) X[3 * k + m] = l[m];
-        }
+    const double* e = element_data + i * tetra_fem_data_size(method);
+    const Index* t = tetra + 4 * i;
+    double X[12];
+    double F[12];
+    if (method == 0) {
+        for (int k = 0; k < 4; ++k)
+            for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
         tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
-        for (int k = 0; k < 4; ++k) {
-            const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
-            for (int m = 0; m < 3; ++m) df[3 * t[k] + m] -= fk[m];
-        }
+        for (int j = 0; j < 12; ++j) out[j] = -F[j];
+        return;
     }
+    const M3 rot = load_m(e + TROT);
+    for (int k = 0; k < 4; ++k) {
+        const V3 l = mul_t(rot, load(dx + 3 * t[k]));
+        for (int m = 0; m < 3; ++m) X[3 * k + m] = l[m];
+    }
+    tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
+    for (int k = 0; k < 4; ++k) {
+        const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
+        for (int m = 0; m < 3; ++m) out[3 * k + m] = -fk[m];
+    }
+}
+
+// df += kfactor * (df/dx) dx (see tetra_fem_dforce_of).
+inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                 const double* element_data, int method, const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) {
+        tetra_fem_dforce_of(tetra, i, dx, kfactor, element_data, method, out);
+    };
+    if (split.chunks > 1)
+        split_elements<4>(split, tetra, df, element);
+    else
+        serial_elements<4>(n, tetra, df, element);
 }
 
 // SOFA's getPotentialEnergy: 1/2 sum_e D_e . (J K J^T D_e) for the small method; SOFA returns 0 for
@@ -736,12 +753,13 @@ inline void tetracorot_fem_init(const Index* tetra, Index n_tetra, const double*
                    local_stiffness_factor, n_factor);
 }
 inline void tetracorot_fem_add_force(const Index* tetra, Index n, const double* x, double* f,
-                                     double* element_data, int method) {
-    tetra_fem_add_force(tetra, n, x, f, element_data, method);
+                                     double* element_data, int method, const ElementSplit& split = {}) {
+    tetra_fem_add_force(tetra, n, x, f, element_data, method, split);
 }
 inline void tetracorot_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df,
-                                      double kfactor, const double* element_data, int method) {
-    tetra_fem_add_dforce(tetra, n, dx, df, kfactor, element_data, method);
+                                      double kfactor, const double* element_data, int method,
+                                      const ElementSplit& split = {}) {
+    tetra_fem_add_dforce(tetra, n, dx, df, kfactor, element_data, method, split);
 }
 inline void tetracorot_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
     tetra_fem_element_matrix(element_data, e, method, out);
@@ -986,32 +1004,37 @@ inline void hexa_fem_mass_init(const Index* hexa, Index n_hexa, const double* re
     }
 }
 
-// f += internal force at x (f_node += R^T (Ke (R0 X0 - R x))_node); stores R.
+// f += internal force at x (f_node += R^T (Ke (R0 X0 - R x))_node); stores R. With a split, the
+// elements run on its threads (same numbers, see parallel.h).
 inline void hexa_fem_add_force(const Index* hexa, Index n, const double* x, double* f, double* element_data,
-                               int method) {
+                               int method, const ElementSplit& split = {}) {
     using namespace fem_detail;
     const int stride = hexa_fem_data_size(method);
-    for (Index i = 0; i < n; ++i) {
+    const auto element = [&](Index i, double* out) {
         double* e = element_data + i * stride;
-        const Index* h = hexa + 8 * i;
         double D[24], F[24];
-        const M3 R = hexa_local(h, x, e, method, D, F);
+        const M3 R = hexa_local(hexa + 8 * i, x, e, method, D, F);
         store_m(e + HROT, R);
         for (int w = 0; w < 8; ++w) {
             const V3 fw = method == 0 ? V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}}
                                       : mul_t(R, V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}});
-            for (int m = 0; m < 3; ++m) f[3 * h[w] + m] += fw[m];
+            for (int m = 0; m < 3; ++m) out[3 * w + m] = fw[m];
         }
-    }
+    };
+    if (split.chunks > 1)
+        split_elements<8>(split, hexa, f, element);
+    else
+        serial_elements<8>(n, hexa, f, element);
 }
 
 // df += kfactor * (df/dx) dx with SOFA's df/dx = -R^T Ke R (rotation of the last add_force;
-// SOFA multiplies by kfactor after rotating back: df_node -= (R^T (Ke R dx)_node) * kfactor).
+// SOFA multiplies by kfactor after rotating back: df_node -= (R^T (Ke R dx)_node) * kfactor,
+// which rounds as adding -((R^T Ke R dx)_node * kfactor)).
 inline void hexa_fem_add_dforce(const Index* hexa, Index n, const double* dx, double* df, double kfactor,
-                                const double* element_data, int method) {
+                                const double* element_data, int method, const ElementSplit& split = {}) {
     using namespace fem_detail;
     const int stride = hexa_fem_data_size(method);
-    for (Index i = 0; i < n; ++i) {
+    const auto element = [&](Index i, double* out) {
         const double* e = element_data + i * stride;
         const Index* h = hexa + 8 * i;
         const M3 R = load_m(e + HROT);
@@ -1023,9 +1046,13 @@ inline void hexa_fem_add_dforce(const Index* hexa, Index n, const double* dx, do
         hexa_mul(F, e + HK, X);
         for (int w = 0; w < 8; ++w) {
             const V3 fw = mul_t(R, V3{{F[3 * w], F[3 * w + 1], F[3 * w + 2]}});
-            for (int m = 0; m < 3; ++m) df[3 * h[w] + m] -= fw[m] * kfactor;
+            for (int m = 0; m < 3; ++m) out[3 * w + m] = -(fw[m] * kfactor);
         }
-    }
+    };
+    if (split.chunks > 1)
+        split_elements<8>(split, hexa, df, element);
+    else
+        serial_elements<8>(n, hexa, df, element);
 }
 
 // SOFA's getPotentialEnergy returns the value accumulated by the last addForce:
