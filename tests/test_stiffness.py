@@ -293,7 +293,7 @@ def test_rest_shape_springs_stiffness(lib: ctypes.CDLL) -> None:
     n = 6
     rest = np.ascontiguousarray(rng.uniform(-1, 1, 3 * n))
     indices = np.array([0, 2, 3, 5], dtype=np.int64)
-    ks = np.array([10.0, 20.0], dtype=np.float64)  # shorter list: the last value for the rest
+    ks = np.array([10.0, 20.0], dtype=np.float64)  # shorter list: its first value for the rest (SOFA)
 
     def force(x: np.ndarray) -> np.ndarray:
         f = np.zeros(3 * n)
@@ -316,5 +316,5 @@ def test_rest_shape_springs_stiffness(lib: ctypes.CDLL) -> None:
     lib.rest_assemble(_i(indices), _d(ks), 2, len(indices), 3 * n, kfact, _d(assembled))
     assert rel(assembled.reshape(3 * n, 3 * n), matrix_free) < 1e-15
     assert np.diag(fd).tolist() == pytest.approx(
-        [-10.0] * 3 + [0.0] * 3 + [-20.0] * 6 + [0.0] * 3 + [-20.0] * 3
+        [-10.0] * 3 + [0.0] * 3 + [-20.0] * 3 + [-10.0] * 3 + [0.0] * 3 + [-10.0] * 3
     )

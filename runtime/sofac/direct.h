@@ -308,7 +308,7 @@ template <class DT>
 inline void assemble_rest_shape(Assembler& A, Index offset, const Index* indices, const double* stiffness,
                                 Index stiffness_count, Index count, double kfact) {
     for (Index k = 0; k < count; ++k) {
-        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        const double ks = stiffness[k < stiffness_count ? k : 0];
         for (int d = 0; d < DT::spatial; ++d) {
             const Index row = offset + DT::deriv * indices[k] + d;
             A.add(row, row, -kfact * ks);

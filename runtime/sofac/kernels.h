@@ -123,8 +123,8 @@ inline void mass_multiply(double* df, const double* dx, Index n, const double* m
             df[3 * i] += mfact * mi[0] * dx[3 * i];
             df[3 * i + 1] += mfact * mi[0] * dx[3 * i + 1];
             df[3 * i + 2] += mfact * mi[1] * dx[3 * i + 2];
-        } else {
-            for (int d = 0; d < DT::deriv; ++d) df[DT::deriv * i + d] += mfact * mi[0] * dx[DT::deriv * i + d];
+        } else {  // one mass per point (DiagonalMass::addMDx): (dx m) mfact, in that order
+            for (int d = 0; d < DT::deriv; ++d) df[DT::deriv * i + d] += (dx[DT::deriv * i + d] * mi[0]) * mfact;
         }
     }
 }
@@ -323,13 +323,14 @@ inline void constant_forces(double* f, const Index* indices, const double* force
         for (int d = 0; d < DT::deriv; ++d) f[DT::deriv * indices[k] + d] += forces[DT::deriv * k + d];
 }
 
-// RestShapeSpringsForceField on points: f_i -= k_i (x_i - x_rest_i) (translation only).
+// RestShapeSpringsForceField on points: f_i -= k_i (x_i - x_rest_i) (translation only); points past the
+// end of the stiffness list take its first value, as SOFA does.
 template <class DT>
 inline void rest_shape_forces(double* f, const double* x, const double* rest, const Index* indices,
                               const double* stiffness, Index stiffness_count, Index count) {
     for (Index k = 0; k < count; ++k) {
         const Index i = indices[k];
-        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        const double ks = stiffness[k < stiffness_count ? k : 0];
         linear<DT>(f, i) -= ks * (point<DT>(x, i) - point<DT>(rest, i));
     }
 }
@@ -340,8 +341,8 @@ inline void rest_shape_dforces(double* df, const double* dx, const Index* indice
                                Index stiffness_count, Index count, double kfact) {
     for (Index k = 0; k < count; ++k) {
         const Index i = indices[k];
-        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
-        linear<DT>(df, i) -= kfact * ks * linear<DT>(dx, i);
+        const double ks = stiffness[k < stiffness_count ? k : 0];
+        linear<DT>(df, i) -= (linear<DT>(dx, i) * ks) * kfact;  // SOFA's order: (dx k) kfact
     }
 }
 
@@ -351,7 +352,7 @@ inline double rest_shape_energy(const double* x, const double* rest, const Index
     double energy = 0.0;
     for (Index k = 0; k < count; ++k) {
         const Index i = indices[k];
-        const double ks = stiffness[k < stiffness_count ? k : stiffness_count - 1];
+        const double ks = stiffness[k < stiffness_count ? k : 0];
         energy += 0.5 * ks * (point<DT>(x, i) - point<DT>(rest, i)).squaredNorm();
     }
     return energy;
