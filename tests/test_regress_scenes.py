@@ -17,6 +17,8 @@ SCENES = [
     "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
     "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
     "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",
+    # PrecomputedMatrixSystem: SOFA's run, and its reference, never move from the initial state
+    "Component/LinearSolver/Preconditioner/FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",
     "Demos/TriangleSurfaceCutting.scn",  # TriangularFEMForceField + TriangularBendingSprings, loader scale
 ]
 
