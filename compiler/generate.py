@@ -122,6 +122,8 @@ class _GroupView:
         self.assemble = group.assemble
         self.system_size = group.system_size
         self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
+        inert = group.inert_preconditioner
+        self.inert_origin = origin_of(inert) if inert is not None else ""
         self.marks = [p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and self.matrix]
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)

@@ -159,6 +159,9 @@ class Group:
     minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance
     preconditioner: int = 0
     ssor_omega: Buffer | None = None
+    # A PCGLinearSolver's PrecomputedWarpPreconditioner: SOFA's apply leaves the output as it was,
+    # so the PCG stops before its first iteration and dv keeps its start (pcg is then empty).
+    inert_preconditioner: Component | None = None
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
     # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
     # parameters; empty for a time integrator.
@@ -502,6 +505,8 @@ class _Planner:
                 "rk4": ("x0", "v0", "dx", "dv"),
                 "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
             }[group.scheme]
+            if group.inert_preconditioner is not None:
+                names = ("r",)  # b only: no CG iteration
             if group.minres:
                 names = ("r", "r1", "r2", "y", "w", "w2", "v")
             if group.newmark:
@@ -551,9 +556,20 @@ class _Planner:
         return group
 
     def _plan_pcg(self, linear: CheckedComponent, group: Group) -> bool:
-        """SOFA's PCGLinearSolver: warm-started CG, optionally (block) Jacobi preconditioned."""
+        """SOFA's PCGLinearSolver: warm-started CG, optionally (block) Jacobi, SSOR or Warp
+        preconditioned; with a PrecomputedWarpPreconditioner, no iteration at all (see below)."""
         component = linear.component
         group.linear_solver = component
+        preconditioner = linear.links.get("preconditioner")
+        if (
+            isinstance(preconditioner, Component)
+            and self.value(component, "use_precond") is not False
+            and getattr(self.checked.of(preconditioner).spec, "kernel", "") == "precomputed_warp"
+        ):
+            if not self._precomputed_warp_is_inert(self.checked.of(preconditioner), group):
+                return False
+            group.inert_preconditioner = preconditioner
+            return True
         group.pcg = {
             "iterations": self.buffer(
                 component, "iterations", [int(self.value(component, "iterations") or 25)], "i64"
@@ -562,7 +578,6 @@ class _Planner:
                 component, "tolerance", [float(self.value(component, "tolerance"))], role="param"
             ),
         }
-        preconditioner = linear.links.get("preconditioner")
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
             block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
@@ -578,6 +593,31 @@ class _Planner:
                     preconditioner, "omega", [float(self.value(preconditioner, "omega"))], role="param"
                 )
             group.preconditioner, group.assembled = block, True
+        return True
+
+    def _precomputed_warp_is_inert(self, warp: CheckedComponent, group: Group) -> bool:
+        """PrecomputedWarpPreconditioner as SOFA runs it: it sizes its precomputed inverse from its
+        PrecomputedMatrixSystem's matrix, which nothing assembles (SOFA only allocates it, 0x0), so the
+        inverse is 0x0 (the shared, empty matrix counts as already built: no precomputation) and the
+        rotated product loops over no DOF: its output vector is left as it was. The PCG's first output
+        is a fresh, zero vector, so r.z = 0 ends it before any iteration: dv keeps its start.
+        The configurations where SOFA does something else are refused."""
+        system = warp.links.get("linearSystem")
+        system_spec = self.checked.of(system).spec if isinstance(system, Component) else None
+        if system_spec is None or system_spec.name != "PrecomputedMatrixSystem":
+            self.unsupported(warp, "its linearSystem must link a PrecomputedMatrixSystem")
+            return False
+        if self.value(warp.component, "use_rotations") is False:
+            self.unsupported(warp, "use_rotations false (SOFA then copies an empty product) is not compiled")
+            return False
+        if self.value(warp.component, "share_matrix") is False:
+            self.unsupported(
+                warp, "share_matrix false (SOFA then precomputes from files and solvers) is not compiled"
+            )
+            return False
+        if group.static or group.newmark:
+            self.unsupported(warp, "it is compiled under an EulerImplicitSolver only")
+            return False
         return True
 
     def _warp_is_identity(self, warp: CheckedComponent) -> bool:

@@ -83,11 +83,13 @@ def test_bundled_scenes_do_not_allocate_in_a_step(shim: Path) -> None:
 
 
 def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -> None:
+    preconditioners = shared_dir / "corpus/sofa/Component/LinearSolver/Preconditioner"
     scenes = [
         shared_dir / "corpus/sofa/Demos/liver.scn",  # CG, tetrahedral FEM, barycentric mapping
         shared_dir / "reference/sofa/scenes/c2_beam_tetfem_ldl.scn",  # SparseLDLSolver: factorised each step
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
-        shared_dir / "corpus/sofa/Component/LinearSolver/Preconditioner/FEMBAR_PCG_JacobiPreconditioner.scn",
+        preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
+        preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

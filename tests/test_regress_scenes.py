@@ -19,6 +19,8 @@ SCENES = [
     "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",  # with QuadBendingSprings
     "Component/Mapping/NonLinear/DistanceMultiMapping.scn",  # with TransformEngine, UniformVelocityDamping
     "Component/LinearSolver/Preconditioner/FEMBAR_PCG_WarpPreconditioner.scn",
+    # PrecomputedMatrixSystem: SOFA's run, and its reference, never move from the initial state
+    "Component/LinearSolver/Preconditioner/FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",
     "Demos/TriangleSurfaceCutting.scn",  # TriangularFEMForceField + TriangularBendingSprings, loader scale
     # Chaotic scenes (one ulp on an initial coordinate moves the final state by up to 1e-3): they pass
     # only when every operation is SOFA's, here DiagonalMass's (dx m) mfact and, for the second,

@@ -293,12 +293,15 @@ WARP_PRECONDITIONER = ComponentSpec(
 
 PRECOMPUTED_WARP_PRECONDITIONER = ComponentSpec(
     name="PrecomputedWarpPreconditioner",
+    kernel="precomputed_warp",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
-    doc="Precomputed inverse, rotated per node each step.",
+    doc="Meant as a precomputed inverse rotated per node each step; SOFA sizes that inverse from its "
+    "PrecomputedMatrixSystem, which nothing assembles (0x0): applied, it leaves its output vector as "
+    "it was (compiled as a PCG preconditioner with its use_rotations left true).",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="PrecomputedWarpPreconditioner is not implemented yet",
+    supported=True,  # as a PCGLinearSolver's preconditioner on a PrecomputedMatrixSystem, checked there
     effects=_SOLVE,
     fields=(
         FieldSpec("jmjt_twostep", Bool(), True),
@@ -431,10 +434,11 @@ PRECOMPUTED_MATRIX_SYSTEM = ComponentSpec(
     name="PrecomputedMatrixSystem",
     category=Category.LINEAR_SYSTEM,
     module=_PRECONDITIONER,
-    doc="System matrix assembled once at init.",
+    doc="PrecomputedWarpPreconditioner's system: a TypedMatrixLinearSystem that assembles nothing, so "
+    "its matrix stays 0x0.",
     templates=(CRS_SCALAR,),
     default_template=CRS_SCALAR,
-    unsupported_reason="PrecomputedMatrixSystem is not implemented yet",
+    supported=True,  # its only user, PrecomputedWarpPreconditioner, is checked where the PCG is planned
     effects=_SOLVE,
     fields=_SYSTEM_BASE,
 )
