@@ -689,13 +689,6 @@ class _Planner:
         group.incremental_potential = incremental is None or bool(incremental)
         group.energy_file = str(self.value(component, "file") or "")
         group.save_energy = bool(self.value(component, "saveEnergyInFile"))
-        if group.save_energy and not group.energy_file:
-            self.diags.add(
-                "W225",
-                component.loc,
-                "saveEnergyInFile=true without a file: SOFA writes the energies nowhere",
-                'name the CSV file with file="energies.csv"',
-            )
         if not self._plan_linear_solver(solver, group):
             return False
         if group.factor_once:

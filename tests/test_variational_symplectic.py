@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
+from sofac.check import check_file
 
 M, K, L, A = 1.0, 100.0, 1.0, 0.1  # omega = 10 rad/s
 W = math.sqrt(K / M)
@@ -296,3 +297,22 @@ def test_sofa_example_scene_runs_and_writes_its_energies(
     sim.step()
     lines = (tmp_path / "energy.txt").read_text().splitlines()
     assert lines[-2] == lines[0] and lines[-1].startswith("0,") and len(lines) == steps + 3
+
+
+def test_save_energy_without_a_file_is_a_warning(tmp_path: Path) -> None:
+    scene = tmp_path / "nofile.scn"
+    scene.write_text(
+        OSCILLATOR.format(
+            dt=0.01,
+            solver='<VariationalSymplecticSolver saveEnergyInFile="1"/>',
+            linear=LDL,
+            x0=L + A,
+            m=M,
+            k=K,
+            length=L,
+        )
+    )
+    _, diagnostics = check_file(scene)
+    warnings = [d for d in diagnostics if d.code == "W225"]
+    assert len(warnings) == 1 and "saveEnergyInFile=true without a file" in warnings[0].message
+    assert warnings[0].loc.line == 4 and warnings[0].loc.attribute == "saveEnergyInFile"
