@@ -76,10 +76,11 @@ __all__ = [
 
 AnalyticSolution = Callable[[float], Mapping[str, Any]]
 
-# Integrator names, as given to --solvers. "implicit" expands over the linear solvers (cg, direct).
-INTEGRATORS = ("euler", "symplectic", "rk2", "rk4", "implicit")
+# Integrator names, as given to --solvers. "implicit" expands over the linear solvers (cg, direct);
+# "variational" is VariationalSymplecticSolver (SOFA's defaults) with a sparse direct solver.
+INTEGRATORS = ("euler", "symplectic", "rk2", "rk4", "implicit", "variational")
 LINEAR_SOLVERS = ("cg", "direct")
-DEFAULT_SOLVERS = INTEGRATORS
+DEFAULT_SOLVERS = ("euler", "symplectic", "rk2", "rk4", "implicit")
 DEFAULT_CG_ITERATIONS = (25,)
 DEFAULT_TOLERANCES = (1e-5,)
 REFERENCE_DIVISOR = 16
@@ -119,7 +120,8 @@ class Solver:
     """One integration setting: an integrator and, for implicit Euler, its linear solver.
 
     ``kind`` is ``euler`` (forward Euler), ``symplectic`` (semi-implicit Euler), ``rk2``, ``rk4``,
-    ``implicit-cg`` (with ``iterations`` and ``tolerance``) or ``implicit-direct``.
+    ``implicit-cg`` (with ``iterations`` and ``tolerance``), ``implicit-direct`` or ``variational``
+    (VariationalSymplecticSolver with SparseLDLSolver).
     """
 
     kind: str
@@ -136,15 +138,16 @@ class Solver:
 
     @property
     def implicit(self) -> bool:
-        return self.kind.startswith("implicit")
+        return self.kind.startswith("implicit") or self.kind == "variational"
 
     @property
     def theoretical_order(self) -> int:
-        return {"rk2": 2, "rk4": 4}.get(self.kind, 1)
+        return {"rk2": 2, "rk4": 4, "variational": 2}.get(self.kind, 1)
 
     @classmethod
     def parse(cls, text: str) -> Solver:
-        """``rk4``, ``implicit-direct``, ``implicit-cg:ITERATIONS:TOLERANCE[:THRESHOLD]`` (labels)."""
+        """``rk4``, ``implicit-direct``, ``variational``, ``implicit-cg:ITERATIONS:TOLERANCE[:THRESHOLD]``
+        (labels)."""
         parts = text.strip().lower().split(":")
         kind = parts[0]
         if kind == "implicit-cg":
@@ -158,10 +161,11 @@ class Solver:
             if len(parts) > 4 or iterations < 1 or not tolerance >= 0 or not (threshold or 0) >= 0:
                 raise AccuracyError(usage)
             return cls(kind, iterations, tolerance, threshold)
-        if kind in ("euler", "symplectic", "rk2", "rk4", "implicit-direct") and len(parts) == 1:
+        single = ("euler", "symplectic", "rk2", "rk4", "implicit-direct", "variational")
+        if kind in single and len(parts) == 1:
             return cls(kind)
         raise AccuracyError(
-            f"unknown solver {text!r}; known: euler, symplectic, rk2, rk4, implicit-direct, "
+            f"unknown solver {text!r}; known: euler, symplectic, rk2, rk4, implicit-direct, variational, "
             "implicit-cg:ITERATIONS:TOLERANCE"
         )
 
@@ -296,6 +300,10 @@ def _solver_components(solver: Solver, old: Component, rayleigh: tuple[str, str]
         add("RungeKutta2Solver", **name)
     elif solver.kind == "rk4":
         add("RungeKutta4Solver", **name)
+    elif solver.kind == "variational":
+        damping = {"rayleighStiffness": rayleigh[0], "rayleighMass": rayleigh[1]} if rayleigh else {}
+        add("VariationalSymplecticSolver", **name, **damping)
+        add("SparseLDLSolver", name="accuracy_linear_solver")
     else:
         damping = {"rayleighStiffness": rayleigh[0], "rayleighMass": rayleigh[1]} if rayleigh else {}
         add("EulerImplicitSolver", **name, **damping)
@@ -707,7 +715,7 @@ def _set_up(
             "none, so every configuration integrates the same undamped equations"
         )
     elif keep and explicit:
-        notes.append("Rayleigh damping kept on implicit Euler only: explicit solvers run undamped")
+        notes.append("Rayleigh damping kept on the implicit solvers only: explicit solvers run undamped")
 
     analytic: AnalyticSolution | None = None
     candidates: list[Configuration] = []

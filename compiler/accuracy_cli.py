@@ -98,7 +98,8 @@ def register(commands: argparse._SubParsersAction, epilog: str) -> None:
         description=description,
         epilog=(
             "solvers: euler (forward), symplectic, rk2, rk4, implicit (expands over --linear-solvers: "
-            "direct, and cg over --cg-iterations x --tolerances), or a label such as "
+            "direct, and cg over --cg-iterations x --tolerances), variational "
+            "(VariationalSymplecticSolver with a direct solver), or a label such as "
             "implicit-cg:50:1e-8. reference: analytic (the scene's <scene>.analytic.py), SOLVER@DT, "
             "SOLVER@/N (the smallest dt divided by N); default rk4@/16 (implicit-direct@/16 when the "
             "scene's Rayleigh damping is kept, or when rk4 diverges). " + epilog

@@ -28,6 +28,7 @@ _MARKERS = {
     "rk4": "D",
     "implicit-direct": "o",
     "implicit-cg": "P",
+    "variational": "X",
 }
 
 

@@ -853,6 +853,16 @@ class _Checker:
                     )
             if spec.category is Category.STATE:
                 self._check_state_integrated(checked)
+            if spec.name == "VariationalSymplecticSolver":
+                component = checked.component
+                if checked.fields.get("saveEnergyInFile") and not checked.fields.get("file"):
+                    self.diags.add(
+                        "W225",
+                        component.attribute_loc("saveEnergyInFile"),
+                        f"{spec.name} {component.label!r}: saveEnergyInFile=true without a file: SOFA "
+                        "writes the energies nowhere",
+                        'name the CSV file with file="energies.csv"',
+                    )
 
     def _linear_solver_below(self, node: Node) -> Component | None:
         for descendant in node.walk():

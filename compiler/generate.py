@@ -134,6 +134,9 @@ class _GroupView:
         self.minres = group.minres
         self.static = group.static
         self.newmark = group.newmark
+        self.variational = group.variational
+        self.hamiltonian = group.hamiltonian
+        self.incremental_potential = group.incremental_potential
         self.first_order = group.first_order
 
 

@@ -7,6 +7,7 @@ parameters are numpy views of the native instance: writing into them changes the
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import sys
 import time
@@ -14,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import Any, NamedTuple
+from typing import IO, Any, NamedTuple
 
 import numpy as np
 
@@ -157,6 +158,34 @@ class State:
         return f"<State {self.info.path} {self.info.template} x{self.info.size}>"
 
 
+class _EnergyFile:
+    """VariationalSymplecticSolver's energy file: SOFA opens (empties) `file` at init; with
+    saveEnergyInFile it writes a CSV header at each step that starts at time 0 and, when the
+    Hamiltonian is computed, one line per step (the step's start time and its energies, printed
+    as a C++ stream prints them: 6 significant digits)."""
+
+    HEADER = "time,kinetic energy,potential energy, hamiltonian energy\n"
+
+    def __init__(self, path: str, save: bool, lines: bool, energies: np.ndarray) -> None:
+        self.path = Path(path)
+        self.save = save
+        self.lines = lines
+        self.energies = energies  # (kinetic, potential) of the last step
+        try:
+            self.path.write_text("")
+        except OSError as error:  # SOFA's stream fails silently; sofac says so
+            raise SofacError(f"cannot write the energy file {path}: {error}") from error
+
+    def before(self, out: IO[str], start: float) -> None:
+        if start == 0.0:
+            out.write(self.HEADER)
+
+    def after(self, out: IO[str], start: float) -> None:
+        if self.lines:
+            kinetic, potential = (float(e) for e in self.energies)
+            out.write(f"{start:.6g},{kinetic:.6g},{potential:.6g},{kinetic + potential:.6g}\n")
+
+
 class Compiled:
     """A compiled scene: its plan and library; ``instantiate()`` makes independent simulations."""
 
@@ -206,6 +235,18 @@ class Simulation:
             if buffer.key in self.plan.init_only
         ]
         self._init_values = [view.copy() for _, view in self._init_params]
+        buffer_index = {id(b): i for i, b in enumerate(self.plan.buffers)}
+        self._energy_files = [
+            _EnergyFile(
+                g.energy_file,
+                g.save_energy,
+                g.hamiltonian,
+                self._views[buffer_index[id(g.variational["energies"])]],
+            )
+            for g in self.plan.groups
+            if g.energy_file
+        ]
+        self._saving = [f for f in self._energy_files if f.save]
 
     #: Steps per call of the compiled step: between two chunks, ``step()`` checks the energy bound
     #: (if any) and copies the independent states for ``SimulationDiverged.last_finite``.
@@ -251,13 +292,31 @@ class Simulation:
             count = min(remaining, chunk)
             if self.keep_last_finite:
                 self._take_snapshot()
-            done = int(self._native.step(count))
+            done = self._step_saving(count) if self._saving else int(self._native.step(count))
             self._steps += done
             remaining -= count
             if done < count or not self._finite():
                 raise self._non_finite_error()
             if energy_bound is not None or self._energy_guard is not None:
                 self._check_energy(energy_bound)
+
+    def _step_saving(self, steps: int) -> int:
+        """Runs ``steps`` steps one at a time, writing the energy files; returns the number done."""
+        done = 0
+        with contextlib.ExitStack() as stack:
+            outs = [(f, stack.enter_context(f.path.open("a"))) for f in self._saving]
+            while done < steps:
+                start = float(self._native.time)
+                for energy_file, out in outs:
+                    energy_file.before(out, start)
+                if int(self._native.step(1)) < 1:
+                    break
+                done += 1
+                for energy_file, out in outs:
+                    energy_file.after(out, start)
+                if not self._finite():
+                    break  # step() reports it
+        return done
 
     def guard_energy(self, factor: float | None, *, scale: float | None = None) -> None:
         """Make ``step()`` raise SimulationDiverged when the total energy gains more than
@@ -483,6 +542,17 @@ class Simulation:
                 return view
         names = ", ".join(b.key for b in self.plan.buffers if b.role == "param")
         raise KeyError(f"no parameter {key!r}; parameters: {names}")
+
+    def output(self, key: str) -> np.ndarray:
+        """A read-only view of a value the step computes, such as a VariationalSymplecticSolver's
+        ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included)."""
+        for buffer, view in zip(self.plan.buffers, self._views, strict=True):
+            if buffer.key == key and buffer.role == "state":
+                out = view.view()
+                out.flags.writeable = False
+                return out
+        names = ", ".join(b.key for b in self.plan.buffers if b.role == "state")
+        raise KeyError(f"no output {key!r}; outputs: {names}")
 
     def params(self) -> dict[str, np.ndarray]:
         return {b.key: v for b, v in zip(self.plan.buffers, self._views, strict=True) if b.role == "param"}

@@ -169,6 +169,15 @@ class Group:
     # NewmarkImplicitSolver (also "implicit"): gamma, beta, and a flag set once the initial
     # acceleration is computed; empty for other solvers.
     newmark: dict[str, Buffer] = field(default_factory=dict)
+    # VariationalSymplecticSolver (also "implicit"): newtonError, steps, the Hamiltonian outputs and
+    # a flag set once the momentum is initialised; empty for other solvers.
+    variational: dict[str, Buffer] = field(default_factory=dict)
+    hamiltonian: bool = False  # computeHamiltonian: one more solve per step, with M alone
+    incremental_potential: bool = True  # useIncrementalPotentialEnergy
+    # saveEnergyInFile: the CSV file the loader writes the energies to ("" = none); SOFA opens (and
+    # empties) `file` at init even when it writes nothing, hence the separate flag.
+    energy_file: str = ""
+    save_energy: bool = False
     first_order: bool = False  # EulerImplicitSolver's firstOrder: (M - h K) v = f, x += h v
 
     def offset(self, state: StatePlan) -> int | None:
@@ -332,7 +341,13 @@ class _Planner:
         for group in groups:
             states = ", ".join(s.path for s in group.states)
             scheme = (
-                "static (Newton-Raphson)" if group.static else "Newmark" if group.newmark else group.scheme
+                "static (Newton-Raphson)"
+                if group.static
+                else "Newmark"
+                if group.newmark
+                else "variational symplectic"
+                if group.variational
+                else group.scheme
             )
             effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
         if self.gravity.key not in self.pruned:
@@ -511,9 +526,11 @@ class _Planner:
                 names = ("r", "r1", "r2", "y", "w", "w2", "v")
             if group.newmark:
                 names += ("a",)  # the previous step's acceleration
+            if group.variational:  # x_k, the previous Newton iterate, the momenta p_k and p_k+1
+                names += ("x0", "xi", "momentum", "new_momentum")
             for state in group.states:
                 for name in names:
-                    like = state.x if name == "x0" else state.v
+                    like = state.x if name in ("x0", "xi") else state.v
                     columns = like.columns
                     state.stages[name] = self.buffer(
                         state.component, name, np.zeros_like(like.initial), columns=columns, role="scratch"
@@ -524,6 +541,9 @@ class _Planner:
                 continue
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
+        for group in groups.values():
+            if group.variational:
+                self._screen_variational(group, owner)
         return list(groups.values())
 
     def _new_group(self, solver: CheckedComponent, index: int) -> Group | None:
@@ -535,6 +555,7 @@ class _Planner:
             "euler_implicit": "implicit",
             "static": "implicit",
             "newmark": "implicit",
+            "variational": "implicit",
         }.get(kernel)
         if scheme is None:
             return None  # reported by _screen
@@ -545,6 +566,8 @@ class _Planner:
         if kernel == "euler_implicit" and not self._plan_implicit(solver, group):
             return None
         if kernel == "newmark" and not self._plan_newmark(solver, group):
+            return None
+        if kernel == "variational" and not self._plan_variational(solver, group):
             return None
         if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
             linear = solver.links.get("linearSolver")
@@ -680,6 +703,71 @@ class _Planner:
             )
             return False
         return True
+
+    def _plan_variational(self, solver: CheckedComponent, group: Group) -> bool:
+        """VariationalSymplecticSolver (implicit variant): Newton's tolerance and iteration cap,
+        Rayleigh damping, the Hamiltonian outputs and the energy file; then the linear solver."""
+        component = solver.component
+        if self.value(component, "explicitIntegration"):
+            self.unsupported(
+                solver,
+                "explicitIntegration=true is not compiled yet (the implicit variant, the default, is)",
+            )
+            return False
+        for name in ("rayleighStiffness", "rayleighMass"):
+            group.implicit[name] = self.buffer(
+                component, name, [float(self.value(component, name) or 0.0)], role="param"
+            )
+        error = self.value(component, "newtonError")
+        steps = self.value(component, "steps")
+        group.variational = {
+            "newtonError": self.buffer(
+                component, "newtonError", [0.01 if error is None else float(error)], role="param"
+            ),
+            "steps": self.buffer(component, "steps", [5 if steps is None else int(steps)], "i64"),
+            "started": self.buffer(component, "started", [0], "i64", role="scratch"),
+            # m_incrementalPotentialEnergy: the potential at t = 0 plus -2 f.res at each step
+            "incremental": self.buffer(component, "incrementalPotentialEnergy", [0.0], role="state"),
+            # outputs: hamiltonianEnergy, and the kinetic and potential parts the energy file shows
+            "hamiltonianEnergy": self.buffer(component, "hamiltonianEnergy", [0.0], role="state"),
+            "energies": self.buffer(component, "energies", [0.0, 0.0], role="state"),
+        }
+        computed = self.value(component, "computeHamiltonian")
+        group.hamiltonian = computed is None or bool(computed)
+        incremental = self.value(component, "useIncrementalPotentialEnergy")
+        group.incremental_potential = incremental is None or bool(incremental)
+        group.energy_file = str(self.value(component, "file") or "")
+        group.save_energy = bool(self.value(component, "saveEnergyInFile"))
+        if not self._plan_linear_solver(solver, group):
+            return False
+        if group.factor_once:
+            self.unsupported(
+                self.checked.of(group.linear_solver),
+                "PrecomputedLinearSolver under VariationalSymplecticSolver is not compiled yet",
+            )
+            return False
+        return True
+
+    def _screen_variational(self, group: Group, owner: dict[int, Group]) -> None:
+        """What sofac's VariationalSymplecticSolver cannot take: rigid frames (SOFA adds and
+        subtracts their coordinates as vectors, quaternions included), and masses on mapped states
+        (SOFA's momentum M v stops at the mappings: they would have no inertia)."""
+        solver = self.checked.of(group.solver)
+        for state in group.states:
+            if state.datatype.rigid:
+                self.unsupported(
+                    solver, f"VariationalSymplecticSolver on {state.datatype.name} is not compiled yet"
+                )
+        for checked in self.checked:
+            spec = checked.spec
+            is_mass = checked.category is Category.MASS or (spec is not None and spec.role == "and_mass")
+            state = self.state_of(checked) if is_mass else None
+            if state is not None and state.mapped and owner.get(id(state.component)) is group:
+                self.unsupported(
+                    checked,
+                    "a mass on a mapped state under VariationalSymplecticSolver is not compiled yet "
+                    "(SOFA's momentum M v leaves it out)",
+                )
 
     def _plan_static(self, solver: CheckedComponent, group: Group) -> bool:
         """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
@@ -3264,6 +3352,8 @@ def format_schedule(plan: Plan) -> str:
             if group.static
             else "Newmark"
             if group.newmark
+            else "variational symplectic (implicit midpoint)"
+            if group.variational
             else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")
@@ -3287,6 +3377,9 @@ def format_schedule(plan: Plan) -> str:
             elif group.newmark:
                 rhs = "b = f + (-rm M + (rk + h) K) v + (...) a, projected"
                 system = "solve ((1 + h gamma rm) M - (h^2 beta + h gamma rk) K) a' = b"
+            elif group.variational:
+                rhs = "Newton iterations: b = f(x + res) - K res + (2/h) p, projected"
+                system = "solve ((4/h^2 + 4 rm/h) M - (1 + 4 rk/h) K) res = b"
             elif group.first_order:
                 rhs, system = "b = f, projected (firstOrder)", "solve (M - h K) v' = b"
             else:

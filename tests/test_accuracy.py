@@ -55,7 +55,7 @@ def record(solver: str, dt: float, error: float, wall: float = 1.0, **extra: obj
 def test_orders_of_convergence_against_the_analytic_solution() -> None:
     result = accuracy.sweep(
         OSCILLATOR,
-        solvers=["euler", "rk2", "rk4"],
+        solvers=["euler", "rk2", "rk4", "variational"],
         dts=[0.004, 0.002, 0.001],
         duration=1.0,
         reference=oscillator_exact,
@@ -67,6 +67,7 @@ def test_orders_of_convergence_against_the_analytic_solution() -> None:
     assert orders["euler"] == pytest.approx(1, abs=0.25)
     assert orders["rk2"] == pytest.approx(2, abs=0.25)
     assert orders["rk4"] == pytest.approx(4, abs=0.25)
+    assert orders["variational"] == pytest.approx(2, abs=0.05)
     info = result.info
     assert info.reference == "analytic" and result.reference is None
     assert info.scene_size == pytest.approx(1.1)  # anchor at 0, particle at 1.1
@@ -245,6 +246,12 @@ def test_with_solver_replaces_the_ode_and_linear_solvers() -> None:
     assert direct[1][0] == "SparseLDLSolver"
     euler = beam_objects(accuracy.with_solver(model, Solver("euler"), keep_rayleigh=False))
     assert euler[0] == ("EulerExplicitSolver", {"name": "odesolver", "symplectic": "0"})
+    variational = beam_objects(accuracy.with_solver(model, Solver.parse("variational"), keep_rayleigh=True))
+    assert variational[0] == (
+        "VariationalSymplecticSolver",
+        {"name": "odesolver", "rayleighStiffness": "0.1", "rayleighMass": "0.1"},
+    )
+    assert variational[1][0] == "SparseLDLSolver"
     # The parsed model itself is untouched.
     assert [c.type_name for c in model.root.child("beam").objects][:2] == [
         "EulerImplicitSolver",
@@ -256,6 +263,7 @@ def test_solver_names_and_expansion() -> None:
     assert Solver.parse("implicit-cg:50:1e-8") == Solver("implicit-cg", 50, 1e-8)
     assert Solver.parse("implicit-cg:50:1e-8").label == "implicit-cg:50:1e-08"
     assert Solver.parse("RK4").theoretical_order == 4
+    assert Solver.parse("variational").theoretical_order == 2 and Solver.parse("variational").implicit
     with pytest.raises(AccuracyError, match="unknown solver"):
         Solver.parse("rk5")
     with pytest.raises(AccuracyError):

@@ -93,3 +93,23 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}
+
+
+def test_variational_symplectic_solver_does_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
+    # Newton iterations, the Hamiltonian's extra solve, CG and a factorised direct solver.
+    scene = (REPO / "scenes" / "oscillator.scn").read_text()
+    paths = []
+    for name, linear in (
+        ("cg", '<CGLinearSolver iterations="50" tolerance="1e-12"/>'),
+        ("ldl", "<SparseLDLSolver/>"),
+    ):
+        path = tmp_path / f"vss_{name}.scn"
+        path.write_text(
+            scene.replace(
+                '<EulerExplicitSolver name="odesolver" symplectic="1"/>',
+                f'<VariationalSymplecticSolver steps="3" newtonError="0"/>{linear}',
+            )
+        )
+        paths.append(path)
+    counts = allocations(shim, paths)
+    assert counts == {str(path): [0, 0] for path in paths}

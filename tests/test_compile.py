@@ -321,14 +321,15 @@ def test_compiler_failure_is_a_sofac_error_with_a_log(
 
 def test_unsupported_component_names_itself_and_its_line(tmp_path: Path) -> None:
     body = (
-        '<Node name="n">\n<VariationalSymplecticSolver/>\n<CGLinearSolver/>\n<MechanicalObject/>\n'
-        '<UniformMass vertexMass="1"/>\n</Node>'
+        '<Node name="n">\n<VariationalSymplecticSolver explicitIntegration="1"/>\n<CGLinearSolver/>\n'
+        '<MechanicalObject/>\n<UniformMass vertexMass="1"/>\n</Node>'
     )
     with pytest.raises(sofac.SceneError) as failure:
         sofac.load(scene(tmp_path, body))
     first = failure.value.diagnostics[0]
     assert first.code == "E222" and first.loc.line == 2
     assert "unsupported component VariationalSymplecticSolver at line 2" in first.message
+    assert "explicitIntegration=true is not compiled yet" in first.message
 
 
 def test_scene_text_never_reaches_the_code(tmp_path: Path) -> None:
