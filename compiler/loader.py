@@ -166,13 +166,14 @@ class _EnergyFile:
 
     HEADER = "time,kinetic energy,potential energy, hamiltonian energy\n"
 
-    def __init__(self, path: str, save: bool, lines: bool, energies: np.ndarray) -> None:
+    def __init__(self, path: str, save: bool, lines: bool, energies: np.ndarray, empty: bool = True) -> None:
         self.path = Path(path)
         self.save = save
         self.lines = lines
         self.energies = energies  # (kinetic, potential) of the last step
         try:
-            self.path.write_text("")
+            if empty:
+                self.path.write_text("")
         except OSError as error:  # SOFA's stream fails silently; sofac says so
             raise SofacError(f"cannot write the energy file {path}: {error}") from error
 
@@ -202,7 +203,9 @@ class Compiled:
 class Simulation:
     """A running instance of a compiled scene."""
 
-    def __init__(self, compiled: Compiled) -> None:
+    def __init__(self, compiled: Compiled, *, resumed: bool = False) -> None:
+        """``resumed``: the instance takes over from another (``recompile()``), so files it
+        writes are appended to rather than emptied."""
         self.compiled = compiled
         self.plan = compiled.plan
         initial = [b.initial.copy() for b in self.plan.buffers]
@@ -242,6 +245,7 @@ class Simulation:
                 g.save_energy,
                 g.hamiltonian,
                 self._views[buffer_index[id(g.variational["energies"])]],
+                empty=not resumed,
             )
             for g in self.plan.groups
             if g.energy_file
@@ -524,24 +528,55 @@ class Simulation:
             return named[0]
         raise KeyError(f"no MechanicalObject {path!r}; the scene has: {', '.join(self._states)}")
 
-    def param(self, key: str) -> np.ndarray:
+    def param(self, key: str, *, recompile: bool = False) -> np.ndarray:
         """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
 
         Parameters read at every step (stiffnesses of springs, masses, gravity, dt) take effect at the
         next step; those turned into data when the simulation is initialized (the element
         stiffnesses from ``youngModulus``/``poissonRatio``: ``plan.init_only``) at the next
         ``reset()``, and ``step()`` raises ParameterNeedsReset if one was changed without it.
-        Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity)."""
+        Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity),
+        unless ``recompile``: then the scene is recompiled with every effect kept and the
+        simulation goes on from where it is (see ``recompile()``)."""
         if key in self.plan.pruned:
-            raise PrunedEffectError(
-                f"{key}: {self.plan.pruned[key]}, so the compiled step has no code for it and changing it "
-                "would have no effect; load the scene with sofac.load(path, prune=False) to keep it"
-            )
+            if not recompile:
+                raise PrunedEffectError(
+                    f"{key}: {self.plan.pruned[key]}, so the compiled step has no code for it and changing "
+                    "it would have no effect; use sim.param(key, recompile=True) to recompile with it "
+                    "(the state carries over), or load the scene with sofac.load(path, prune=False)"
+                )
+            self.recompile(prune=False)
         for buffer, view in zip(self.plan.buffers, self._views, strict=True):
             if buffer.key == key and buffer.role == "param":
                 return view
         names = ", ".join(b.key for b in self.plan.buffers if b.role == "param")
         raise KeyError(f"no parameter {key!r}; parameters: {names}")
+
+    def recompile(self, *, prune: bool = False) -> None:
+        """Recompile the scene (``prune=False``: with the effects it compiled out, such as a zero
+        gravity) and go on from the current state: positions, velocities, solver data, time,
+        step count and parameters carry over, so the next steps are those of the new code.
+        Arrays taken before (``sim[path].position``, ``sim.param(...)``) view the old instance:
+        take them again."""
+        compiled = compile_checked(
+            self.compiled.checked, prune=prune, rigid_model=self.plan.rigid_model, threads=self.plan.threads
+        )
+        fresh = Simulation(compiled, resumed=True)
+        now = {
+            buffer.key: view
+            for buffer, view in zip(self.plan.buffers, self._views, strict=True)
+            if buffer.role != "data"
+        }
+        for buffer, view in zip(fresh.plan.buffers, fresh._views, strict=True):
+            old = now.get(buffer.key)
+            if buffer.role != "data" and old is not None and old.shape == view.shape:
+                view[...] = old
+        fresh._native.time = self._native.time
+        initialised = dict(zip((key for key, _ in self._init_params), self._init_values, strict=True))
+        fresh._init_values = [initialised.get(key, view.copy()) for key, view in fresh._init_params]
+        fresh._steps, fresh._energy_guard = self._steps, self._energy_guard
+        fresh.chunk, fresh.keep_last_finite = self.chunk, self.keep_last_finite
+        self.__dict__.update(fresh.__dict__)
 
     def output(self, key: str) -> np.ndarray:
         """A read-only view of a value the step computes, such as a VariationalSymplecticSolver's

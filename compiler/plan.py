@@ -212,6 +212,7 @@ class Plan:
     init_only: frozenset[str] = frozenset()
     # OpenMP threads for large element loops and independent groups (1: serial, built without OpenMP)
     threads: int = 1
+    rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
@@ -315,6 +316,7 @@ class _Planner:
             effects=self._effects(groups),
             init_only=self._init_only(groups),
             threads=self.threads,
+            rigid_model=self.rigid_model,
         )
 
     def _init_only(self, groups: list[Group]) -> frozenset[str]:

@@ -51,6 +51,29 @@ def test_zero_gravity_has_no_code_and_refuses_a_run_time_change(tmp_path: Path) 
     assert kept["dofs"].position[:, 1] == pytest.approx([-10 * 0.01**2 * 55] * 2)
 
 
+def test_asking_for_a_pruned_effect_recompiles_and_goes_on(tmp_path: Path) -> None:
+    """sim.param(key, recompile=True) on a pruned effect: the scene is recompiled with it and the
+    run continues from where it was, as if it had been compiled with the effect from the start."""
+    path = write(tmp_path, "weightless.scn", gravity="0 0 0")
+    sim, kept = sofac.load(path), sofac.load(path, prune=False)
+    for run in (sim, kept):
+        run["dofs"].velocity[:] = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]  # some state to carry over
+        run.step(20)
+    assert "/.gravity" in sim.plan.pruned
+    sim.param("/.gravity", recompile=True)[:] = [0.0, -10.0, 0.0]
+    kept.param("/.gravity")[:] = [0.0, -10.0, 0.0]
+    assert "/.gravity" not in sim.plan.pruned
+    assert sim.steps == 20 and sim.time == pytest.approx(0.2)
+    for run in (sim, kept):
+        run.step(30)
+    np.testing.assert_array_equal(sim["dofs"].position, kept["dofs"].position)
+    np.testing.assert_array_equal(sim["dofs"].velocity, kept["dofs"].velocity)
+    assert sim["dofs"].position[0, 1] < -0.04  # it fell once gravity was on
+    assert sim.time == kept.time
+    sim.reset()  # back to the scene's initial state, the new gravity kept
+    assert sim.time == 0.0 and sim.param("/.gravity")[1] == -10.0
+
+
 def test_gravity_is_an_effect_when_present(tmp_path: Path) -> None:
     plan = compile_scene(write(tmp_path, "heavy.scn")).plan
     assert plan.gravity.key not in plan.pruned
