@@ -16,7 +16,8 @@
 // by R, K_ab = V (lambda G_a G_b^T + mu G_b G_a^T + mu (G_a . G_b) I) with the world gradients
 // G = R^T g (isotropic material: the same as R^T (B^T D B) R).
 // Step (SOFA's EulerImplicitSolver): f = m g + elastic forces; b = h (f - rm M v - (h + rk) K v);
-// solve ((1 + h rm) M + h (h + rk) K) dv = b with the z = 0 nodes' rows and columns removed;
+// solve ((1 + h rm) M + h (h + rk) K) dv = b without the z = 0 nodes' DOFs (CG zeroes their rows,
+// CHOLMOD's matrix leaves them out);
 // v += dv, x += h v.
 // Prints one JSON line: ms per step of each timed batch, the time of the step's phases, and for
 // CHOLMOD the factor's kind and size.
