@@ -5,21 +5,22 @@ For each workload, in this one process:
 - **sofac**: the workload as a generated ``.scn`` scene (``scenegen.py``), ``sofac.load``, warm-up
   steps, then ``--batches`` timed batches of ``sim.step(steps)``;
 - **hand-written**: an independent C++ loop of the same algorithm (``handwritten/w1.cpp``,
-  ``w2.cpp``), compiled with g++ and the flags sofac uses for large scenes
-  (``sofac.build.LARGE_SCENE_FLAGS`` without the shared-library ones) and timed inside the C++
-  program, batch by batch, after the same warm-up;
+  ``w2.cpp``, ``w3.cpp``), compiled with g++ and the flags sofac uses for large scenes
+  (``sofac.build.LARGE_SCENE_FLAGS`` without the shared-library ones; W3 linked with CHOLMOD) and
+  timed inside the C++ program, batch by batch, after the same warm-up;
 - **NumPy / SciPy**: vectorised NumPy (W1) and a ``scipy.sparse`` matrix with
   ``scipy.sparse.linalg.cg`` (W2), when SciPy is installed;
 - **SOFA**: SOFA's measured figures from ``shared/reference/sofa/timings.md`` (not run here).
 
-W3 (the corotational tetrahedral cantilever) has no hand-written loop and no NumPy version: it
-is compared with SOFA's figure for the same beam only. ``Demos/liver.scn`` from the SOFA corpus is
-timed with sofac against SOFA's figure.
+W3 (the corotational tetrahedral cantilever) has no NumPy version; its SOFA figure is that of
+SOFA's own beam scene (same counts). ``Demos/liver.scn`` from the SOFA corpus is timed with sofac
+against SOFA's figure.
 
 ms/step is the fastest batch, in CPU time by default (``--clock wall`` for the wall clock; the
 machine is shared; the median is printed too). The final positions of sofac and the hand-written
 loop after the same number of steps are compared (the same algorithm must give the same numbers to
-rounding).
+rounding; W3's hand-written loop uses other, equivalent formulas: its tip displacement must agree
+to 1e-6).
 
     python benchmarks/workloads.py                      # everything (a few minutes)
     python benchmarks/workloads.py --only w1 w2 liver   # some workloads
@@ -57,6 +58,7 @@ import scenegen  # noqa: E402
 from machine import describe  # noqa: E402
 
 HANDWRITTEN = HERE / "handwritten"
+HANDWRITTEN_CHOLMOD = ("w3",)  # the loops linked with SuiteSparse's CHOLMOD
 ALL = ("w1", "w2", "w3", "w3ldl", "beam", "liver")
 
 # SOFA's measured ms/step (the minimum over runs) from shared/reference/sofa/timings.md.
@@ -68,6 +70,18 @@ HAND_TARGET: dict[str, float] = {"w1": 1.2, "w2": 1.3, "w3": 1.3, "w3ldl": 1.3}
 # The W3 beam is SOFA's e_beam_large_cg25 apart from its length (5 m here, 4 m there) and the
 # tetrahedral split (Hexa2TetraTopologicalMapping here, the grid's own there): same counts.
 SOFA_OF = {"w3": "beam"}
+# W3's hand-written solvers (w3.cpp's SOLVER argument), implementation name and note: the first is
+# the reference of the "x hand-written" column, the others are shown beside it.
+W3_HANDWRITTEN: dict[str, tuple[tuple[str, str, str], ...]] = {
+    "w3": (
+        ("cg-assembled", "hand-written C++", "K assembled each step (3x3 blocks)"),
+        ("cg", "hand-written C++ (matrix-free)", "element products, rotated shape gradients"),
+    ),
+    "w3ldl": (
+        ("cholmod", "hand-written C++", "CHOLMOD's defaults"),
+        ("cholmod-simplicial", "hand-written C++ (simplicial)", "CHOLMOD simplicial LDL^T, as sofac"),
+    ),
+}
 
 
 @dataclass
@@ -90,6 +104,7 @@ class Setup:
     liver_steps: int = 500
     batches: int = 3
     check_steps: int = 10  # the short run whose final positions must agree to rounding
+    beam_grid: tuple[int, int, int] = (10, 10, 50)  # W3's grid points along x, y, z
     workdir: Path = field(default_factory=lambda: Path(tempfile.gettempdir()))
 
 
@@ -144,12 +159,21 @@ def handwritten_flags() -> list[str]:
 
 
 def build_handwritten(name: str, out: Path) -> Path:
-    """Compile ``handwritten/NAME.cpp`` into ``out``; returns the executable."""
-    from sofac.build import compiler
+    """Compile ``handwritten/NAME.cpp`` into ``out`` (W3 with CHOLMOD); returns the executable."""
+    from sofac.build import SUITESPARSE_INCLUDE, compiler
 
     out.mkdir(parents=True, exist_ok=True)
     exe = out / name
-    command = [compiler(), *handwritten_flags(), str(HANDWRITTEN / f"{name}.cpp"), "-o", str(exe)]
+    cholmod = ([f"-I{SUITESPARSE_INCLUDE}"], ["-lcholmod"]) if name in HANDWRITTEN_CHOLMOD else ([], [])
+    command = [
+        compiler(),
+        *handwritten_flags(),
+        *cholmod[0],
+        str(HANDWRITTEN / f"{name}.cpp"),
+        "-o",
+        str(exe),
+        *cholmod[1],
+    ]
     done = subprocess.run(command, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         raise RuntimeError(f"{' '.join(command)} failed:\n{done.stderr}")
@@ -174,11 +198,24 @@ def write_cloth_input(path: Path, cloth: scenegen.Cloth) -> None:
             file.write(array.tobytes())
 
 
-def run_handwritten(exe: Path, cloth_file: Path, args: Sequence[object]) -> tuple[dict[str, Any], np.ndarray]:
+def write_beam_input(path: Path, beam: scenegen.Beam) -> None:
+    """The binary mesh file read by ``handwritten/w3.cpp``."""
+    header = np.array([len(beam.positions), len(beam.tetrahedra), len(beam.fixed)], dtype=np.int64)
+    with path.open("wb") as file:
+        for array in (
+            header,
+            np.array(beam.positions, dtype=np.float64).ravel(),
+            np.array(beam.tetrahedra, dtype=np.int64).ravel(),
+            np.array(beam.fixed, dtype=np.int64),
+        ):
+            file.write(array.tobytes())
+
+
+def run_handwritten(exe: Path, input_file: Path, args: Sequence[object]) -> tuple[dict[str, Any], np.ndarray]:
     """Run a hand-written loop: its JSON report and its final positions (points x 3)."""
-    final = cloth_file.with_suffix(f".{exe.name}.out")
+    final = input_file.with_suffix(f".{exe.name}.out")
     done = subprocess.run(
-        [str(exe), str(cloth_file), str(final), *(repr(a) if isinstance(a, float) else str(a) for a in args)],
+        [str(exe), str(input_file), str(final), *(repr(a) if isinstance(a, float) else str(a) for a in args)],
         capture_output=True,
         text=True,
         check=True,
@@ -393,6 +430,82 @@ def run_cloth(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[lis
     return rows, checks
 
 
+def run_beam(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[list[Row], dict[str, float]]:
+    """W3 (CG) or W3 with the sparse direct solver: sofac and the hand-written loops; also the
+    relative difference of the mean tip displacement (the z = L nodes) of each loop from sofac's,
+    after all the steps run and, for CG, after ``check_steps`` (25 CG iterations on 15,000 DOFs
+    amplify rounding differences exponentially from one step to the next, as in W2: ~6e-13 after
+    20 steps, 2e-7 after 80, 1e-2 after 310; the direct solve does not)."""
+    direct = which == "w3ldl"
+    nx, ny, nz = setup.beam_grid
+    folder = setup.workdir
+    cg_scene, ldl_scene = scenegen.write_beam(folder, nx, ny, nz)
+    scene = ldl_scene if direct else cg_scene
+    steps = setup.ldl_steps if direct else setup.w3_steps
+    warmup = max(1, steps // 10)
+    batches = setup.batches
+    beam = scenegen.beam(nx, ny, nz)
+    input_file = folder / f"w3_{nx}x{ny}x{nz}.bin"
+    write_beam_input(input_file, beam)
+    start = np.array(beam.positions, dtype=float)
+    tip = start[:, 2] == start[:, 2].max()
+
+    def tip_displacement(final: np.ndarray) -> np.ndarray:
+        return np.asarray((final[tip] - start[tip]).mean(axis=0))
+
+    label = f"{which.upper()} {nx}x{ny}x{nz}"
+    log(f"{label}: sofac")
+    times, sofac_final, loaded = time_sofac(scene, warmup, steps, batches)
+    rows = [row(which, "sofac", times, f"{scene.name}, load {loaded:.1f} s", sofac_final)]
+    sofac_tip = tip_displacement(sofac_final)
+    checks: dict[str, float] = {}
+    exe = build_handwritten("w3", folder / "bin")
+    total = warmup + steps * batches
+    short = setup.check_steps
+    sofac_short = tip_displacement(time_sofac(scene, 0, short, 1)[1]) if not direct else None
+    for solver, implementation, note in W3_HANDWRITTEN[which]:
+        log(f"{label}: {implementation}")
+        args = [
+            scenegen.W3_DT,
+            scenegen.BEAM_TOTAL_MASS / len(beam.positions),
+            scenegen.BEAM_YOUNG,
+            scenegen.BEAM_POISSON,
+            scenegen.GRAVITY[1],
+            scenegen.BEAM_RAYLEIGH,
+            scenegen.BEAM_RAYLEIGH,
+            solver,
+            scenegen.CG_ITERATIONS,
+            warmup,
+            steps,
+            batches,
+        ]
+        report, final = run_handwritten(exe, input_file, args)
+        if report.get("failed"):
+            raise RuntimeError(f"w3 {solver}: CHOLMOD's factorisation failed")
+        phases = report["phase_ms"]
+        if direct:
+            note += (
+                f"; {report['factor']}, {report['flops'] / 1e9:.2f} GFlop, "
+                f"factorisation {phases['factor']:.4g} ms/step"
+            )
+        else:
+            note += f"; forces{' + K' if solver == 'cg-assembled' else ''} {phases['forces']:.3g} ms/step"
+        rows.append(row(which, implementation, report["ms_per_step"], note, final))
+        checks[f"tip displacement, sofac vs {implementation}, after {total} steps"] = relative_norm(
+            tip_displacement(final) - sofac_tip, sofac_tip
+        )
+        if sofac_short is not None:
+            final = run_handwritten(exe, input_file, [*args[:-3], 0, short, 1])[1]
+            checks[f"tip displacement, sofac vs {implementation}, after {short} steps"] = relative_norm(
+                tip_displacement(final) - sofac_short, sofac_short
+            )
+    return rows, checks
+
+
+def relative_norm(difference: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.linalg.norm(difference) / max(float(np.linalg.norm(reference)), 1e-300))
+
+
 def run_scene(workload: str, scene: Path, steps: int, setup: Setup, log: Callable[[str], None]) -> Row:
     log(f"{workload}: sofac {scene.name}")
     times, _final, loaded = time_sofac(scene, max(1, steps // 10), steps, setup.batches)
@@ -411,9 +524,9 @@ def run(
             rows += found
             checks[workload] = check
         elif workload in ("w3", "w3ldl"):
-            cg, ldl = scenegen.write_beam(setup.workdir)
-            scene, steps = (cg, setup.w3_steps) if workload == "w3" else (ldl, setup.ldl_steps)
-            rows.append(run_scene(workload, scene, steps, setup, log))
+            found, check = run_beam(workload, setup, log)
+            rows += found
+            checks[workload] = check
         elif workload == "beam":
             scene = (
                 shared / "reference" / "sofa" / "scenes" / "e_beam_large_cg25_noexport.scn"
@@ -514,9 +627,12 @@ def checks_text(checks: dict[str, dict[str, float]]) -> str:
     lines = []
     for workload, found in checks.items():
         for what, value in found.items():
-            lines.append(
-                f"{workload.upper()} final positions, {what}: max |difference| / max |x| = {value:.3g}"
-            )
+            if what.startswith("tip displacement"):
+                lines.append(f"{workload.upper()} {what}: |difference| / |sofac's| = {value:.3g}")
+            else:
+                lines.append(
+                    f"{workload.upper()} final positions, {what}: max |difference| / max |x| = {value:.3g}"
+                )
     return "\n".join(lines)
 
 
@@ -534,7 +650,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--batches", type=int, default=3, help="timed batches (default 3; the fastest is shown)"
     )
-    parser.add_argument("--check-steps", type=int, default=10, help="steps of the W1/W2 agreement check (10)")
+    parser.add_argument(
+        "--check-steps", type=int, default=10, help="steps of the W1/W2/W3-CG agreement check (10)"
+    )
     parser.add_argument("--markdown", type=Path, help="also write the table (Markdown) to this file")
     parser.add_argument("--json", type=Path, help="also write the rows and checks as JSON")
     parser.add_argument(

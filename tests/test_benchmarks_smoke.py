@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
@@ -59,3 +60,41 @@ def test_cloth_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) ->
     assert cells[0][:3] == ["workload", "implementation", "ms/step"]
     assert any(c[1] == "sofac" and c[0] == "w1" and "hand-written" in c[6] for c in cells)
     assert workloads.render(cells, markdown=True).startswith("| workload |")
+
+
+def test_beam_mesh_matches_the_workload_definition(workloads: ModuleType) -> None:
+    beam = workloads.scenegen.beam()
+    assert len(beam.positions) == 10 * 10 * 50
+    assert len(beam.tetrahedra) == 6 * 9 * 9 * 49 == 23_814
+    assert beam.positions[-1] == (1.0, 1.0, 5.0)
+    assert len(beam.fixed) == 100 and all(beam.positions[i][2] == 0.0 for i in beam.fixed)
+    # Hexa2TetraTopologicalMapping's first cell, corners 0 1 11 10 100 101 111 110: (0, 5, 1, 6)...
+    assert beam.tetrahedra[:2] == [(0, 101, 1, 111), (0, 1, 10, 111)]
+    # the 6 tetrahedra fill each cell: their volumes sum to the cell's
+    points = np.array(beam.positions)
+    corners = points[np.array(beam.tetrahedra[:6])]
+    edges = corners[:, 1:] - corners[:, :1]
+    volume = np.abs(np.linalg.det(edges)).sum() / 6
+    assert volume == pytest.approx((1 / 9) * (1 / 9) * (5 / 49))
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+def test_beam_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) -> None:
+    from sofac.build import SUITESPARSE_INCLUDE
+
+    if not (SUITESPARSE_INCLUDE / "cholmod.h").is_file():
+        pytest.skip("needs SuiteSparse (CHOLMOD)")
+    setup = workloads.Setup(w3_steps=3, ldl_steps=3, batches=2, beam_grid=(3, 3, 5), workdir=tmp_path)
+    rows, checks = workloads.run(["w3", "w3ldl"], setup, lambda _: None)
+    implementations = {(r.workload, r.implementation) for r in rows}
+    for workload in ("w3", "w3ldl"):
+        assert {(workload, "sofac"), (workload, "hand-written C++")} <= implementations
+    # the same physics: the hand-written loops' tip displacement is sofac's to rounding (~1e-13);
+    # 25 CG iterations amplify the rounding differences of their other formulas by the system's
+    # conditioning (~1e-8 on this small grid)
+    assert len(checks["w3ldl"]) == 2 and all(v < 1e-10 for v in checks["w3ldl"].values()), checks
+    assert len(checks["w3"]) == 4 and all(v < 1e-6 for v in checks["w3"].values()), checks
+    assert all(r.ms > 0 for r in rows)
+    cells = workloads.table(rows, sofa=False)
+    hand = {c[0]: c[4] for c in cells if c[1] == "sofac"}
+    assert hand["w3"] != "-" and hand["w3ldl"] != "-"

@@ -3,7 +3,6 @@
 // Each step: f = m g + spring forces (k (d - L0) along the spring, no damping: W1 has none);
 // v += dt f / m on the free particles; x += dt v. Prints one JSON line with the ms per step of
 // each timed batch (bench_ms() around the batch only: CPU time by default).
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -63,14 +62,8 @@ int main(int argc, char** argv) {
         }
     };
 
-    for (long s = 0; s < warmup; ++s) step();
-    std::printf("{\"ms_per_step\": [");
-    for (long batch = 0; batch < batches; ++batch) {
-        const double start = bench_ms();
-        for (long s = 0; s < steps; ++s) step();
-        std::printf("%s%.17g", batch ? ", " : "", (bench_ms() - start) / double(steps));
-    }
-    std::printf("]}\n");
+    run_batches(step, warmup, steps, batches);
+    std::printf("}\n");
     write_positions(argv[2], x);
     return 0;
 }

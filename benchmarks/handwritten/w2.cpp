@@ -8,12 +8,12 @@
 //   tolerance = threshold = 0: stop only when |b| = 0 or p.Ap = 0), then v += dv, x += h v.
 // Prints one JSON line: ms per step of each timed batch, and the fewest CG iterations any step ran.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <vector>
 
+#include "cg.h"
 #include "cloth_io.h"
 
 int main(int argc, char** argv) {
@@ -89,37 +89,12 @@ int main(int argc, char** argv) {
         }
         // b = h (f + h K v), projected
         add_k(f.data(), v.data(), h);
-        double normb2 = 0.0;
-        for (std::int64_t j = 0; j < size; ++j) {
-            r[j] = free_dof[j] ? h * f[j] : 0.0;
-            dv[j] = 0.0;
-            normb2 += r[j] * r[j];
-        }
-        double rho_previous = 0.0;
-        long done = 0;
-        for (long it = 1; normb2 != 0.0 && it <= iterations; ++it) {
-            double rho = 0.0;
-            for (std::int64_t j = 0; j < size; ++j) rho += r[j] * r[j];
-            const double beta = it == 1 ? 0.0 : rho / rho_previous;
-            for (std::int64_t j = 0; j < size; ++j) {
-                p[j] = r[j] + beta * p[j];
-                q[j] = mass * p[j];
-            }
-            add_k(q.data(), p.data(), -h * h);
-            double den = 0.0;
-            for (std::int64_t j = 0; j < size; ++j) {
-                if (!free_dof[j]) q[j] = 0.0;
-                den += p[j] * q[j];
-            }
-            if (den == 0.0) break;
-            const double alpha = rho / den;
-            for (std::int64_t j = 0; j < size; ++j) {
-                dv[j] += alpha * p[j];
-                r[j] -= alpha * q[j];
-            }
-            rho_previous = rho;
-            done = it;
-        }
+        for (std::int64_t j = 0; j < size; ++j) r[j] = free_dof[j] ? h * f[j] : 0.0;
+        const long done = conjugate_gradient(size, iterations, free_dof.data(), r.data(), p.data(), q.data(),
+                                             dv.data(), [&](const double* y, double* out) {
+                                                 for (std::int64_t j = 0; j < size; ++j) out[j] = mass * y[j];
+                                                 add_k(out, y, -h * h);
+                                             });
         fewest_iterations = std::min(fewest_iterations, done);
         for (std::int64_t j = 0; j < size; ++j) {
             v[j] += dv[j];
@@ -127,14 +102,8 @@ int main(int argc, char** argv) {
         }
     };
 
-    for (long s = 0; s < warmup; ++s) step();
-    std::printf("{\"ms_per_step\": [");
-    for (long batch = 0; batch < batches; ++batch) {
-        const double start = bench_ms();
-        for (long s = 0; s < steps; ++s) step();
-        std::printf("%s%.17g", batch ? ", " : "", (bench_ms() - start) / double(steps));
-    }
-    std::printf("], \"fewest_cg_iterations\": %ld}\n", fewest_iterations);
+    run_batches(step, warmup, steps, batches);
+    std::printf(", \"fewest_cg_iterations\": %ld}\n", fewest_iterations);
     write_positions(argv[2], x);
     return 0;
 }
