@@ -26,7 +26,7 @@ SHIM = r"""
 #include <vector>
 using sofac::Index;
 #define API extern "C" __attribute__((visibility("default")))
-API int tet_size(int method) { return sofac::tetra_fem_data_size(method); }
+API sofac::Index tet_count(int method, Index n) { return sofac::tetra_fem_data_count(method, n); }
 API int hex_size(int method) { return sofac::hexa_fem_data_size(method); }
 API void tet_init(const Index* t, Index n, const double* x0, const double* e, Index ne, const double* nu,
                   Index nn, int method, double* data, const double* lsf, Index nf) {
@@ -153,6 +153,7 @@ HEX_METHODS = (SMALL, LARGE, POLAR)
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library = build_shim(tmp_path_factory, "fem", SHIM)
     library.tet_energy.restype = ctypes.c_double
+    library.tet_count.restype = ctypes.c_int64
     library.hex_energy.restype = ctypes.c_double
     for name in ("tet_dforce", "hex_dforce"):
         getattr(library, name).argtypes = [I64, ctypes.c_int64, D, D, ctypes.c_double, D, ctypes.c_int]
@@ -183,8 +184,10 @@ class Field:
         self.rest = np.ascontiguousarray(rest, dtype=np.float64)
         e = np.atleast_1d(np.asarray(young, dtype=np.float64))
         nu = np.atleast_1d(np.asarray(poisson, dtype=np.float64))
-        size = (lib.tet_size if kind == "tet" else lib.hex_size)(method)
-        self.data = np.zeros(self.n * size)
+        if kind == "tet":
+            self.data = np.zeros(lib.tet_count(method, ctypes.c_int64(self.n)))
+        else:
+            self.data = np.zeros(self.n * lib.hex_size(method))
         if kind == "tet":
             lsf = np.asarray(factor if factor is not None else [1.0], dtype=np.float64)
             lib.tet_init(

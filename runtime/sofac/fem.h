@@ -10,8 +10,10 @@
 // - Elements are flat index arrays (4 per tetrahedron, 8 per hexahedron), in the topology's order.
 // - `method`: 0 = small, 1 = large, 2 = polar, 3 = svd (tetrahedra only). SOFA maps an unknown
 //   method string to "large".
-// - Everything an element needs is precomputed by *_init into `element_data`, a caller-owned array
-//   of n_elements * *_data_size(method) doubles (element e at offset e * *_data_size(method)).
+// - Everything an element needs is precomputed by *_init into `element_data`, a caller-owned array:
+//   hexahedra: n_elements * hexa_fem_data_size(method) doubles (element e at offset e * size);
+//   tetrahedra: tetra_fem_data_count(method, n_elements) doubles, in blocks of TETRA_LANES elements
+//   (see tetra_fem_data_count).
 //   *_add_force also writes the element's current rotation there (SOFA's `rotations[i]`), which
 //   *_add_dforce reads; so add_dforce linearizes around the positions of the last add_force, as SOFA.
 // - add_force: f += f(x) (internal elastic force, f = -K (x - x0) for small displacements).
@@ -32,6 +34,7 @@
 #include <algorithm>
 #include <cfloat>
 #include <cmath>
+#include <cstring>
 
 #include "parallel.h"
 #include "types.h"
@@ -405,21 +408,23 @@ inline void strain_displacement(double* j, const V3& a, const V3& b, const V3& c
 // SOFA's computeForce for tetrahedra: F = J (K (J^T D)) exploiting the zeros, with an optional
 // factor applied to K J^T D (the addDForce variant). mat = {K00, K01, K33} (K11 = K22 = K00,
 // off-diagonal normal terms = K01, shear terms = K33), already divided by 36 V.
-inline void tetra_compute_force(double* F, const double* D, const double* j, const double* mat, double fact,
-                                bool scale) {
-    const double a0 = j[0], b0 = j[1], g0 = j[2];
-    const double a1 = j[3], b1 = j[4], g1 = j[5];
-    const double a2 = j[6], b2 = j[7], g2 = j[8];
-    const double a3 = j[9], b3 = j[10], g3 = j[11];
-    double e[6];
+// T is double, or a vector of doubles holding that many elements (one per lane) for the
+// vectorised kernels: each lane then does exactly the scalar operations, in the same order.
+template <class T>
+inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, const T& fact, bool scale) {
+    const T a0 = j[0], b0 = j[1], g0 = j[2];
+    const T a1 = j[3], b1 = j[4], g1 = j[5];
+    const T a2 = j[6], b2 = j[7], g2 = j[8];
+    const T a3 = j[9], b3 = j[10], g3 = j[11];
+    T e[6];
     e[0] = a0 * D[0] + a1 * D[3] + a2 * D[6] + a3 * D[9];
     e[1] = b0 * D[1] + b1 * D[4] + b2 * D[7] + b3 * D[10];
     e[2] = g0 * D[2] + g1 * D[5] + g2 * D[8] + g3 * D[11];
     e[3] = b0 * D[0] + a0 * D[1] + b1 * D[3] + a1 * D[4] + b2 * D[6] + a2 * D[7] + b3 * D[9] + a3 * D[10];
     e[4] = g0 * D[1] + b0 * D[2] + g1 * D[4] + b1 * D[5] + g2 * D[7] + b2 * D[8] + g3 * D[10] + b3 * D[11];
     e[5] = g0 * D[0] + a0 * D[2] + g1 * D[3] + a1 * D[5] + g2 * D[6] + a2 * D[8] + g3 * D[9] + a3 * D[11];
-    const double kd = mat[0], ko = mat[1], ks = mat[2];
-    double s[6];
+    const T kd = mat[0], ko = mat[1], ks = mat[2];
+    T s[6];
     s[0] = kd * e[0] + ko * e[1] + ko * e[2];
     s[1] = ko * e[0] + kd * e[1] + ko * e[2];
     s[2] = ko * e[0] + ko * e[1] + kd * e[2];
@@ -427,12 +432,42 @@ inline void tetra_compute_force(double* F, const double* D, const double* j, con
     s[4] = ks * e[4];
     s[5] = ks * e[5];
     if (scale)
-        for (double& v : s) v *= fact;
+        for (T& v : s) v *= fact;
     for (int n = 0; n < 4; ++n) {
-        const double a = j[3 * n], b = j[3 * n + 1], g = j[3 * n + 2];
+        const T a = j[3 * n], b = j[3 * n + 1], g = j[3 * n + 2];
         F[3 * n + 0] = a * s[0] + b * s[3] + g * s[5];
         F[3 * n + 1] = b * s[1] + a * s[3] + g * s[4];
         F[3 * n + 2] = g * s[2] + b * s[4] + a * s[5];
+    }
+}
+
+// R^T v and R v for a row-major 3x3 R (9 numbers), as mul_t and mul (SOFA's order), on T.
+template <class T>
+inline void rotate_t(const T* R, const T* v, T* r) {
+    for (int i = 0; i < 3; ++i) r[i] = R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2];
+}
+template <class T>
+inline void rotate(const T* R, const T* v, T* r) {
+    for (int i = 0; i < 3; ++i) r[i] = R[3 * i] * v[0] + R[3 * i + 1] * v[1] + R[3 * i + 2] * v[2];
+}
+
+// SOFA's addDForce of one element on T: the 12 numbers R (J K J^T) (kfactor R^T dx) (R = the
+// element's rotation, local -> world; none for small) that SOFA subtracts from df. X: the 12
+// numbers of dx at the element's nodes.
+template <class T, bool Rotated>
+inline void tetra_dforce_element(const T* R, const T* j, const T* mat, const T& kfactor, const T* X, T* out) {
+    T L[12];
+    if (Rotated) {
+        for (int k = 0; k < 4; ++k) rotate_t(R, X + 3 * k, L + 3 * k);
+    } else {
+        for (int k = 0; k < 12; ++k) L[k] = X[k];
+    }
+    T F[12];
+    tetra_compute_force(F, L, j, mat, kfactor, true);
+    if (Rotated) {
+        for (int k = 0; k < 4; ++k) rotate(R, F + 3 * k, out + 3 * k);
+    } else {
+        for (int k = 0; k < 12; ++k) out[k] = F[k];
     }
 }
 
@@ -476,6 +511,31 @@ constexpr int tetra_fem_data_size(int method) {
     return method == 0 ? 24 : method == 1 ? 30 : method == 2 ? 36 : 54;
 }
 
+// Tetrahedron element data is stored in blocks of TETRA_LANES consecutive elements, field-major
+// inside a block (a structure of arrays per block): number f (a fem_detail offset) of element e
+// is at data[(e / TETRA_LANES) * TETRA_LANES * size + f * TETRA_LANES + e % TETRA_LANES], so the
+// vectorised kernels load one number of TETRA_LANES elements with one load. The array holds whole
+// blocks (the lanes past the last element stay unused): tetra_fem_data_count doubles.
+constexpr int TETRA_LANES = 4;
+constexpr Index tetra_fem_data_count(int method, Index n) {
+    return (n + TETRA_LANES - 1) / TETRA_LANES * TETRA_LANES * tetra_fem_data_size(method);
+}
+
+namespace fem_detail {
+
+// Element e's numbers [first, first + count) between the blocked data and a flat record (the
+// per-element layout of the offsets above), for the scalar kernels.
+inline void tetra_unpack(const double* data, Index e, int stride, int first, int count, double* record) {
+    const double* p = data + e / TETRA_LANES * TETRA_LANES * stride + e % TETRA_LANES;
+    for (int f = first; f < first + count; ++f) record[f] = p[f * TETRA_LANES];
+}
+inline void tetra_pack(double* data, Index e, int stride, int first, int count, const double* record) {
+    double* p = data + e / TETRA_LANES * TETRA_LANES * stride + e % TETRA_LANES;
+    for (int f = first; f < first + count; ++f) p[f * TETRA_LANES] = record[f];
+}
+
+}  // namespace fem_detail
+
 // Precomputes per element what SOFA's reinit does: material stiffness (isotropic Hooke, divided by
 // 36 |V0|), strain-displacement cofactors in the element's rest frame (world frame for small; the
 // Gram-Schmidt frame of edges 0->1, 0->2 for large; the polar rotation of the rest edge rows for
@@ -489,7 +549,7 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
     using namespace fem_detail;
     const int stride = tetra_fem_data_size(method);
     for (Index i = 0; i < n_tetra; ++i) {
-        double* e = element_data + i * stride;
+        double e[54];
         const Index* t = tetra + 4 * i;
         const V3 a = load(rest_x + 3 * t[0]), b = load(rest_x + 3 * t[1]);
         const V3 c = load(rest_x + 3 * t[2]), d = load(rest_x + 3 * t[3]);
@@ -537,6 +597,7 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
                 store_m(e + TINITINV, inv);
             }
         }
+        tetra_pack(element_data, i, stride, 0, stride, e);
     }
 }
 
@@ -545,7 +606,9 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
 inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, double* element_data, int method,
                                double* out) {
     using namespace fem_detail;
-    double* e = element_data + i * tetra_fem_data_size(method);
+    const int stride = tetra_fem_data_size(method);
+    double e[54];
+    tetra_unpack(element_data, i, stride, 0, stride, e);
     const Index* t = tetra + 4 * i;
     double D[12];
     double F[12];
@@ -575,6 +638,7 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
     }
     const M3 rot = transposed(r02);
     store_m(e + TROT, rot);
+    tetra_pack(element_data, i, stride, TROT, 9, e);
     V3 q[4];
     for (int k = 0; k < 4; ++k) q[k] = mul(r02, p[k]);
     if (method == 1) {
@@ -624,28 +688,96 @@ inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, do
 inline void tetra_fem_dforce_of(const Index* tetra, Index i, const double* dx, double kfactor,
                                 const double* element_data, int method, double* out) {
     using namespace fem_detail;
-    const double* e = element_data + i * tetra_fem_data_size(method);
+    double e[TROT + 9];
+    tetra_unpack(element_data, i, tetra_fem_data_size(method), 0, method == 0 ? TROT : TROT + 9, e);
     const Index* t = tetra + 4 * i;
     double X[12];
+    for (int k = 0; k < 4; ++k)
+        for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
     double F[12];
-    if (method == 0) {
+    if (method == 0)
+        tetra_dforce_element<double, false>(nullptr, e + TJ, e + TMAT, kfactor, X, F);
+    else
+        tetra_dforce_element<double, true>(e + TROT, e + TJ, e + TMAT, kfactor, X, F);
+    for (int j = 0; j < 12; ++j) out[j] = -F[j];
+}
+
+namespace fem_detail {
+
+// TETRA_LANES doubles in one vector (GCC's vector extension, also in Clang): one lane per element.
+typedef double Lanes __attribute__((vector_size(8 * TETRA_LANES)));
+
+// Numbers [first, first + count) of a block's TETRA_LANES elements (the data need not be aligned).
+inline void load_lanes(const double* block, int first, int count, Lanes* out) {
+    _Pragma("GCC unroll 32") for (int f = 0; f < count; ++f)
+        std::memcpy(&out[f], block + (first + f) * TETRA_LANES, sizeof(Lanes));
+}
+
+// add_dforce on whole blocks of TETRA_LANES elements, one element per lane: each lane does the
+// scalar operations of tetra_fem_dforce_of, in the same order (the same numbers), and the elements'
+// results are subtracted from df one element after the other, in element order, as the serial
+// loop adds them (a - b and a + (-b) round the same). A short last block repeats the last element
+// in its unused lanes and drops their results. Always inlined into the instruction-set variants
+// below, which compile it for their vector width.
+template <bool Rotated>
+__attribute__((always_inline)) inline void tetra_dforce_blocks(const Index* tetra, Index n, const double* dx,
+                                                               double* df, double kfactor, const double* data,
+                                                               int stride) {
+    constexpr int L = TETRA_LANES;
+    Lanes factor;
+    for (int l = 0; l < L; ++l) factor[l] = kfactor;
+    for (Index first = 0; first < n; first += L) {
+        Lanes f[TROT + 9];
+        load_lanes(data + first * stride, 0, Rotated ? TROT + 9 : TROT, f);
+        Index node[4][L];  // 3 * the node index of corner k of lane l
+        for (int l = 0; l < L; ++l) {
+            const Index* t = tetra + 4 * std::min<Index>(first + l, n - 1);
+            for (int k = 0; k < 4; ++k) node[k][l] = 3 * t[k];
+        }
+        Lanes X[12] = {};
         for (int k = 0; k < 4; ++k)
-            for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
-        tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
-        for (int j = 0; j < 12; ++j) out[j] = -F[j];
-        return;
-    }
-    const M3 rot = load_m(e + TROT);
-    for (int k = 0; k < 4; ++k) {
-        const V3 l = mul_t(rot, load(dx + 3 * t[k]));
-        for (int m = 0; m < 3; ++m) X[3 * k + m] = l[m];
-    }
-    tetra_compute_force(F, X, e + TJ, e + TMAT, kfactor, true);
-    for (int k = 0; k < 4; ++k) {
-        const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
-        for (int m = 0; m < 3; ++m) out[3 * k + m] = -fk[m];
+            for (int m = 0; m < 3; ++m)
+                for (int l = 0; l < L; ++l) X[3 * k + m][l] = dx[node[k][l] + m];
+        Lanes F[12];
+        tetra_dforce_element<Lanes, Rotated>(f + TROT, f + TJ, f + TMAT, factor, X, F);
+        const auto scatter = [&](int l) {
+            for (int k = 0; k < 4; ++k) {
+                double* out = df + node[k][l];
+                for (int m = 0; m < 3; ++m) out[m] -= F[3 * k + m][l];
+            }
+        };
+        if (n - first >= L) {
+            _Pragma("GCC unroll 16") for (int l = 0; l < L; ++l) scatter(l);
+        } else {
+            for (int l = 0; l < n - first; ++l) scatter(l);
+        }
     }
 }
+
+inline void tetra_dforce_default(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                 const double* data, int method) {
+    if (method == 0)
+        tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+    else
+        tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+}
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#define SOFAC_X86_VARIANTS 1
+// The same kernel compiled for AVX2, chosen at run time when the processor has it (the library is
+// built for baseline x86-64). No FMA: the target adds no fused multiply-add (and scenes are built
+// with -ffp-contract=off), so every lane rounds as the scalar code.
+__attribute__((target("avx2"))) inline void tetra_dforce_avx2(const Index* tetra, Index n, const double* dx,
+                                                              double* df, double kfactor, const double* data,
+                                                              int method) {
+    if (method == 0)
+        tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+    else
+        tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+}
+#endif
+
+}  // namespace fem_detail
 
 // df += kfactor * (df/dx) dx (see tetra_fem_dforce_of).
 inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
@@ -653,10 +785,17 @@ inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, 
     const auto element = [&](Index i, double* out) {
         tetra_fem_dforce_of(tetra, i, dx, kfactor, element_data, method, out);
     };
-    if (split.chunks > 1)
+    if (split.chunks > 1) {
         split_elements<4>(split, tetra, df, element);
-    else
-        serial_elements<4>(n, tetra, df, element);
+        return;
+    }
+#ifdef SOFAC_X86_VARIANTS
+    if (__builtin_cpu_supports("avx2")) {
+        fem_detail::tetra_dforce_avx2(tetra, n, dx, df, kfactor, element_data, method);
+        return;
+    }
+#endif
+    fem_detail::tetra_dforce_default(tetra, n, dx, df, kfactor, element_data, method);
 }
 
 // SOFA's getPotentialEnergy: 1/2 sum_e D_e . (J K J^T D_e) for the small method; SOFA returns 0 for
@@ -668,7 +807,8 @@ inline double tetra_fem_energy(const Index* tetra, Index n, const double* x, con
     const int stride = tetra_fem_data_size(method);
     double energy = 0.0;
     for (Index i = 0; i < n; ++i) {
-        const double* e = element_data + i * stride;
+        double e[TSMALL_REST + 9];
+        tetra_unpack(element_data, i, stride, 0, TSMALL_REST + 9, e);
         const Index* t = tetra + 4 * i;
         double D[12];
         double F[12];
@@ -691,7 +831,8 @@ inline double tetra_fem_energy(const Index* tetra, Index n, const double* x, con
 // -k * out. Products are evaluated in SOFA's order (generic Mat products over all 12/6 entries).
 inline void tetra_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
     using namespace fem_detail;
-    const double* d = element_data + e * tetra_fem_data_size(method);
+    double d[TROT + 9];
+    tetra_unpack(element_data, e, tetra_fem_data_size(method), 0, method == 0 ? TROT : TROT + 9, d);
     double J[12][6] = {};
     for (int n = 0; n < 4; ++n) {
         const double a = d[TJ + 3 * n], b = d[TJ + 3 * n + 1], g = d[TJ + 3 * n + 2];
