@@ -41,6 +41,9 @@
 
 namespace sofac {
 
+// Tetrahedra processed at once by the vectorised kernels (see tetra_fem_data_count).
+constexpr int TETRA_LANES = 4;
+
 namespace fem_detail {
 
 // Row-major 3x3 matrix and 3-vector with SOFA's evaluation order (no Eigen: Eigen is free to
@@ -63,6 +66,12 @@ inline V3 cross(const V3& a, const V3& b) {
 }
 inline double dot3(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline double norm(const V3& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
+inline void sqrt_lanes(double& v) { v = std::sqrt(v); }
+// TETRA_LANES doubles in one vector (GCC's vector extension, also in Clang): one lane per element.
+typedef double Lanes __attribute__((vector_size(8 * TETRA_LANES)));
+inline void sqrt_lanes(Lanes& v) {
+    for (int l = 0; l < TETRA_LANES; ++l) v[l] = std::sqrt(v[l]);
+}
 // SOFA's Vec::normalize: divides by the norm unless it is <= machine epsilon (then unchanged).
 inline void normalize(V3& a) {
     const double n = norm(a);
@@ -473,14 +482,41 @@ inline void tetra_dforce_element(const T* R, const T* j, const T* mat, const T& 
 
 // Gram-Schmidt frame of SOFA's computeRotationLarge: x along edge a->b, z normal to (a->b, a->c),
 // y = z x x. Rows of the result are the frame axes (a world -> local rotation).
+// On T (double or a vector of lanes): the frame's rows as 9 numbers, a, b, c 3 numbers each; the
+// operations of normalize, sub and cross in their order (a vector divides every lane and keeps
+// the quotient where the norm is above epsilon: the same numbers).
+template <class T>
+inline void normalize_lanes(T* a) {
+    const T squared = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+    T n = squared;
+    sqrt_lanes(n);
+    const auto above = n > DBL_EPSILON;
+    for (int i = 0; i < 3; ++i) a[i] = above ? a[i] / n : a[i];
+}
+template <class T>
+inline void cross_lanes(const T* a, const T* b, T* r) {
+    r[0] = a[1] * b[2] - a[2] * b[1];
+    r[1] = a[2] * b[0] - a[0] * b[2];
+    r[2] = a[0] * b[1] - a[1] * b[0];
+}
+template <class T>
+inline void tetra_frame_rows(const T* a, const T* b, const T* c, T* rows) {
+    T* ex = rows;
+    T* ey = rows + 3;
+    T* ez = rows + 6;
+    T ac[3];
+    for (int m = 0; m < 3; ++m) ex[m] = b[m] - a[m];
+    normalize_lanes(ex);
+    for (int m = 0; m < 3; ++m) ac[m] = c[m] - a[m];
+    cross_lanes(ex, ac, ez);
+    normalize_lanes(ez);
+    cross_lanes(ez, ex, ey);
+}
+
 inline M3 tetra_frame(const V3& a, const V3& b, const V3& c) {
-    V3 ex = sub(b, a);
-    normalize(ex);
-    V3 ey = sub(c, a);
-    V3 ez = cross(ex, ey);
-    normalize(ez);
-    ey = cross(ez, ex);
-    return from_rows(ex, ey, ez);
+    M3 r;
+    tetra_frame_rows(a.v, b.v, c.v, &r.a[0][0]);
+    return r;
 }
 
 inline M3 edge_rows(const V3& a, const V3& b, const V3& c, const V3& d) {
@@ -516,7 +552,6 @@ constexpr int tetra_fem_data_size(int method) {
 // is at data[(e / TETRA_LANES) * TETRA_LANES * size + f * TETRA_LANES + e % TETRA_LANES], so the
 // vectorised kernels load one number of TETRA_LANES elements with one load. The array holds whole
 // blocks (the lanes past the last element stay unused): tetra_fem_data_count doubles.
-constexpr int TETRA_LANES = 4;
 constexpr Index tetra_fem_data_count(int method, Index n) {
     return (n + TETRA_LANES - 1) / TETRA_LANES * TETRA_LANES * tetra_fem_data_size(method);
 }
@@ -670,17 +705,6 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
     }
 }
 
-// f += internal force at positions x; stores each element's current rotation (large/polar/svd).
-// With a split, the elements run on its threads (same numbers, see parallel.h).
-inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
-                                int method, const ElementSplit& split = {}) {
-    const auto element = [&](Index i, double* out) { tetra_fem_force_of(tetra, i, x, element_data, method, out); };
-    if (split.chunks > 1)
-        split_elements<4>(split, tetra, f, element);
-    else
-        serial_elements<4>(n, tetra, f, element);
-}
-
 // -kfactor * (df/dx) dx of element i (12 numbers to add), with SOFA's df/dx = -R (J K J^T) R^T, R
 // the rotation of the last add_force (the initial rotation before any add_force); small:
 // -J K J^T. The derivative of the rotation is neglected, as in SOFA (exact at zero strain, an
@@ -704,53 +728,111 @@ inline void tetra_fem_dforce_of(const Index* tetra, Index i, const double* dx, d
 
 namespace fem_detail {
 
-// TETRA_LANES doubles in one vector (GCC's vector extension, also in Clang): one lane per element.
-typedef double Lanes __attribute__((vector_size(8 * TETRA_LANES)));
-
-// Numbers [first, first + count) of a block's TETRA_LANES elements (the data need not be aligned).
+// Numbers [first, first + count) of a block's TETRA_LANES elements into out[first, first + count)
+// (the data need not be aligned).
 inline void load_lanes(const double* block, int first, int count, Lanes* out) {
-    _Pragma("GCC unroll 32") for (int f = 0; f < count; ++f)
-        std::memcpy(&out[f], block + (first + f) * TETRA_LANES, sizeof(Lanes));
+    _Pragma("GCC unroll 32") for (int f = first; f < first + count; ++f)
+        std::memcpy(&out[f], block + f * TETRA_LANES, sizeof(Lanes));
 }
 
-// add_dforce on whole blocks of TETRA_LANES elements, one element per lane: each lane does the
-// scalar operations of tetra_fem_dforce_of, in the same order (the same numbers), and the elements'
-// results are subtracted from df one element after the other, in element order, as the serial
-// loop adds them (a - b and a + (-b) round the same). A short last block repeats the last element
-// in its unused lanes and drops their results. Always inlined into the instruction-set variants
-// below, which compile it for their vector width.
+// The block kernels below run TETRA_LANES elements at once, one element per lane: each lane does
+// the scalar operations of the per-element kernel, in the same order (the same numbers), and the
+// elements' results go to the nodes one element after the other, in element order, as the serial
+// loop adds them. A short last block repeats the last element in its unused lanes and drops their
+// results. They are always inlined into the instruction-set variants below, which compile them for
+// their vector width.
+
+// node[k][l] = 3 * node k of element first + l; X[3k + m][l] = in[node[k][l] + m].
+__attribute__((always_inline)) inline void gather_nodes(const Index* tetra, Index n, Index first,
+                                                        const double* in, Index (&node)[4][TETRA_LANES],
+                                                        Lanes* X) {
+    for (int l = 0; l < TETRA_LANES; ++l) {
+        const Index* t = tetra + 4 * std::min<Index>(first + l, n - 1);
+        for (int k = 0; k < 4; ++k) node[k][l] = 3 * t[k];
+    }
+    for (int k = 0; k < 4; ++k)
+        for (int m = 0; m < 3; ++m)
+            for (int l = 0; l < TETRA_LANES; ++l) X[3 * k + m][l] = in[node[k][l] + m];
+}
+
+// out[node k of element first + l] += F[3k + m][l] (or -=), element after element.
+template <bool Subtract>
+__attribute__((always_inline)) inline void scatter_nodes(Index n, Index first,
+                                                         const Index (&node)[4][TETRA_LANES], const Lanes* F,
+                                                         double* out) {
+    const auto element = [&](int l) {
+        for (int k = 0; k < 4; ++k) {
+            double* o = out + node[k][l];
+            for (int m = 0; m < 3; ++m) {
+                if (Subtract)
+                    o[m] -= F[3 * k + m][l];
+                else
+                    o[m] += F[3 * k + m][l];
+            }
+        }
+    };
+    if (n - first >= TETRA_LANES) {
+        _Pragma("GCC unroll 16") for (int l = 0; l < TETRA_LANES; ++l) element(l);
+    } else {
+        for (int l = 0; l < n - first; ++l) element(l);
+    }
+}
+
+// add_dforce (tetra_fem_dforce_of): SOFA subtracts R F from df (a - b and a + (-b) round the same).
 template <bool Rotated>
 __attribute__((always_inline)) inline void tetra_dforce_blocks(const Index* tetra, Index n, const double* dx,
                                                                double* df, double kfactor, const double* data,
                                                                int stride) {
-    constexpr int L = TETRA_LANES;
     Lanes factor;
-    for (int l = 0; l < L; ++l) factor[l] = kfactor;
-    for (Index first = 0; first < n; first += L) {
+    for (int l = 0; l < TETRA_LANES; ++l) factor[l] = kfactor;
+    for (Index first = 0; first < n; first += TETRA_LANES) {
         Lanes f[TROT + 9];
         load_lanes(data + first * stride, 0, Rotated ? TROT + 9 : TROT, f);
-        Index node[4][L];  // 3 * the node index of corner k of lane l
-        for (int l = 0; l < L; ++l) {
-            const Index* t = tetra + 4 * std::min<Index>(first + l, n - 1);
-            for (int k = 0; k < 4; ++k) node[k][l] = 3 * t[k];
-        }
+        Index node[4][TETRA_LANES];
         Lanes X[12] = {};
-        for (int k = 0; k < 4; ++k)
-            for (int m = 0; m < 3; ++m)
-                for (int l = 0; l < L; ++l) X[3 * k + m][l] = dx[node[k][l] + m];
+        gather_nodes(tetra, n, first, dx, node, X);
         Lanes F[12];
         tetra_dforce_element<Lanes, Rotated>(f + TROT, f + TJ, f + TMAT, factor, X, F);
-        const auto scatter = [&](int l) {
-            for (int k = 0; k < 4; ++k) {
-                double* out = df + node[k][l];
-                for (int m = 0; m < 3; ++m) out[m] -= F[3 * k + m][l];
-            }
-        };
-        if (n - first >= L) {
-            _Pragma("GCC unroll 16") for (int l = 0; l < L; ++l) scatter(l);
-        } else {
-            for (int l = 0; l < n - first; ++l) scatter(l);
-        }
+        scatter_nodes<true>(n, first, node, F, df);
+    }
+}
+
+// add_force of the large method (tetra_fem_force_of, method 1); stores the rotations.
+__attribute__((always_inline)) inline void tetra_force_large_blocks(const Index* tetra, Index n, const double* x,
+                                                                    double* f, double* data) {
+    constexpr int stride = 30;
+    Lanes one;
+    for (int l = 0; l < TETRA_LANES; ++l) one[l] = 1.0;
+    for (Index first = 0; first < n; first += TETRA_LANES) {
+        double* block = data + first * stride;
+        Index node[4][TETRA_LANES];
+        Lanes p[12] = {};
+        gather_nodes(tetra, n, first, x, node, p);
+        Lanes r02[9];  // world -> local
+        tetra_frame_rows(p, p + 3, p + 6, r02);
+        Lanes rot[9];
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) rot[3 * i + j] = r02[3 * j + i];
+        for (int i = 0; i < 9; ++i) std::memcpy(block + (TROT + i) * TETRA_LANES, &rot[i], sizeof(Lanes));
+        Lanes q[12];
+        for (int k = 0; k < 4; ++k) rotate(r02, p + 3 * k, q + 3 * k);
+        // as tetra_fem_force_of: node 0 subtracted only where the local coordinates are not 0
+        q[3] -= q[0];
+        q[6] -= q[0];
+        q[7] -= q[1];
+        for (int m = 0; m < 3; ++m) q[9 + m] -= q[m];
+        Lanes e[TREST + 6];
+        load_lanes(block, 0, TROT, e);
+        load_lanes(block, TREST, 6, e);
+        const Lanes* r = e + TREST;
+        const Lanes zero = Lanes{};
+        Lanes D[12] = {zero, zero, zero, r[0] - q[3], zero, zero, r[1] - q[6], r[2] - q[7], zero,
+                       r[3] - q[9], r[4] - q[10], r[5] - q[11]};
+        Lanes F[12];
+        tetra_compute_force(F, D, e + TJ, e + TMAT, one, false);
+        Lanes out[12];
+        for (int k = 0; k < 4; ++k) rotate(rot, F + 3 * k, out + 3 * k);
+        scatter_nodes<false>(n, first, node, out, f);
     }
 }
 
@@ -775,9 +857,38 @@ __attribute__((target("avx2"))) inline void tetra_dforce_avx2(const Index* tetra
     else
         tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
 }
+__attribute__((target("avx2"))) inline void tetra_force_large_avx2(const Index* tetra, Index n, const double* x,
+                                                                  double* f, double* data) {
+    tetra_force_large_blocks(tetra, n, x, f, data);
+}
 #endif
 
+inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data) {
+    tetra_force_large_blocks(tetra, n, x, f, data);
+}
+
 }  // namespace fem_detail
+
+// f += internal force at positions x; stores each element's current rotation (large/polar/svd).
+// With a split, the elements run on its threads (same numbers, see parallel.h); else the large
+// method runs TETRA_LANES elements at once (the same numbers).
+inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
+                                int method, const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) { tetra_fem_force_of(tetra, i, x, element_data, method, out); };
+    if (split.chunks > 1) {
+        split_elements<4>(split, tetra, f, element);
+    } else if (method == 1) {
+#ifdef SOFAC_X86_VARIANTS
+        if (__builtin_cpu_supports("avx2")) {
+            fem_detail::tetra_force_large_avx2(tetra, n, x, f, element_data);
+            return;
+        }
+#endif
+        fem_detail::tetra_force_large_default(tetra, n, x, f, element_data);
+    } else {
+        serial_elements<4>(n, tetra, f, element);
+    }
+}
 
 // df += kfactor * (df/dx) dx (see tetra_fem_dforce_of).
 inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
