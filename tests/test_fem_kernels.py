@@ -45,8 +45,8 @@ API double tet_energy(const Index* t, Index n, const double* x, const double* da
 API void tet_matrix(const double* data, Index e, int method, double* out) {
     sofac::tetra_fem_element_matrix(data, e, method, out);
 }
-// The per-element kernels in the serial loop, the reference of the vectorised loops (which
-// tet_force / tet_dforce run), and the vectorised loops' baseline copy (no AVX2).
+// The per-element kernels in the serial loop, the reference of the vectorised loops; the
+// vectorised loops compiled for instruction-set level 0 (baseline), 1 (AVX2), 2 (AVX-512 F+VL).
 API void tet_force_scalar(const Index* t, Index n, const double* x, double* f, double* data, int method) {
     sofac::serial_elements<4>(n, t, f, [&](Index i, double* out) {
         sofac::tetra_fem_force_of(t, i, x, data, method, out);
@@ -58,12 +58,29 @@ API void tet_dforce_scalar(const Index* t, Index n, const double* dx, double* df
         sofac::tetra_fem_dforce_of(t, i, dx, k, data, method, out);
     });
 }
-API void tet_force_baseline(const Index* t, Index n, const double* x, double* f, double* data) {
-    sofac::fem_detail::tetra_force_large_default(t, n, x, f, data);
+API int vector_level() {
+#ifdef SOFAC_X86_VARIANTS
+    return sofac::fem_detail::vector_level();
+#else
+    return 0;
+#endif
 }
-API void tet_dforce_baseline(const Index* t, Index n, const double* dx, double* df, double k,
-                             const double* data, int method) {
-    sofac::fem_detail::tetra_dforce_default(t, n, dx, df, k, data, method);
+API void tet_force_level(int level, const Index* t, Index n, const double* x, double* f, double* data) {
+    using namespace sofac::fem_detail;
+#ifdef SOFAC_X86_VARIANTS
+    if (level == 2) return tetra_force_large_avx512(t, n, x, f, data);
+    if (level == 1) return tetra_force_large_avx2(t, n, x, f, data);
+#endif
+    if (level == 0) tetra_force_large_default(t, n, x, f, data);
+}
+API void tet_dforce_level(int level, const Index* t, Index n, const double* dx, double* df, double k,
+                          const double* data, int method) {
+    using namespace sofac::fem_detail;
+#ifdef SOFAC_X86_VARIANTS
+    if (level == 2) return tetra_dforce_avx512(t, n, dx, df, k, data, method);
+    if (level == 1) return tetra_dforce_avx2(t, n, dx, df, k, data, method);
+#endif
+    if (level == 0) tetra_dforce_default(t, n, dx, df, k, data, method);
 }
 API void corot_force(const Index* t, Index n, const double* x, double* f, double* data, int method) {
     sofac::tetracorot_fem_add_force(t, n, x, f, data, method);
@@ -175,7 +192,7 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.tet_energy.restype = ctypes.c_double
     library.tet_count.restype = ctypes.c_int64
     library.hex_energy.restype = ctypes.c_double
-    for name in ("tet_dforce", "hex_dforce", "tet_dforce_scalar", "tet_dforce_baseline"):
+    for name in ("tet_dforce", "hex_dforce", "tet_dforce_scalar"):
         getattr(library, name).argtypes = [I64, ctypes.c_int64, D, D, ctypes.c_double, D, ctypes.c_int]
     head = [ctypes.c_int, I64, ctypes.c_int64, D, D, ctypes.c_int64, D, I64, ctypes.c_int64, ctypes.c_int]
     tail = [ctypes.c_double] * 5 + [ctypes.c_int] + [ctypes.c_double] * 2
@@ -499,39 +516,48 @@ def bits(a: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("count", [45, 46, 47, 48])
 @pytest.mark.parametrize("method", TET_METHODS)
 def test_tetra_vectorised_loops_match_the_scalar_kernels(lib: ctypes.CDLL, method: int, count: int) -> None:
-    """The loops running TETRA_LANES (4) elements at once (AVX2 where the processor has it, and the
-    baseline copy) give the per-element scalar kernels' numbers to the last bit, signed zeros
-    included, with a short last block (count % 4 = 1, 2, 3) and the rotations they store."""
+    """The loops running TETRA_LANES (4) elements at once give the per-element scalar kernels'
+    numbers to the last bit, signed zeros included, with a short last block (count % 4 = 1, 2, 3),
+    and store the same rotations: the dispatched loop and each instruction-set copy this processor
+    can run (baseline, AVX2, AVX-512)."""
     tetra, rest = tet_mesh()
     tetra = np.ascontiguousarray(tetra[:count])
+    n = ctypes.c_int64(count)
     rng = np.random.default_rng(count)
     x = rest @ rotation([0.2, 1.0, -0.4], 0.6).T + 0.08 * rng.standard_normal(rest.shape)
     dx = rng.standard_normal(rest.shape)
     dx[3] = 0.0  # exact zeros keep their sign through the products
-    fields = [Field(lib, "tet", tetra, rest, method) for _ in range(3)]
-    forces = [np.zeros_like(x) for _ in range(3)]
-    lib.tet_force(_i(tetra), ctypes.c_int64(count), _d(x), _d(forces[0]), _d(fields[0].data), method)
-    lib.tet_force_scalar(_i(tetra), ctypes.c_int64(count), _d(x), _d(forces[1]), _d(fields[1].data), method)
-    if method == LARGE:
-        lib.tet_force_baseline(_i(tetra), ctypes.c_int64(count), _d(x), _d(forces[2]), _d(fields[2].data))
-    else:
-        forces[2], fields[2] = forces[1], fields[1]
-    assert np.abs(forces[1]).max() > 0
-    # the data of the elements (blocks of 4 elements, number-major): the unused lanes may differ
-    slot = np.arange(fields[1].data.size)
-    used = slot // (fields[1].data.size // ((count + 3) // 4)) * 4 + slot % 4 < count
-    for force, field in zip(forces[::2], fields[::2], strict=True):
-        assert np.array_equal(bits(force), bits(forces[1]))
-        assert np.array_equal(bits(field.data)[used], bits(fields[1].data)[used])
     kfactor = -0.37
-    dforces = [np.zeros_like(x) for _ in range(3)]
-    for out, fn in zip(
-        dforces, (lib.tet_dforce, lib.tet_dforce_scalar, lib.tet_dforce_baseline), strict=True
-    ):
-        fn(_i(tetra), count, _d(dx), _d(out), kfactor, _d(fields[1].data), method)
-    assert np.abs(dforces[1]).max() > 0
-    assert np.array_equal(bits(dforces[0]), bits(dforces[1]))
-    assert np.array_equal(bits(dforces[2]), bits(dforces[1]))
+    reference = Field(lib, "tet", tetra, rest, method)
+    force = np.zeros_like(x)
+    lib.tet_force_scalar(_i(tetra), n, _d(x), _d(force), _d(reference.data), method)
+    dforce = np.zeros_like(x)
+    lib.tet_dforce_scalar(_i(tetra), count, _d(dx), _d(dforce), kfactor, _d(reference.data), method)
+    assert np.abs(force).max() > 0 and np.abs(dforce).max() > 0
+    # the elements' data, in blocks of 4 elements (number-major): the unused lanes may differ
+    slot = np.arange(reference.data.size)
+    used = slot // (reference.data.size // ((count + 3) // 4)) * 4 + slot % 4 < count
+    levels = [None, *range(lib.vector_level() + 1)]  # None: the dispatched loop
+    for level in levels:
+        field = Field(lib, "tet", tetra, rest, method)
+        f = np.zeros_like(x)
+        if level is None:
+            lib.tet_force(_i(tetra), n, _d(x), _d(f), _d(field.data), method)
+        elif method == LARGE:  # the only vectorised add_force
+            lib.tet_force_level(level, _i(tetra), n, _d(x), _d(f), _d(field.data))
+        else:
+            continue
+        assert np.array_equal(bits(f), bits(force)), level
+        assert np.array_equal(bits(field.data)[used], bits(reference.data)[used]), level
+    for level in levels:
+        df = np.zeros_like(x)
+        if level is None:
+            lib.tet_dforce(_i(tetra), n, _d(dx), _d(df), ctypes.c_double(kfactor), _d(reference.data), method)
+        else:
+            lib.tet_dforce_level(
+                level, _i(tetra), n, _d(dx), _d(df), ctypes.c_double(kfactor), _d(reference.data), method
+            )
+        assert np.array_equal(bits(df), bits(dforce)), level
 
 
 @pytest.mark.parametrize("method", [LARGE, POLAR, SVD])

@@ -760,15 +760,22 @@ template <bool Subtract>
 __attribute__((always_inline)) inline void scatter_nodes(Index n, Index first,
                                                          const Index (&node)[4][TETRA_LANES], const Lanes* F,
                                                          double* out) {
+    typedef double Pair __attribute__((vector_size(16)));
     const auto element = [&](int l) {
         for (int k = 0; k < 4; ++k) {
             double* o = out + node[k][l];
-            for (int m = 0; m < 3; ++m) {
-                if (Subtract)
-                    o[m] -= F[3 * k + m][l];
-                else
-                    o[m] += F[3 * k + m][l];
+            // x and y in one operation, then z: the same sums, fewer instructions
+            const Pair xy = {F[3 * k][l], F[3 * k + 1][l]};
+            Pair sum;
+            std::memcpy(&sum, o, sizeof(Pair));
+            if (Subtract) {
+                sum -= xy;
+                o[2] -= F[3 * k + 2][l];
+            } else {
+                sum += xy;
+                o[2] += F[3 * k + 2][l];
             }
+            std::memcpy(o, &sum, sizeof(Pair));
         }
     };
     if (n - first >= TETRA_LANES) {
@@ -836,36 +843,56 @@ __attribute__((always_inline)) inline void tetra_force_large_blocks(const Index*
     }
 }
 
-inline void tetra_dforce_default(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
-                                 const double* data, int method) {
+__attribute__((always_inline)) inline void tetra_dforce_method(const Index* tetra, Index n, const double* dx,
+                                                               double* df, double kfactor, const double* data,
+                                                               int method) {
     if (method == 0)
         tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
     else
         tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
 }
 
+// The block kernels compiled for baseline x86-64 (the library's own target) and, chosen at run time
+// by what the processor has, for AVX2 and for AVX-512 F+VL (the same 4-wide vectors, with 32
+// registers instead of 16: fewer spills, about 10% faster). No fused multiply-add: the targets do
+// not change the operations (and scenes are built with -ffp-contract=off), so every lane rounds as
+// the scalar code.
+inline void tetra_dforce_default(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                 const double* data, int method) {
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
+}
+inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data) {
+    tetra_force_large_blocks(tetra, n, x, f, data);
+}
+
 #if defined(__GNUC__) && defined(__x86_64__)
 #define SOFAC_X86_VARIANTS 1
-// The same kernel compiled for AVX2, chosen at run time when the processor has it (the library is
-// built for baseline x86-64). No FMA: the target adds no fused multiply-add (and scenes are built
-// with -ffp-contract=off), so every lane rounds as the scalar code.
 __attribute__((target("avx2"))) inline void tetra_dforce_avx2(const Index* tetra, Index n, const double* dx,
                                                               double* df, double kfactor, const double* data,
                                                               int method) {
-    if (method == 0)
-        tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
-    else
-        tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
 }
 __attribute__((target("avx2"))) inline void tetra_force_large_avx2(const Index* tetra, Index n, const double* x,
                                                                   double* f, double* data) {
     tetra_force_large_blocks(tetra, n, x, f, data);
 }
-#endif
-
-inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data) {
+__attribute__((target("avx512f,avx512vl"))) inline void tetra_dforce_avx512(const Index* tetra, Index n,
+                                                                            const double* dx, double* df,
+                                                                            double kfactor, const double* data,
+                                                                            int method) {
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
+}
+__attribute__((target("avx512f,avx512vl"))) inline void tetra_force_large_avx512(const Index* tetra, Index n,
+                                                                                 const double* x, double* f,
+                                                                                 double* data) {
     tetra_force_large_blocks(tetra, n, x, f, data);
 }
+// 2: AVX-512 F+VL, 1: AVX2, 0: neither.
+inline int vector_level() {
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) return 2;
+    return __builtin_cpu_supports("avx2") ? 1 : 0;
+}
+#endif
 
 }  // namespace fem_detail
 
@@ -879,10 +906,9 @@ inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, do
         split_elements<4>(split, tetra, f, element);
     } else if (method == 1) {
 #ifdef SOFAC_X86_VARIANTS
-        if (__builtin_cpu_supports("avx2")) {
-            fem_detail::tetra_force_large_avx2(tetra, n, x, f, element_data);
-            return;
-        }
+        const int level = fem_detail::vector_level();
+        if (level == 2) return fem_detail::tetra_force_large_avx512(tetra, n, x, f, element_data);
+        if (level == 1) return fem_detail::tetra_force_large_avx2(tetra, n, x, f, element_data);
 #endif
         fem_detail::tetra_force_large_default(tetra, n, x, f, element_data);
     } else {
@@ -901,10 +927,9 @@ inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, 
         return;
     }
 #ifdef SOFAC_X86_VARIANTS
-    if (__builtin_cpu_supports("avx2")) {
-        fem_detail::tetra_dforce_avx2(tetra, n, dx, df, kfactor, element_data, method);
-        return;
-    }
+    const int level = fem_detail::vector_level();
+    if (level == 2) return fem_detail::tetra_dforce_avx512(tetra, n, dx, df, kfactor, element_data, method);
+    if (level == 1) return fem_detail::tetra_dforce_avx2(tetra, n, dx, df, kfactor, element_data, method);
 #endif
     fem_detail::tetra_dforce_default(tetra, n, dx, df, kfactor, element_data, method);
 }
