@@ -1209,6 +1209,11 @@ _FEM_KINDS = {
 }
 
 
+# runtime fem.h TETRA_LANES: tetrahedron element data is stored in blocks of this many elements (a
+# structure of arrays per block, for the vectorised kernels), so its buffer holds whole blocks.
+TETRA_LANES = 4
+
+
 # Element loops are split over threads only when each thread gets this many elements: below it,
 # starting the threads costs more than they save.
 MIN_ELEMENTS_PER_THREAD = 1024
@@ -1280,7 +1285,8 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     poisson_buffer = planner.buffer(
         component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
     )
-    data = planner.buffer(component, "elements", np.zeros(count * sizes[method]), role="scratch")
+    padded = -(-count // TETRA_LANES) * TETRA_LANES if kind == "tetrahedra" else count
+    data = planner.buffer(component, "elements", np.zeros(padded * sizes[method]), role="scratch")
     origin = origin_of(component)
     group.init.append(
         Op(
