@@ -1225,7 +1225,10 @@ def element_split(cells: np.ndarray, chunks: int) -> tuple[np.ndarray, np.ndarra
     directly) and each slot's node. A node belongs to the first chunk touching it; later chunks
     defer their contributions to it, numbered in serial (element, corner) order."""
     count, corners = cells.shape
-    bounds = np.linspace(0, count, chunks + 1).round().astype(np.int64)
+    # chunks start at whole blocks of TETRA_LANES elements (the vectorised kernels' unit)
+    bounds = np.minimum((np.linspace(0, count, chunks + 1) / TETRA_LANES).round() * TETRA_LANES, count)
+    bounds = bounds.astype(np.int64)
+    bounds[-1] = count
     chunk = np.repeat(np.arange(chunks), np.diff(bounds))
     owner = np.full(int(cells.max()) + 1, chunks, dtype=np.int64)
     np.minimum.at(owner, cells, np.broadcast_to(chunk[:, None], cells.shape))

@@ -68,19 +68,19 @@ API int vector_level() {
 API void tet_force_level(int level, const Index* t, Index n, const double* x, double* f, double* data) {
     using namespace sofac::fem_detail;
 #ifdef SOFAC_X86_VARIANTS
-    if (level == 2) return tetra_force_large_avx512(t, n, x, f, data);
-    if (level == 1) return tetra_force_large_avx2(t, n, x, f, data);
+    if (level == 2) return tetra_force_large_avx512(t, n, x, f, data, nullptr, nullptr);
+    if (level == 1) return tetra_force_large_avx2(t, n, x, f, data, nullptr, nullptr);
 #endif
-    if (level == 0) tetra_force_large_default(t, n, x, f, data);
+    if (level == 0) tetra_force_large_default(t, n, x, f, data, nullptr, nullptr);
 }
 API void tet_dforce_level(int level, const Index* t, Index n, const double* dx, double* df, double k,
                           const double* data, int method) {
     using namespace sofac::fem_detail;
 #ifdef SOFAC_X86_VARIANTS
-    if (level == 2) return tetra_dforce_avx512(t, n, dx, df, k, data, method);
-    if (level == 1) return tetra_dforce_avx2(t, n, dx, df, k, data, method);
+    if (level == 2) return tetra_dforce_avx512(t, n, dx, df, k, data, method, nullptr, nullptr);
+    if (level == 1) return tetra_dforce_avx2(t, n, dx, df, k, data, method, nullptr, nullptr);
 #endif
-    if (level == 0) tetra_dforce_default(t, n, dx, df, k, data, method);
+    if (level == 0) tetra_dforce_default(t, n, dx, df, k, data, method, nullptr, nullptr);
 }
 API void corot_force(const Index* t, Index n, const double* x, double* f, double* data, int method) {
     sofac::tetracorot_fem_add_force(t, n, x, f, data, method);

@@ -106,17 +106,20 @@ def test_small_loops_stay_serial(tmp_path: Path) -> None:
 
 
 def test_element_split_keeps_the_serial_order() -> None:
-    # A strip of 6 three-node elements over 3 chunks; a node belongs to the first chunk touching it.
-    cells = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5], [4, 5, 6], [5, 6, 7]])
+    # A strip of 12 three-node elements over 3 chunks of whole 4-element blocks; a node belongs to
+    # the first chunk touching it.
+    cells = np.array([[i, i + 1, i + 2] for i in range(12)])
     bounds, slot_of, slot_node = element_split(cells, 3)
-    np.testing.assert_array_equal(bounds, [0, 2, 4, 6])
-    # chunk 1 (elements 2, 3) shares nodes 2 and 3 with chunk 0; chunk 2 (4, 5) shares 4 and 5 with chunk 1
+    np.testing.assert_array_equal(bounds, [0, 4, 8, 12])
+    # chunk 1 (elements 4-7) shares nodes 4 and 5 with chunk 0; chunk 2 (8-11) shares 8 and 9 with chunk 1
     deferred = slot_of.reshape(cells.shape) >= 0
-    np.testing.assert_array_equal(
-        deferred, [[0, 0, 0], [0, 0, 0], [1, 1, 0], [1, 0, 0], [1, 1, 0], [1, 0, 0]]
-    )
+    expected = np.zeros(cells.shape, dtype=bool)
+    expected[[4, 4, 5, 8, 8, 9], [0, 1, 0, 0, 1, 0]] = True
+    np.testing.assert_array_equal(deferred, expected)
     np.testing.assert_array_equal(slot_of[slot_of >= 0], np.arange(6))
-    np.testing.assert_array_equal(slot_node, [2, 3, 3, 4, 5, 5])
+    np.testing.assert_array_equal(slot_node, [4, 5, 5, 8, 9, 9])
+    # Chunks start at whole blocks of 4 elements, the last one ends at the last element.
+    np.testing.assert_array_equal(element_split(cells[:10], 2)[0], [0, 4, 10])
     # Replaying the split serially (chunks in order, deferred slots last) adds every contribution
     # of a node in element order, as the serial loop does.
     order: dict[int, list[int]] = {}

@@ -755,14 +755,21 @@ __attribute__((always_inline)) inline void gather_nodes(const Index* tetra, Inde
             for (int l = 0; l < TETRA_LANES; ++l) X[3 * k + m][l] = in[node[k][l] + m];
 }
 
-// out[node k of element first + l] += F[3k + m][l] (or -=), element after element.
+// out[node k of element first + l] += F[3k + m][l] (or -=), element after element. Under a thread
+// split (slots non-null: per element corner, -1 or its deferred slot), a deferred corner's
+// contribution goes to its slot instead, signed, for parallel.h's for_chunks to add in order.
 template <bool Subtract>
 __attribute__((always_inline)) inline void scatter_nodes(Index n, Index first,
                                                          const Index (&node)[4][TETRA_LANES], const Lanes* F,
-                                                         double* out) {
+                                                         double* out, const Index* slots, double* deferred) {
     typedef double Pair __attribute__((vector_size(16)));
     const auto element = [&](int l) {
         for (int k = 0; k < 4; ++k) {
+            if (slots && slots[4 * (first + l) + k] >= 0) {
+                double* d = deferred + 3 * slots[4 * (first + l) + k];
+                for (int m = 0; m < 3; ++m) d[m] = Subtract ? -F[3 * k + m][l] : F[3 * k + m][l];
+                continue;
+            }
             double* o = out + node[k][l];
             // x and y in one operation, then z: the same sums, fewer instructions
             const Pair xy = {F[3 * k][l], F[3 * k + 1][l]};
@@ -789,7 +796,7 @@ __attribute__((always_inline)) inline void scatter_nodes(Index n, Index first,
 template <bool Rotated>
 __attribute__((always_inline)) inline void tetra_dforce_blocks(const Index* tetra, Index n, const double* dx,
                                                                double* df, double kfactor, const double* data,
-                                                               int stride) {
+                                                               int stride, const Index* slots, double* deferred) {
     Lanes factor;
     for (int l = 0; l < TETRA_LANES; ++l) factor[l] = kfactor;
     for (Index first = 0; first < n; first += TETRA_LANES) {
@@ -800,13 +807,14 @@ __attribute__((always_inline)) inline void tetra_dforce_blocks(const Index* tetr
         gather_nodes(tetra, n, first, dx, node, X);
         Lanes F[12];
         tetra_dforce_element<Lanes, Rotated>(f + TROT, f + TJ, f + TMAT, factor, X, F);
-        scatter_nodes<true>(n, first, node, F, df);
+        scatter_nodes<true>(n, first, node, F, df, slots, deferred);
     }
 }
 
 // add_force of the large method (tetra_fem_force_of, method 1); stores the rotations.
 __attribute__((always_inline)) inline void tetra_force_large_blocks(const Index* tetra, Index n, const double* x,
-                                                                    double* f, double* data) {
+                                                                    double* f, double* data, const Index* slots,
+                                                                    double* deferred) {
     constexpr int stride = 30;
     Lanes one;
     for (int l = 0; l < TETRA_LANES; ++l) one[l] = 1.0;
@@ -839,17 +847,17 @@ __attribute__((always_inline)) inline void tetra_force_large_blocks(const Index*
         tetra_compute_force(F, D, e + TJ, e + TMAT, one, false);
         Lanes out[12];
         for (int k = 0; k < 4; ++k) rotate(rot, F + 3 * k, out + 3 * k);
-        scatter_nodes<false>(n, first, node, out, f);
+        scatter_nodes<false>(n, first, node, out, f, slots, deferred);
     }
 }
 
 __attribute__((always_inline)) inline void tetra_dforce_method(const Index* tetra, Index n, const double* dx,
                                                                double* df, double kfactor, const double* data,
-                                                               int method) {
+                                                               int method, const Index* slots, double* deferred) {
     if (method == 0)
-        tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+        tetra_dforce_blocks<false>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method), slots, deferred);
     else
-        tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method));
+        tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method), slots, deferred);
 }
 
 // The block kernels compiled for baseline x86-64 (the library's own target) and, chosen at run time
@@ -858,34 +866,34 @@ __attribute__((always_inline)) inline void tetra_dforce_method(const Index* tetr
 // not change the operations (and scenes are built with -ffp-contract=off), so every lane rounds as
 // the scalar code.
 inline void tetra_dforce_default(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
-                                 const double* data, int method) {
-    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
+                                 const double* data, int method, const Index* slots, double* deferred) {
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method, slots, deferred);
 }
-inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data) {
-    tetra_force_large_blocks(tetra, n, x, f, data);
+inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data,
+                                      const Index* slots, double* deferred) {
+    tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
 }
 
 #if defined(__GNUC__) && defined(__x86_64__)
 #define SOFAC_X86_VARIANTS 1
 __attribute__((target("avx2"))) inline void tetra_dforce_avx2(const Index* tetra, Index n, const double* dx,
                                                               double* df, double kfactor, const double* data,
-                                                              int method) {
-    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
+                                                              int method, const Index* slots, double* deferred) {
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method, slots, deferred);
 }
 __attribute__((target("avx2"))) inline void tetra_force_large_avx2(const Index* tetra, Index n, const double* x,
-                                                                  double* f, double* data) {
-    tetra_force_large_blocks(tetra, n, x, f, data);
+                                                                  double* f, double* data, const Index* slots,
+                                                                  double* deferred) {
+    tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
 }
-__attribute__((target("avx512f,avx512vl"))) inline void tetra_dforce_avx512(const Index* tetra, Index n,
-                                                                            const double* dx, double* df,
-                                                                            double kfactor, const double* data,
-                                                                            int method) {
-    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method);
+__attribute__((target("avx512f,avx512vl"))) inline void tetra_dforce_avx512(
+    const Index* tetra, Index n, const double* dx, double* df, double kfactor, const double* data, int method,
+    const Index* slots, double* deferred) {
+    tetra_dforce_method(tetra, n, dx, df, kfactor, data, method, slots, deferred);
 }
-__attribute__((target("avx512f,avx512vl"))) inline void tetra_force_large_avx512(const Index* tetra, Index n,
-                                                                                 const double* x, double* f,
-                                                                                 double* data) {
-    tetra_force_large_blocks(tetra, n, x, f, data);
+__attribute__((target("avx512f,avx512vl"))) inline void tetra_force_large_avx512(
+    const Index* tetra, Index n, const double* x, double* f, double* data, const Index* slots, double* deferred) {
+    tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
 }
 // 2: AVX-512 F+VL, 1: AVX2, 0: neither.
 inline int vector_level() {
@@ -894,44 +902,65 @@ inline int vector_level() {
 }
 #endif
 
+// The variant for this processor. `slots`/`deferred`: a thread split's (see scatter_nodes), or null.
+inline void tetra_dforce_dispatch(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                  const double* data, int method, const Index* slots, double* deferred) {
+#ifdef SOFAC_X86_VARIANTS
+    const int level = vector_level();
+    if (level == 2) return tetra_dforce_avx512(tetra, n, dx, df, kfactor, data, method, slots, deferred);
+    if (level == 1) return tetra_dforce_avx2(tetra, n, dx, df, kfactor, data, method, slots, deferred);
+#endif
+    tetra_dforce_default(tetra, n, dx, df, kfactor, data, method, slots, deferred);
+}
+inline void tetra_force_large_dispatch(const Index* tetra, Index n, const double* x, double* f, double* data,
+                                       const Index* slots, double* deferred) {
+#ifdef SOFAC_X86_VARIANTS
+    const int level = vector_level();
+    if (level == 2) return tetra_force_large_avx512(tetra, n, x, f, data, slots, deferred);
+    if (level == 1) return tetra_force_large_avx2(tetra, n, x, f, data, slots, deferred);
+#endif
+    tetra_force_large_default(tetra, n, x, f, data, slots, deferred);
+}
+
 }  // namespace fem_detail
 
 // f += internal force at positions x; stores each element's current rotation (large/polar/svd).
-// With a split, the elements run on its threads (same numbers, see parallel.h); else the large
-// method runs TETRA_LANES elements at once (the same numbers).
+// The large method runs TETRA_LANES elements at once (the same numbers). With a split, the
+// elements run on its threads (same numbers, see parallel.h; its chunks start at whole blocks).
 inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, double* f, double* element_data,
                                 int method, const ElementSplit& split = {}) {
-    const auto element = [&](Index i, double* out) { tetra_fem_force_of(tetra, i, x, element_data, method, out); };
-    if (split.chunks > 1) {
-        split_elements<4>(split, tetra, f, element);
+    const int stride = tetra_fem_data_size(method);
+    if (method == 1 && split.chunks > 1) {
+        for_chunks(split, f, [&](Index begin, Index end) {
+            fem_detail::tetra_force_large_dispatch(tetra + 4 * begin, end - begin, x, f, element_data + begin * stride,
+                                                   split.slot_of + 4 * begin, split.deferred);
+        });
     } else if (method == 1) {
-#ifdef SOFAC_X86_VARIANTS
-        const int level = fem_detail::vector_level();
-        if (level == 2) return fem_detail::tetra_force_large_avx512(tetra, n, x, f, element_data);
-        if (level == 1) return fem_detail::tetra_force_large_avx2(tetra, n, x, f, element_data);
-#endif
-        fem_detail::tetra_force_large_default(tetra, n, x, f, element_data);
+        fem_detail::tetra_force_large_dispatch(tetra, n, x, f, element_data, nullptr, nullptr);
     } else {
-        serial_elements<4>(n, tetra, f, element);
+        const auto element = [&](Index i, double* out) {
+            tetra_fem_force_of(tetra, i, x, element_data, method, out);
+        };
+        if (split.chunks > 1)
+            split_elements<4>(split, tetra, f, element);
+        else
+            serial_elements<4>(n, tetra, f, element);
     }
 }
 
-// df += kfactor * (df/dx) dx (see tetra_fem_dforce_of).
+// df += kfactor * (df/dx) dx (see tetra_fem_dforce_of), TETRA_LANES elements at once.
 inline void tetra_fem_add_dforce(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
                                  const double* element_data, int method, const ElementSplit& split = {}) {
-    const auto element = [&](Index i, double* out) {
-        tetra_fem_dforce_of(tetra, i, dx, kfactor, element_data, method, out);
-    };
+    const int stride = tetra_fem_data_size(method);
     if (split.chunks > 1) {
-        split_elements<4>(split, tetra, df, element);
+        for_chunks(split, df, [&](Index begin, Index end) {
+            fem_detail::tetra_dforce_dispatch(tetra + 4 * begin, end - begin, dx, df, kfactor,
+                                              element_data + begin * stride, method, split.slot_of + 4 * begin,
+                                              split.deferred);
+        });
         return;
     }
-#ifdef SOFAC_X86_VARIANTS
-    const int level = fem_detail::vector_level();
-    if (level == 2) return fem_detail::tetra_dforce_avx512(tetra, n, dx, df, kfactor, element_data, method);
-    if (level == 1) return fem_detail::tetra_dforce_avx2(tetra, n, dx, df, kfactor, element_data, method);
-#endif
-    fem_detail::tetra_dforce_default(tetra, n, dx, df, kfactor, element_data, method);
+    fem_detail::tetra_dforce_dispatch(tetra, n, dx, df, kfactor, element_data, method, nullptr, nullptr);
 }
 
 // SOFA's getPotentialEnergy: 1/2 sum_e D_e . (J K J^T D_e) for the small method; SOFA returns 0 for

@@ -3,7 +3,8 @@
 // A serial element loop adds each element's contributions to its nodes in element order, so a
 // node's sum is rounded in that order. Threads writing to shared nodes in any other order would
 // change the last bits, so the split keeps the order:
-// - the elements are cut into `chunks` consecutive ranges, one per thread;
+// - the elements are cut into `chunks` consecutive ranges, one per thread (whole blocks of 4 for
+//   the kernels that run 4 elements at once);
 // - a node belongs to the first chunk that touches it; that chunk adds to it directly (no other
 //   chunk before it touches the node, so its additions come first, as in the serial loop);
 // - a later chunk writes its contributions to such a node into its own slots instead (`deferred`),
@@ -32,17 +33,27 @@ struct ElementSplit {
     double* deferred = nullptr;        // 3 numbers per slot, written by the chunks, added at the end
 };
 
-// out[node] += contribution for every element corner, element(e, F) giving the element's
-// 3 * Corners contributions (already signed: a kernel that subtracts passes -value, the same IEEE
-// result). The element function must only write per-element data of its own element.
-template <int Corners, class Element>
-inline void split_elements(const ElementSplit& split, const Index* cells, double* out, Element element) {
+// Runs chunk(begin, end) for each chunk's element range on the split's threads, then adds the
+// deferred slots in serial order. A chunk writes a deferred corner's contribution, already signed
+// (a kernel that subtracts stores -value: a - b and a + (-b) round the same), to its slot.
+template <class Chunk>
+inline void for_chunks(const ElementSplit& split, double* out, Chunk chunk) {
 #ifdef _OPENMP
 #pragma omp parallel for schedule(static, 1) num_threads(split.chunks)
 #endif
-    for (int c = 0; c < split.chunks; ++c) {
+    for (int c = 0; c < split.chunks; ++c) chunk(split.bounds[c], split.bounds[c + 1]);
+    for (Index s = 0; s < split.slots; ++s)
+        for (int m = 0; m < 3; ++m) out[3 * split.slot_node[s] + m] += split.deferred[3 * s + m];
+}
+
+// out[node] += contribution for every element corner, element(e, F) giving the element's
+// 3 * Corners contributions (already signed). The element function must only write per-element
+// data of its own element.
+template <int Corners, class Element>
+inline void split_elements(const ElementSplit& split, const Index* cells, double* out, Element element) {
+    for_chunks(split, out, [&](Index begin, Index end) {
         double F[3 * Corners];
-        for (Index e = split.bounds[c]; e < split.bounds[c + 1]; ++e) {
+        for (Index e = begin; e < end; ++e) {
             element(e, F);
             for (int k = 0; k < Corners; ++k) {
                 const Index slot = split.slot_of[Corners * e + k];
@@ -54,9 +65,7 @@ inline void split_elements(const ElementSplit& split, const Index* cells, double
                 }
             }
         }
-    }
-    for (Index s = 0; s < split.slots; ++s)
-        for (int m = 0; m < 3; ++m) out[3 * split.slot_node[s] + m] += split.deferred[3 * s + m];
+    });
 }
 
 // The serial loop over the same element function (no split: the default build).
