@@ -107,6 +107,7 @@ class _GroupView:
         self.all_states = [_StateView(s) for s in (*group.states, *group.mapped)]
         self.mappings = [_MappingView(m) for m in group.mappings]
         self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
+        self.on_read = [_MappingView(m) for m in group.on_read]
         self.forces = group.forces
         self.accelerations = group.accelerations
         self.projections = [_ProjectionView(p) for p in group.projections]
@@ -155,6 +156,7 @@ def render(plan: Plan) -> str:
             buffers=buffers,
             groups=[_GroupView(g) for g in plan.groups],
             any_direct=any(g.direct or g.preconditioner for g in plan.groups),
+            on_read=any(g.on_read for g in plan.groups),
             dt=plan.dt,
             threads=plan.threads,
             parallel_groups=parallel_groups,

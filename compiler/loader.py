@@ -11,7 +11,7 @@ import contextlib
 import importlib.util
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -144,15 +144,38 @@ class StateInfo:
 
 
 class State:
-    """One MechanicalObject of a running simulation; arrays are views of the native state."""
+    """One MechanicalObject of a running simulation; arrays are views of the native state.
+
+    A mapped state that nothing in the step reads (``Group.unread`` in the plan) is left out of the
+    compiled step: reading its ``position`` or ``velocity`` first maps it from its parents (at most
+    once per step() or reset()), with the numbers the step would have computed. An array kept from
+    an earlier read is brought up to date only by the next read of either attribute."""
 
     def __init__(
-        self, info: StateInfo, position: np.ndarray, velocity: np.ndarray, force: np.ndarray
+        self,
+        info: StateInfo,
+        position: np.ndarray,
+        velocity: np.ndarray,
+        force: np.ndarray,
+        update: Callable[[], None] | None = None,
     ) -> None:
         self.info = info
-        self.position = position
-        self.velocity = velocity
+        self._position = position
+        self._velocity = velocity
         self.force = force
+        self._update = update  # maps the states the step leaves out, when they are stale
+
+    @property
+    def position(self) -> np.ndarray:
+        if self._update is not None:
+            self._update()
+        return self._position
+
+    @property
+    def velocity(self) -> np.ndarray:
+        if self._update is not None:
+            self._update()
+        return self._velocity
 
     def __repr__(self) -> str:
         return f"<State {self.info.path} {self.info.template} x{self.info.size}>"
@@ -213,8 +236,9 @@ class Simulation:
         self._views = [self._native.buffer(i, b.kind == "i64") for i, b in enumerate(self.plan.buffers)]
         self._native.init()
         self._states: dict[str, State] = {}
+        unread = {id(s) for g in self.plan.groups for s in g.unread}
+        index = {id(b): i for i, b in enumerate(self.plan.buffers)}
         for state in self.plan.states:
-            index = {id(b): i for i, b in enumerate(self.plan.buffers)}
             datatype = state.datatype
             name = sofa_name(state.component)
             info = StateInfo(state.path, name, state.mapped, datatype.name, state.size, state.simulated)
@@ -223,6 +247,7 @@ class Simulation:
                 self._views[index[id(state.x)]].reshape(-1, datatype.coord_size),
                 self._views[index[id(state.v)]].reshape(-1, datatype.deriv_size),
                 self._views[index[id(state.f)]].reshape(-1, datatype.deriv_size),
+                self._native.update_mapped if id(state) in unread else None,
             )
         self._solver_of = {s.path: g for g in self.plan.groups for s in g.states}
         self._independent = [s for s in self._states.values() if not s.info.mapped]

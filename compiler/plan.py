@@ -139,6 +139,11 @@ class Group:
     states: list[StatePlan] = field(default_factory=list)  # independent
     mapped: list[StatePlan] = field(default_factory=list)  # parent → child order
     mappings: list[MappingOp] = field(default_factory=list)  # parent → child order
+    # Mapped states nothing in the step reads (no mass, force field, constraint or read mapping
+    # child acts on them), and their mappings: left out of the step, run only when Python reads
+    # such a state (sofac_update_mapped). Parent → child order.
+    unread: list[StatePlan] = field(default_factory=list)
+    on_read: list[MappingOp] = field(default_factory=list)
     forces: list[Op] = field(default_factory=list)  # force fields and gravity
     accelerations: list[Op] = field(default_factory=list)  # a = M⁻¹ f (explicit schemes)
     projections: list[Projection] = field(default_factory=list)
@@ -244,6 +249,7 @@ class _Planner:
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
+        self.buffer_count = 0  # buffers ever made: identifiers stay unique when one is dropped
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
 
@@ -264,9 +270,10 @@ class _Planner:
             np.asarray(data, dtype=np.float64 if kind == "f64" else np.int64).ravel()
         )
         key = f"{owner if isinstance(owner, str) else owner.path}.{name}"
-        ident = f"b{len(self.buffers)}_{re.sub(r'[^A-Za-z0-9]', '_', name)[:24]}"
+        ident = f"b{self.buffer_count}_{re.sub(r'[^A-Za-z0-9]', '_', name)[:24]}"
         buffer = Buffer(ident, key, kind, array, columns, role)
         self.buffers.append(buffer)
+        self.buffer_count += 1
         return buffer
 
     def add_gravity(self, group: Group, op: Op) -> None:
@@ -357,6 +364,21 @@ class _Planner:
                 ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
             )
         kept_out = {id(component) for component, _ in self.ignored}
+        on_read: list[tuple[str, str, str]] = []
+        for group in groups:
+            for state in group.unread:
+                mapping = self.checked.mapping_of(state.component)
+                assert mapping is not None
+                kept_out.add(id(mapping.component))
+                on_read.append(
+                    (
+                        "computed on read",
+                        origin_of(mapping.component),
+                        f"nothing in the step reads {state.path} (no mass, force field, constraint or "
+                        "mapping to one acts on it): mapped only when read (state views, WriteState, "
+                        "regress), not in the step",
+                    )
+                )
         for component in self.lowered:
             if id(component) in kept_out:
                 continue
@@ -368,6 +390,7 @@ class _Planner:
                 effects.append((effect, origin_of(component), spec.category.value))
         for key, why in self.pruned.items():
             effects.append(("pruned", key, why))
+        effects.extend(on_read)
         for component, why in self.ignored:
             effects.append(("kept out", origin_of(component), why))
         return effects
@@ -546,7 +569,58 @@ class _Planner:
         for group in groups.values():
             if group.variational:
                 self._screen_variational(group, owner)
+        if self.prune:
+            self._leave_unread_out(list(groups.values()))
         return list(groups.values())
+
+    def _leave_unread_out(self, groups: list[Group]) -> None:
+        """Moves the mapped states nothing in the step reads, and their mappings, out of the step.
+
+        Read from the lowered plan itself: a mapped state is read when a projection constrains it,
+        when code of a step (forces, masses, products, assembly, energy, init) names one of its
+        vectors, or when it is an input of the mapping of a read state. Anything else (a collision
+        model's points when no contact can happen, a mapped node kept for output) only costs time:
+        its mapping runs when Python reads the state instead, with the same numbers, since mapping
+        x and v is a function of the parents' x and v alone."""
+        owners: dict[str, StatePlan] = {}
+        for group in groups:
+            for state in (*group.states, *group.mapped):
+                for vector in (state.x, state.v, state.f, state.dx, state.df):
+                    if vector is not None:
+                        owners[vector.ident] = state
+
+        def states_named(lines: list[str]) -> set[int]:
+            return {
+                id(owners[ident])
+                for line in lines
+                for ident in re.findall(r"\bS\.(\w+)", line)
+                if ident in owners
+            }
+
+        kinds = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy", "init")
+        code = [line for g in groups for kind in kinds for op in getattr(g, kind) for line in op.code]
+        read = states_named(code) | {id(p.state) for g in groups for p in g.projections}
+        mappings = [m for g in groups for m in g.mappings]
+        growing = True
+        while growing:  # a read state's mapping reads its inputs (every input of a multi-mapping)
+            growing = False
+            for mapping in mappings:
+                if id(mapping.child) in read:
+                    inputs = states_named(mapping.apply) - read
+                    growing = growing or bool(inputs)
+                    read |= inputs
+        mapped_by = {id(m.child) for m in mappings}
+        for group in groups:
+            unread = [s for s in group.mapped if id(s) not in read and id(s) in mapped_by]
+            gone = {id(s) for s in unread}
+            group.unread = unread
+            group.on_read = [m for m in group.mappings if id(m.child) in gone]
+            group.mapped = [s for s in group.mapped if id(s) not in gone]
+            group.mappings = [m for m in group.mappings if id(m.child) not in gone]
+            for state in unread:  # no product runs through them: no dx, df
+                dropped = {id(state.dx), id(state.df)}
+                self.buffers = [b for b in self.buffers if id(b) not in dropped]
+                state.dx = state.df = None
 
     def _new_group(self, solver: CheckedComponent, index: int) -> Group | None:
         kernel = solver.spec.kernel if solver.spec else ""
@@ -3410,6 +3484,9 @@ def format_schedule(plan: Plan) -> str:
             lines.append(f"  {title}:")
             lines.extend(f"    - {origin}" for origin in origins)
         lines.append("  update x, v; propagate again")
+        if group.on_read:
+            lines.append("  mapped only when read from Python (nothing in the step reads them):")
+            lines.extend(f"    - {m.origin} -> {m.child.path}" for m in group.on_read)
     idle = [s for s in plan.states if not s.mapped and not any(s in g.states for g in plan.groups)]
     for state in idle:
         lines.append(f"not integrated (no ODE solver): {state.path}")

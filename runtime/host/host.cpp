@@ -23,6 +23,7 @@ struct Library {
     using Step = std::int64_t (*)(void*, std::int64_t);
     using Energy = double (*)(void*, double*, double*);
     using Init = void (*)(void*);
+    using UpdateMapped = void (*)(void*);
 
     void* handle = nullptr;
     int buffer_count = 0;
@@ -33,12 +34,13 @@ struct Library {
     Step step = nullptr;
     Energy energy = nullptr;
     Init init = nullptr;
+    UpdateMapped update_mapped = nullptr;
 
     explicit Library(const std::string& path) {
         handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
         if (!handle) throw std::runtime_error(std::string("cannot open scene library: ") + dlerror());
         auto abi = reinterpret_cast<int (*)()>(symbol("sofac_abi_version"));
-        if (abi() != 1) throw std::runtime_error("scene library built for another sofac ABI");
+        if (abi() != 2) throw std::runtime_error("scene library built for another sofac ABI");
         buffer_count = reinterpret_cast<int (*)()>(symbol("sofac_buffer_count"))();
         create = reinterpret_cast<Create>(symbol("sofac_create"));
         destroy = reinterpret_cast<Destroy>(symbol("sofac_destroy"));
@@ -47,6 +49,7 @@ struct Library {
         step = reinterpret_cast<Step>(symbol("sofac_step"));
         energy = reinterpret_cast<Energy>(symbol("sofac_energy"));
         init = reinterpret_cast<Init>(symbol("sofac_init"));
+        update_mapped = reinterpret_cast<UpdateMapped>(symbol("sofac_update_mapped"));
     }
     // Libraries stay loaded until the process ends: numpy views may outlive every Python handle.
     Library(const Library&) = delete;
@@ -110,6 +113,7 @@ PYBIND11_MODULE(_sofac_host, m) {
                  return self.library->step(self.state, steps);
              })
         .def("init", [](Instance& self) { self.library->init(self.state); })
+        .def("update_mapped", [](Instance& self) { self.library->update_mapped(self.state); })
         .def_property(
             "time", [](Instance& self) { return *self.library->time(self.state); },
             [](Instance& self, double t) { *self.library->time(self.state) = t; })

@@ -7,7 +7,7 @@
 #include <cstring>
 #include <vector>
 
-#define SOFAC_ABI_VERSION 1
+#define SOFAC_ABI_VERSION 2  // 2: sofac_update_mapped
 #define SOFAC_EXPORT __attribute__((visibility("default")))
 
 namespace sofac {
