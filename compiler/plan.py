@@ -770,12 +770,18 @@ class _Planner:
                 component, name, [float(default if value is None else value)], role="param"
             )
         group.newmark["started"] = self.buffer(component, "started", [0], "i64", role="scratch")
+        return self._plan_refactoring_solver(solver, group)
+
+    def _plan_refactoring_solver(self, solver: CheckedComponent, group: Group) -> bool:
+        """The linear solver of a scheme whose matrix changes within a step (Newmark, the
+        variational Newton loop): PrecomputedLinearSolver's single factorisation is refused."""
         if not self._plan_linear_solver(solver, group):
             return False
         if group.factor_once:
+            name = solver.spec.name if solver.spec else solver.component.type_name
             self.unsupported(
                 self.checked.of(group.linear_solver),
-                "PrecomputedLinearSolver under NewmarkImplicitSolver is not compiled yet",
+                f"PrecomputedLinearSolver under {name} is not compiled yet",
             )
             return False
         return True
@@ -814,15 +820,7 @@ class _Planner:
         group.incremental_potential = incremental is None or bool(incremental)
         group.energy_file = str(self.value(component, "file") or "")
         group.save_energy = bool(self.value(component, "saveEnergyInFile"))
-        if not self._plan_linear_solver(solver, group):
-            return False
-        if group.factor_once:
-            self.unsupported(
-                self.checked.of(group.linear_solver),
-                "PrecomputedLinearSolver under VariationalSymplecticSolver is not compiled yet",
-            )
-            return False
-        return True
+        return self._plan_refactoring_solver(solver, group)
 
     def _screen_variational(self, group: Group, owner: dict[int, Group]) -> None:
         """What sofac's VariationalSymplecticSolver cannot take: rigid frames (SOFA adds and

@@ -18,6 +18,8 @@ A exp(-k t / m) with an error of first order in h (these variants use a softer s
 
 from __future__ import annotations
 
+import pathlib
+
 import numpy as np
 import pytest
 import sofac
@@ -149,3 +151,17 @@ def test_first_order_is_backward_euler_on_the_first_order_system(histories: dict
     error_half = abs(histories["first_half"][round(t / (DT / 2))] - exact)
     assert error > 1e-3 * A
     assert 1.6 < error / error_half < 2.4
+
+
+def test_newmark_refuses_a_precomputed_solver(tmp_path: pathlib.Path) -> None:
+    """PrecomputedLinearSolver factorises once; Newmark's system changes with its factors: E222."""
+    scene = tmp_path / "newmark_precomputed.scn"
+    scene.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><NewmarkImplicitSolver/><PrecomputedLinearSolver/>'
+        '<MechanicalObject position="0 0 0"/><UniformMass/></Node>\n'
+    )
+    with pytest.raises(sofac.SceneError) as failure:
+        sofac.load(scene)
+    messages = [d.message for d in failure.value.diagnostics if d.code == "E222"]
+    why = "PrecomputedLinearSolver under NewmarkImplicitSolver is not compiled yet"
+    assert any(why in m for m in messages)
