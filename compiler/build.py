@@ -18,6 +18,7 @@ import functools
 import hashlib
 import json
 import os
+import platform
 import shutil
 import subprocess
 import sysconfig
@@ -59,8 +60,32 @@ def scene_flags(numbers: int) -> tuple[str, ...]:
     """The flags for a scene whose buffers hold ``numbers`` numbers (see LARGE_SCENE_NUMBERS)."""
     forced = os.environ.get(OPT_ENV, "").strip().upper()
     if forced in ("O2", "O3"):
-        return LARGE_SCENE_FLAGS if forced == "O3" else SCENE_FLAGS
-    return LARGE_SCENE_FLAGS if numbers >= LARGE_SCENE_NUMBERS else SCENE_FLAGS
+        flags = LARGE_SCENE_FLAGS if forced == "O3" else SCENE_FLAGS
+    else:
+        flags = LARGE_SCENE_FLAGS if numbers >= LARGE_SCENE_NUMBERS else SCENE_FLAGS
+    level = vector_level()
+    return flags if level is None else (*flags, f"-DSOFAC_VECTOR_LEVEL={level}")
+
+
+@functools.cache
+def vector_level() -> int | None:
+    """The widest vector copy of the runtime's kernels this processor runs (2: AVX-512 F+VL, 1:
+    AVX2, 0: neither), read from /proc/cpuinfo on x86-64 Linux; None elsewhere (the kernels then
+    ask the processor at run time). Only that copy is compiled into a scene, and being a flag, the
+    level is part of the cache key: a cache shared with another processor builds its own."""
+    if platform.machine() not in ("x86_64", "AMD64"):
+        return None
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return None
+    lines = [line for line in text.splitlines() if line.startswith("flags")]
+    if not lines:
+        return None
+    flags = lines[0].split(":", 1)[1].split()
+    if "avx512f" in flags and "avx512vl" in flags:
+        return 2
+    return 1 if "avx2" in flags else 0
 
 
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3", "/opt/homebrew/include/eigen3")

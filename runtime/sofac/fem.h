@@ -895,10 +895,17 @@ __attribute__((target("avx512f,avx512vl"))) inline void tetra_force_large_avx512
     const Index* tetra, Index n, const double* x, double* f, double* data, const Index* slots, double* deferred) {
     tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
 }
-// 2: AVX-512 F+VL, 1: AVX2, 0: neither.
+// 2: AVX-512 F+VL, 1: AVX2, 0: neither. A scene library is built for the processor it runs on
+// (sofac.build defines SOFAC_VECTOR_LEVEL from it, and the flag is part of the cache key), so only
+// that copy is compiled: the others would triple the kernels' compile time. Without the define
+// (tests, other builds), the processor is asked at run time.
 inline int vector_level() {
+#ifdef SOFAC_VECTOR_LEVEL
+    return SOFAC_VECTOR_LEVEL;
+#else
     if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) return 2;
     return __builtin_cpu_supports("avx2") ? 1 : 0;
+#endif
 }
 #endif
 
