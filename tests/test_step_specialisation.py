@@ -108,3 +108,24 @@ def test_large_scenes_get_o3_small_ones_o2(monkeypatch: pytest.MonkeyPatch) -> N
     assert "-O3" in build.scene_flags(build.LARGE_SCENE_NUMBERS)
     monkeypatch.setenv(build.OPT_ENV, "O2")
     assert "-O3" not in build.scene_flags(10**9)
+
+
+def test_vector_level_follows_the_processor(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """The scene is built with the kernels' vector copy for this processor only, named in its flags
+    (so in its cache key); the level is read from /proc/cpuinfo's flags."""
+    level = build.vector_level()
+    flags = build.scene_flags(10)
+    assert (f"-DSOFAC_VECTOR_LEVEL={level}" in flags) == (level is not None)
+    cpuinfo = tmp_path / "cpuinfo"
+    real_path = build.Path
+
+    def fake_path(*parts: object) -> Path:
+        return cpuinfo if parts == ("/proc/cpuinfo",) else real_path(*parts)
+
+    monkeypatch.setattr(build.platform, "machine", lambda: "x86_64")
+    monkeypatch.setattr(build, "Path", fake_path)
+    for cpu_flags, expected in (("fpu sse2 avx2", 1), ("sse2 avx2 avx512f avx512vl", 2), ("sse2 avx512f", 0)):
+        cpuinfo.write_text(f"processor\t: 0\nflags\t\t: {cpu_flags}\n")
+        build.vector_level.cache_clear()
+        assert build.vector_level() == expected
+    build.vector_level.cache_clear()
