@@ -27,11 +27,13 @@ struct BlockRows {
     std::vector<Index> start, col;
     std::vector<double> values;
 
-    // y = A x. Each scalar row is summed over increasing scalar columns, one product at a time,
-    // from 0: SOFA's CompressedRowSparseMatrix product (tmul), whose numbers are then the same for
-    // every block size (and for its FullMatrix and SparseMatrix, whose extra terms are exact zeros).
-    void multiply(const double* x, double* y) const {
+    // y = A x; returns x.y, summed in index order (as a FullVector dot product, while the product
+    // runs). Each scalar row is summed over increasing scalar columns, one product at a time, from
+    // 0: SOFA's CompressedRowSparseMatrix product (tmul), whose numbers are then the same for every
+    // block size (and for its FullMatrix and SparseMatrix, whose extra terms are exact zeros).
+    double multiply(const double* x, double* y) const {
         const Index rows = n / B;
+        double dot = 0.0;
         for (Index I = 0; I < rows; ++I) {
             double sum[B] = {};
             for (Index k = start[I]; k < start[I + 1]; ++k) {
@@ -42,8 +44,12 @@ struct BlockRows {
                     SOFAC_UNROLL
                     for (int j = 0; j < B; ++j) sum[i] += m[B * i + j] * xj[j];
             }
-            for (int i = 0; i < B; ++i) y[B * I + i] = sum[i];
+            for (int i = 0; i < B; ++i) {
+                y[B * I + i] = sum[i];
+                dot += x[B * I + i] * sum[i];
+            }
         }
+        return dot;
     }
 };
 
@@ -212,12 +218,13 @@ struct AssembledCg {
         double* q = q_.data();
         std::fill(x, x + n, 0.0);
         std::copy(rhs.begin(), rhs.end(), r);
-        const double normb = std::sqrt(dot(rhs.data(), rhs.data(), n));
+        double rho = 0.0;  // r.r, summed in index order as each pass that changes r ends
+        for (Index i = 0; i < n; ++i) rho += r[i] * r[i];
+        const double normb = std::sqrt(rho);
         if (normb == 0.0) return;
         double rho_previous = 0.0;
         for (std::int64_t iteration = 1; iteration <= max_iterations; ++iteration) {
             const bool may_stop = !(iteration == 1 && first_solve);
-            const double rho = dot(r, r, n);
             if (std::sqrt(rho) / normb <= tolerance && may_stop) break;
             if (iteration == 1) {
                 std::copy(r, r + n, p);
@@ -225,25 +232,20 @@ struct AssembledCg {
                 const double beta = rho / rho_previous;
                 for (Index i = 0; i < n; ++i) p[i] = p[i] * beta + r[i];
             }
-            matrix.multiply(p, q);
-            const double den = dot(p, q, n);
+            const double den = matrix.multiply(p, q);  // q = A p, and p.q
             if (den == 0.0 || (std::fabs(den) <= threshold && may_stop)) break;
             const double alpha = rho / den;
+            rho_previous = rho;
+            rho = 0.0;
             for (Index i = 0; i < n; ++i) {
                 x[i] += p[i] * alpha;
                 r[i] += q[i] * -alpha;
+                rho += r[i] * r[i];
             }
-            rho_previous = rho;
         }
     }
 
 private:
-    static double dot(const double* a, const double* b, Index n) {
-        double sum = 0.0;
-        for (Index i = 0; i < n; ++i) sum += a[i] * b[i];
-        return sum;
-    }
-
     std::vector<double> r_, p_, q_;
     std::vector<Index> cleared_, unit_;  // value slots set to 0 and 1 by the projection
 };
