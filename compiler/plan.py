@@ -2268,7 +2268,9 @@ def _matrix_solver(group: Group) -> str:
     """The linear solver of an assembled group, as messages name it."""
     if group.assembled_cg:
         return "a CGLinearSolver on an assembled matrix"
-    return "a sparse direct solver" if group.direct else "an assembled preconditioner"
+    if group.preconditioner:
+        return "a PCGLinearSolver's assembled preconditioner"
+    return "a sparse direct solver"
 
 
 def _matrix_free_hint(group: Group) -> str:
