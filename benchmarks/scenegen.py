@@ -171,8 +171,9 @@ def beam(nx: int = 10, ny: int = 10, nz: int = 50) -> Beam:
     return Beam(positions, tetrahedra, fixed)  # type: ignore[arg-type]
 
 
-def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
-    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations or (b) SparseLDLSolver."""
+def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50, assembled: bool = False) -> str:
+    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations (matrix-free, or with
+    ``assembled`` on the assembled matrix: CompressedRowSparseMatrixMat3x3d) or (b) SparseLDLSolver."""
     length = beam_length(nz)
     if direct:
         linear = (
@@ -180,8 +181,9 @@ def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
         )
         plugin = "Sofa.Component.LinearSolver.Direct"
     else:
+        template = "CompressedRowSparseMatrixMat3x3d" if assembled else "GraphScattered"
         linear = (
-            '        <CGLinearSolver template="GraphScattered" name="linearsolver" '
+            f'        <CGLinearSolver template="{template}" name="linearsolver" '
             f'iterations="{CG_ITERATIONS}" tolerance="0" threshold="0"/>\n'
         )
         plugin = "Sofa.Component.LinearSolver.Iterative"
@@ -200,6 +202,8 @@ def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
     required = "".join(f'    <RequiredPlugin pluginName="{p}"/>\n' for p in plugins)
     gx, gy, gz = GRAVITY
     which = "(b) SparseLDLSolver" if direct else f"(a) CG {CG_ITERATIONS} iterations"
+    if assembled and not direct:
+        which += " on the assembled matrix"
     return (
         '<?xml version="1.0"?>\n'
         f"<!-- W3 corotational tetrahedral cantilever of shared/bench/workloads.md, {which}: "
@@ -237,14 +241,17 @@ def write_cloth(folder: Path, n: int) -> tuple[Path, Path]:
     return w1, w2
 
 
-def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> tuple[Path, Path]:
-    """W3 (a) and (b) into ``folder``: (cg.scn, ldl.scn)."""
+def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> tuple[Path, Path, Path]:
+    """W3 (a), (b) and (a) on the assembled matrix into ``folder``: (cg.scn, ldl.scn,
+    cg_assembled.scn)."""
     folder.mkdir(parents=True, exist_ok=True)
     suffix = "" if (nx, ny, nz) == (10, 10, 50) else f"_{nx}x{ny}x{nz}"
     cg, ldl = folder / f"w3_beam_cg25{suffix}.scn", folder / f"w3_beam_ldl{suffix}.scn"
+    assembled = folder / f"w3_beam_cg25_assembled{suffix}.scn"
     cg.write_text(beam_scene(direct=False, nx=nx, ny=ny, nz=nz))
     ldl.write_text(beam_scene(direct=True, nx=nx, ny=ny, nz=nz))
-    return cg, ldl
+    assembled.write_text(beam_scene(direct=False, nx=nx, ny=ny, nz=nz, assembled=True))
+    return cg, ldl, assembled
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -119,7 +119,13 @@ class _GroupView:
         self.pcg = group.pcg
         self.preconditioner = group.preconditioner
         self.ssor_omega = group.ssor_omega
-        self.matrix = group.direct or bool(group.preconditioner)  # an assembled system matrix
+        # an assembled system matrix: assemble_<g>, its pattern at init
+        self.matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        self.assembled_cg = group.assembled_cg
+        # The instance member holding it: a direct solver (CHOLMOD, also the preconditioners'
+        # container) or the assembled CG's block rows and vectors.
+        self.system = f"cg_{group.ident}" if group.assembled_cg else f"direct_{group.ident}"
+        self.cg_block = group.cg_block if group.assembled_cg else 0
         self.assemble = group.assemble
         self.system_size = group.system_size
         self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
@@ -157,6 +163,7 @@ def render(plan: Plan) -> str:
             groups=[_GroupView(g) for g in plan.groups],
             any_direct=any(g.direct or g.preconditioner for g in plan.groups),
             on_read=any(g.on_read for g in plan.groups),
+            any_assembled_cg=any(g.assembled_cg for g in plan.groups),
             dt=plan.dt,
             threads=plan.threads,
             parallel_groups=parallel_groups,

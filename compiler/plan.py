@@ -27,6 +27,7 @@ from .diagnostics import Diagnostics, SceneError
 from .fem_topology import CELL_KINDS
 from .model import Component, Node
 from .registry import Category
+from .registry.components.common import GRAPH_SCATTERED
 from .registry.datatypes import DATATYPES, DataType
 
 # C++ DataTypes names in runtime/sofac/types.h, by canonical template.
@@ -155,9 +156,10 @@ class Group:
     implicit: dict[str, Buffer] = field(default_factory=dict)
     linear_solver: Component | None = None
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
+    assembled_cg: bool = False  # CGLinearSolver on an assembled matrix (a template other than GraphScattered)
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
-    assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
+    assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
@@ -197,6 +199,12 @@ class Group:
     @property
     def system_size(self) -> int:
         return sum(s.size * s.datatype.deriv_size for s in self.states)
+
+    @property
+    def cg_block(self) -> int:
+        """An assembled CG's block size: rows of 3x3 blocks when every state's derivatives come
+        in threes (the product's numbers do not depend on it), else scalar rows."""
+        return 3 if all(s.datatype.deriv_size % 3 == 0 for s in self.states) else 1
 
 
 @dataclass
@@ -906,6 +914,9 @@ class _Planner:
             group.assembled = group.direct = True
             group.factor_once = checked_linear.spec.kernel == "precomputed"
             return True
+        if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:
+            # SOFA assembles the system matrix and runs CG on it (CRS, sparse or full: the same numbers)
+            group.assembled = group.assembled_cg = True
         group.cg = {
             "iterations": self.buffer(
                 linear, "iterations", [int(self.value(linear, "iterations") or 25)], "i64"
@@ -1339,7 +1350,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         return
     method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), 1)
     if prefix == "trifem" and (method != 1 or group.assembled):
-        planner.unsupported(checked, "TriangularFEMForceField is compiled for method large with CG only")
+        planner.unsupported(
+            checked, "TriangularFEMForceField is compiled for method large with the matrix-free CG only"
+        )
         return
     if prefix != "tetra_fem" and method == 3:
         method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
@@ -1761,7 +1774,9 @@ def _lower_interaction_ellipsoid(
     )
     if group.scheme == "implicit":
         if group.assembled:
-            planner.unsupported(checked, "a direct solver with an ellipsoid force field is not compiled yet")
+            planner.unsupported(
+                checked, f"{_matrix_solver(group)} with an ellipsoid force field is not compiled yet"
+            )
             return
         group.stiffness_dx.append(
             Op(
@@ -1822,7 +1837,7 @@ def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner:
     )
     if planner.value(component, "implicit") and group.scheme == "implicit":
         if group.assembled:
-            planner.unsupported(checked, "implicit damping with a direct solver is not compiled yet")
+            planner.unsupported(checked, f"implicit damping with {_matrix_solver(group)} is not compiled yet")
             return
         group.stiffness_dx.append(
             Op(
@@ -2290,11 +2305,13 @@ def _add_springs(
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
         blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
         jacobians = _ptr(blocks)
-        if group.direct:
+        if group.direct or group.assembled_cg:
             offset1, offset2 = group.offset(first), group.offset(second)
             if offset1 is None or offset2 is None:
                 planner.unsupported(
-                    checked, "a direct solver with springs on mapped states is not compiled yet"
+                    checked,
+                    f"{_matrix_solver(group)} with springs on mapped states is not compiled yet "
+                    f"(J^T K J); {_matrix_free_hint(group)}",
                 )
             else:
                 code = (
@@ -2328,16 +2345,33 @@ def _add_springs(
     )
 
 
+def _matrix_solver(group: Group) -> str:
+    """The linear solver of an assembled group, as messages name it."""
+    if group.assembled_cg:
+        return "a CGLinearSolver on an assembled matrix"
+    if group.preconditioner:
+        return "a PCGLinearSolver's assembled preconditioner"
+    return "a sparse direct solver"
+
+
+def _matrix_free_hint(group: Group) -> str:
+    if group.assembled_cg:
+        return 'use the matrix-free CGLinearSolver (template="GraphScattered", the default)'
+    return "use CGLinearSolver"
+
+
 def _assemble(
     planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[int], str]
 ) -> None:
-    """A direct solver's share of a component: its blocks of A, at the state's offset."""
+    """An assembled solver's share of a component: its blocks of A, at the state's offset."""
     if not group.assembled:
         return
     offset = group.offset(state)
     if offset is None:
         planner.unsupported(
-            checked, "a direct solver with forces or masses on mapped states is not compiled yet"
+            checked,
+            f"{_matrix_solver(group)} with forces or masses on mapped states is not compiled yet "
+            f"(J^T K J); {_matrix_free_hint(group)}",
         )
         return
     group.assemble.append(Op(origin_of(checked.component), [code(offset)]))
@@ -2675,8 +2709,8 @@ def _lower_line_or_plane(planner: _Planner, checked: CheckedComponent, owner: di
     if group.assembled:
         planner.unsupported(
             checked,
-            "with a sparse direct solver (SOFA does not project the assembled matrix for it either); "
-            "use CGLinearSolver",
+            f"with {_matrix_solver(group)} (SOFA does not project the assembled matrix for it either); "
+            f"{_matrix_free_hint(group)}",
         )
         return
     line = checked.spec is not None and checked.spec.role == "line"
@@ -2750,7 +2784,9 @@ def _lower_linear_velocity(planner: _Planner, checked: CheckedComponent, owner: 
         planner.unsupported(checked, "on rigid DOFs it is not compiled yet (Vec types only)")
         return
     if group.assembled:
-        planner.unsupported(checked, "with a sparse direct solver it is not compiled yet; use CGLinearSolver")
+        planner.unsupported(
+            checked, f"with {_matrix_solver(group)} it is not compiled yet; {_matrix_free_hint(group)}"
+        )
         return
     width, coord = state.datatype.deriv_size, state.datatype.coord_size
     times = np.asarray(planner.value(component, "keyTimes"), dtype=float).ravel()
@@ -2809,7 +2845,7 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
     component = checked.component
     if group.assembled:
         planner.unsupported(
-            checked, "its contact-dependent stiffness is not assembled for direct solvers yet"
+            checked, f"its contact-dependent stiffness is not assembled for {_matrix_solver(group)} yet"
         )
         return
     width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
@@ -3473,8 +3509,17 @@ def format_schedule(plan: Plan) -> str:
             sections += [
                 (f"{rhs}; M dx", [op.origin for op in group.mass_dx]),
                 ("K dx", [op.origin for op in group.stiffness_dx]),
-                (f"{system} with {origin_of(group.linear_solver)}", []),
             ]
+            if group.assembled_cg:
+                block = group.cg_block
+                sections.append(
+                    (
+                        f"assemble mfact M + kfact K (rows of {block}x{block} blocks), projected",
+                        [op.origin for op in group.assemble],
+                    )
+                )
+            on = " on the assembled matrix" if group.assembled_cg else ""
+            sections.append((f"{system} with {origin_of(group.linear_solver)}{on}", []))
         else:
             sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))
         sections.append(("project constraints", [p.origin for p in group.projections]))

@@ -90,6 +90,8 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
         preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
+        # CG on the assembled matrix (CompressedRowSparseMatrixMat3x3): values refilled each step
+        shared_dir / "corpus/sofa/Component/LinearSolver/Iterative/FEMBAR_CGLinearSolver_assembled.scn",
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

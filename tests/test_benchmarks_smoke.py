@@ -85,16 +85,18 @@ def test_beam_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) -> 
     if not (SUITESPARSE_INCLUDE / "cholmod.h").is_file():
         pytest.skip("needs SuiteSparse (CHOLMOD)")
     setup = workloads.Setup(w3_steps=3, ldl_steps=3, batches=2, beam_grid=(3, 3, 5), workdir=tmp_path)
-    rows, checks = workloads.run(["w3", "w3ldl"], setup, lambda _: None)
+    rows, checks = workloads.run(["w3", "w3asm", "w3ldl"], setup, lambda _: None)
     implementations = {(r.workload, r.implementation) for r in rows}
-    for workload in ("w3", "w3ldl"):
+    assert ("w3asm", "sofac (matrix-free CG)") in implementations
+    for workload in ("w3", "w3asm", "w3ldl"):
         assert {(workload, "sofac"), (workload, "hand-written C++")} <= implementations
     # the same physics: the hand-written loops' tip displacement is sofac's to rounding (~1e-13);
     # 25 CG iterations amplify the rounding differences of their other formulas by the system's
     # conditioning (~1e-8 on this small grid)
     assert len(checks["w3ldl"]) == 2 and all(v < 1e-10 for v in checks["w3ldl"].values()), checks
     assert len(checks["w3"]) == 4 and all(v < 1e-6 for v in checks["w3"].values()), checks
+    assert len(checks["w3asm"]) == 2 and all(v < 1e-6 for v in checks["w3asm"].values()), checks
     assert all(r.ms > 0 for r in rows)
     cells = workloads.table(rows, sofa=False)
     hand = {c[0]: c[4] for c in cells if c[1] == "sofac"}
-    assert hand["w3"] != "-" and hand["w3ldl"] != "-"
+    assert hand["w3"] != "-" and hand["w3asm"] != "-" and hand["w3ldl"] != "-"

@@ -19,6 +19,7 @@ from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
 from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid, tetrahedra_from_hexahedra
+from sofac.plan import TETRA_LANES
 
 SHIM = r"""
 #include "sofac/fem.h"
@@ -27,6 +28,7 @@ SHIM = r"""
 using sofac::Index;
 #define API extern "C" __attribute__((visibility("default")))
 API sofac::Index tet_count(int method, Index n) { return sofac::tetra_fem_data_count(method, n); }
+API int tet_size(int method) { return sofac::tetra_fem_data_size(method); }
 API int hex_size(int method) { return sofac::hexa_fem_data_size(method); }
 API void tet_init(const Index* t, Index n, const double* x0, const double* e, Index ne, const double* nu,
                   Index nn, int method, double* data, const double* lsf, Index nf) {
@@ -600,6 +602,63 @@ def test_single_tetra_stiffness_against_numpy(lib: ctypes.CDLL, method: int) -> 
             np.testing.assert_allclose(
                 field.force(points + u)[order].ravel(), -expected @ u[order].ravel(), rtol=1e-12, atol=1e-12
             )
+
+
+def sofa_tetra_element_matrix(element_data: np.ndarray, method: int) -> np.ndarray:
+    """SOFA's computeStiffnessMatrix as it evaluates it: J (12x6) from the 12 cofactors, the
+    material K (6x6), then J K J^T and RR (J K J^T) RR^T as generic Mat products over every entry,
+    each sum from 0 in increasing order (plain Python floats: one rounding per operation)."""
+    d = [float(v) for v in element_data]
+    j = [[0.0] * 6 for _ in range(12)]
+    for n in range(4):
+        a, b, g = d[3 * n : 3 * n + 3]
+        j[3 * n][0] = j[3 * n + 1][3] = j[3 * n + 2][5] = a
+        j[3 * n][3] = j[3 * n + 1][1] = j[3 * n + 2][4] = b
+        j[3 * n][5] = j[3 * n + 1][4] = j[3 * n + 2][2] = g
+    k = [[0.0] * 6 for _ in range(6)]
+    for r in range(3):
+        for c in range(3):
+            k[r][c] = d[12] if r == c else d[13]
+        k[3 + r][3 + r] = d[14]
+    identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    rot = identity if method == SMALL else [d[15:18], d[18:21], d[21:24]]
+    rr = [[0.0] * 12 for _ in range(12)]
+    for b in range(4):
+        for r in range(3):
+            for c in range(3):
+                rr[3 * b + r][3 * b + c] = rot[r][c]
+
+    def product(left: list, right: list, transpose: bool) -> list:
+        rows, inner = len(left), len(left[0])
+        cols = len(right) if transpose else len(right[0])
+        out = [[0.0] * cols for _ in range(rows)]
+        for r in range(rows):
+            for c in range(cols):
+                total = 0.0
+                for m in range(inner):
+                    total += left[r][m] * (right[c][m] if transpose else right[m][c])
+                out[r][c] = total
+        return out
+
+    jkjt = product(product(j, k, False), j, True)
+    return np.array(product(product(rr, jkjt, False), rr, True))
+
+
+@pytest.mark.parametrize("method", [SMALL, LARGE])
+def test_tetra_element_matrix_is_sofas_product_to_the_bit(lib: ctypes.CDLL, method: int) -> None:
+    """tetra_fem_element_matrix skips the terms that are zero by construction: every entry must
+    still be the number SOFA's full products give (sign of zeros aside, which adds nothing)."""
+    tetra, rest = tet_mesh()
+    field = Field(lib, "tet", tetra, rest, method, 2.5e4, 0.31)
+    rng = np.random.default_rng(8)
+    field.force(rest + 0.05 * rng.standard_normal(rest.shape))  # rotated elements (large)
+    size = lib.tet_size(method)
+    lanes = TETRA_LANES  # element data in blocks of this many elements, one field of each at a time
+    for e in range(len(tetra)):
+        start = e // lanes * lanes * size + e % lanes
+        record = field.data[start : start + size * lanes : lanes]  # element e's numbers
+        expected = sofa_tetra_element_matrix(record[:24], method)
+        assert np.array_equal(field.element_matrix(e), expected), e
 
 
 def test_tetra_material_lists_and_factors(lib: ctypes.CDLL) -> None:

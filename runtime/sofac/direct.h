@@ -1,10 +1,9 @@
 // Sparse direct solves of the implicit system A dv = b, A = mfact M + kfact K (SOFA's
 // SparseLDLSolver and friends), with SuiteSparse's CHOLMOD through Eigen.
 //
-// The matrix is assembled from the same blocks the matrix-free product uses. Its sparsity never
-// changes, so assembly runs twice at creation: once recording where each contribution goes (the
-// pattern, then CHOLMOD's symbolic analysis), and then, every step, only adding values at the
-// recorded slots (no allocation) before the numeric factorisation.
+// The matrix is assembled (assembly.h) from the same blocks the matrix-free product uses, on a
+// pattern recorded once at creation, then CHOLMOD's symbolic analysis; every step only adds values
+// at the recorded slots (no allocation) before the numeric factorisation.
 #pragma once
 
 #include <Eigen/CholmodSupport>
@@ -13,63 +12,11 @@
 #include <limits>
 #include <vector>
 
+#include "assembly.h"
 #include "kernels.h"
 #include "types.h"
 
 namespace sofac {
-
-class Assembler {
-public:
-    // Record (first pass) or add (later passes) one entry of A.
-    void add(Index row, Index col, double value) {
-        if (recording_) {
-            rows_.push_back(row);
-            cols_.push_back(col);
-        } else {
-            values_[slots_[cursor_++]] += value;
-        }
-    }
-
-    // A block of a derivative pair: rows of DOF a (width wa) against columns of DOF b.
-    template <class Block>
-    void add_block(Index row0, Index col0, const Block& block, double factor) {
-        for (int i = 0; i < block.rows(); ++i)
-            for (int j = 0; j < block.cols(); ++j) add(row0 + i, col0 + j, factor * block(i, j));
-    }
-
-    void start_pattern() {
-        recording_ = true;
-        rows_.clear();
-        cols_.clear();
-    }
-
-    // Build the pattern of an n x n matrix from the recorded entries (plus the whole diagonal).
-    void finish_pattern(Eigen::SparseMatrix<double>& matrix, Index n) {
-        std::vector<Eigen::Triplet<double>> triplets;
-        triplets.reserve(rows_.size() + static_cast<std::size_t>(n));
-        for (std::size_t k = 0; k < rows_.size(); ++k) triplets.emplace_back(rows_[k], cols_[k], 0.0);
-        for (Index i = 0; i < n; ++i) triplets.emplace_back(i, i, 0.0);
-        matrix.resize(n, n);
-        matrix.setFromTriplets(triplets.begin(), triplets.end());
-        matrix.makeCompressed();
-        slots_.resize(rows_.size());
-        for (std::size_t k = 0; k < rows_.size(); ++k)
-            slots_[k] = static_cast<Index>(&matrix.coeffRef(rows_[k], cols_[k]) - matrix.valuePtr());
-        recording_ = false;
-    }
-
-    void start_values(Eigen::SparseMatrix<double>& matrix) {
-        values_ = matrix.valuePtr();
-        std::fill(values_, values_ + matrix.nonZeros(), 0.0);
-        cursor_ = 0;
-    }
-
-private:
-    bool recording_ = false;
-    std::vector<Index> rows_, cols_, slots_;
-    double* values_ = nullptr;
-    std::size_t cursor_ = 0;
-};
 
 // Eigen's CHOLMOD LDL^T, with access to the factor for cholmod_solve2.
 class CholmodLdlt : public Eigen::CholmodSimplicialLDLT<Eigen::SparseMatrix<double>> {
@@ -243,100 +190,5 @@ struct SsorPreconditioner {
             for (Index j = 0; j < n; ++j) z[j] *= 2 - w;
     }
 };
-
-// ---- contributions --------------------------------------------------------------------------
-
-// Mass blocks (uniform / diagonal / rigid, as mass_multiply), times mfact.
-template <class DT>
-inline void assemble_mass(Assembler& A, Index offset, Index n, const double* mass, Index mass_stride, double mfact) {
-    for (Index i = 0; i < n; ++i) {
-        const double* mi = mass + i * mass_stride;
-        const Index row = offset + DT::deriv * i;
-        if constexpr (DT::rigid && DT::coord == 7) {
-            for (int d = 0; d < 3; ++d) A.add(row + d, row + d, mfact * mi[0]);
-            for (int r = 0; r < 3; ++r)
-                for (int c = 0; c < 3; ++c) A.add(row + 3 + r, row + 3 + c, mfact * mi[1 + 3 * r + c]);
-        } else if constexpr (DT::rigid) {
-            A.add(row, row, mfact * mi[0]);
-            A.add(row + 1, row + 1, mfact * mi[0]);
-            A.add(row + 2, row + 2, mfact * mi[1]);
-        } else {
-            for (int d = 0; d < DT::deriv; ++d) A.add(row + d, row + d, mfact * mi[0]);
-        }
-    }
-}
-
-// Springs: kfact times the blocks of spring_dforces (df_a += m (dx_b - dx_a), df_b -= the same).
-template <class D1, class D2>
-inline void assemble_springs(Assembler& A, const Springs& s, const double* jacobians, Index offset1, Index offset2,
-                             double kfact) {
-    constexpr int S = D1::spatial;
-    using Block = Eigen::Matrix<double, S, S, Eigen::RowMajor>;
-    for (Index k = 0; k < s.count; ++k) {
-        double values[S * S];
-        spring_block<S>(jacobians, k, values);
-        const Eigen::Map<const Block> m(values);
-        const Index a = offset1 + D1::deriv * s.a[k], b = offset2 + D2::deriv * s.b[k];
-        A.add_block(a, a, m, -kfact);
-        A.add_block(a, b, m, kfact);
-        A.add_block(b, a, m, kfact);
-        A.add_block(b, b, m, -kfact);
-    }
-}
-
-// Elements (FEM): `matrix(element_data, e, method, out)` gives the positive stiffness of element e
-// (corners x corners blocks of 3x3, row-major); the force Jacobian is its negative.
-template <int Corners, class ElementMatrix>
-inline void assemble_elements(Assembler& A, const Index* elements, Index count, const double* element_data,
-                              int method, Index offset, double kfact, ElementMatrix matrix) {
-    constexpr int N = 3 * Corners;
-    double out[N * N];
-    for (Index e = 0; e < count; ++e) {
-        matrix(element_data, e, method, out);
-        const Index* nodes = elements + Corners * e;
-        for (int a = 0; a < Corners; ++a)
-            for (int b = 0; b < Corners; ++b)
-                for (int i = 0; i < 3; ++i)
-                    for (int j = 0; j < 3; ++j)
-                        A.add(offset + 3 * nodes[a] + i, offset + 3 * nodes[b] + j,
-                              -kfact * out[(3 * a + i) * N + 3 * b + j]);
-    }
-}
-
-// RestShapeSpringsForceField: K = -k I on the listed points.
-template <class DT>
-inline void assemble_rest_shape(Assembler& A, Index offset, const Index* indices, const double* stiffness,
-                                Index stiffness_count, Index count, double kfact) {
-    for (Index k = 0; k < count; ++k) {
-        const double ks = stiffness[k < stiffness_count ? k : 0];
-        for (int d = 0; d < DT::spatial; ++d) {
-            const Index row = offset + DT::deriv * indices[k] + d;
-            A.add(row, row, -kfact * ks);
-        }
-    }
-}
-
-// MeshMatrixMass (consistent: vertex diagonal and edge off-diagonal terms; lumped: diagonal).
-inline void assemble_mesh_matrix_mass(Assembler& A, Index offset, const double* vertex_mass, Index n,
-                                      const Index* edges, const double* edge_mass, Index n_edges, double lumping,
-                                      double mfact, int width) {
-    for (Index i = 0; i < n; ++i)
-        for (int d = 0; d < width; ++d) A.add(offset + width * i + d, offset + width * i + d, mfact * vertex_mass[i] * lumping);
-    for (Index e = 0; e < n_edges; ++e)
-        for (int d = 0; d < width; ++d) {
-            const Index a = offset + width * edges[2 * e] + d, b = offset + width * edges[2 * e + 1] + d;
-            A.add(a, b, mfact * edge_mass[e]);
-            A.add(b, a, mfact * edge_mass[e]);
-        }
-}
-
-// Projective constraints: mark the scalar DOFs whose rows and columns are cleared.
-template <class DT>
-inline void mark_fixed(std::vector<char>& fixed, Index offset, const Index* indices, Index count,
-                       const Index* directions = nullptr) {
-    for (Index k = 0; k < count; ++k)
-        for (int d = 0; d < DT::deriv; ++d)
-            if (!directions || directions[d]) fixed[static_cast<std::size_t>(offset + DT::deriv * indices[k] + d)] = 1;
-}
 
 }  // namespace sofac
