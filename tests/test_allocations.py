@@ -90,6 +90,8 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
         preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
+        # SparseLDLSolver through RigidMapping: J refilled and J^T K J assembled every step
+        shared_dir / "corpus/sofa/Component/LinearSystem/CompositeLinearSystem.scn",
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

@@ -20,9 +20,21 @@ namespace sofac {
 
 class Assembler {
 public:
+    // Mapped states' scalar DOFs are numbered from kMapped on. Each is a row of the mapping's
+    // Jacobian J, over independent or (chained mappings) other mapped indices, so an entry on
+    // such a row or column lands, weighted, on the rows and columns J maps it to: what a mapped
+    // state's K or M contributes is J^T K J (SOFA's MatrixLinearSystem does the same).
+    static constexpr Index kMapped = Index(1) << 40;
+
     // Record (first pass) or add (later passes) one entry of A.
     void add(Index row, Index col, double value) {
-        if (recording_) {
+        if (row >= kMapped) {
+            const auto r = static_cast<std::size_t>(row - kMapped);
+            for (Index k = jstart_[r]; k < jstart_[r + 1]; ++k) add(jcols_[k], col, jweights_[k] * value);
+        } else if (col >= kMapped) {
+            const auto c = static_cast<std::size_t>(col - kMapped);
+            for (Index k = jstart_[c]; k < jstart_[c + 1]; ++k) add(row, jcols_[k], value * jweights_[k]);
+        } else if (recording_) {
             rows_.push_back(row);
             cols_.push_back(col);
         } else {
@@ -37,10 +49,27 @@ public:
             for (int j = 0; j < block.cols(); ++j) add(row0 + i, col0 + j, factor * block(i, j));
     }
 
+    // Row kMapped + r of J: its columns (the first pass appends the rows in order) and weights
+    // (refilled in place on later passes: the mapping's current values).
+    void jacobian_row(Index row, int count, const Index* columns, const double* weights) {
+        if (recording_) {
+            jcols_.insert(jcols_.end(), columns, columns + count);
+            jweights_.insert(jweights_.end(), weights, weights + count);
+            jstart_.push_back(static_cast<Index>(jcols_.size()));
+        } else {
+            std::copy_n(weights, count, jweights_.data() + jstart_[static_cast<std::size_t>(row - kMapped)]);
+        }
+    }
+
+    bool recording() const { return recording_; }
+
     void start_pattern() {
         recording_ = true;
         rows_.clear();
         cols_.clear();
+        jstart_.assign(1, 0);
+        jcols_.clear();
+        jweights_.clear();
     }
 
     // Build the pattern of an n x n matrix from the recorded entries (plus the whole diagonal).
@@ -67,6 +96,8 @@ public:
 private:
     bool recording_ = false;
     std::vector<Index> rows_, cols_, slots_;
+    std::vector<Index> jstart_{0}, jcols_;  // J of the mapped DOFs, by rows (CSR)
+    std::vector<double> jweights_;
     double* values_ = nullptr;
     std::size_t cursor_ = 0;
 };
