@@ -688,9 +688,35 @@ class _Checker:
                 rest[:, 6] = 1.0  # identity orientations
             return rest
         value = np.asarray(value, dtype=float)
+        width = self._linked_width(checked, "position")
+        if width is not None and width != datatype.coord_size and value.size % width == 0:
+            # A link between position types of different widths (a grid's Vec3d points into Rigid3d
+            # frames): SOFA's genericCopyValueFrom copies element by element, the first
+            # min(widths) values of each, the rest keeping the default coordinate.
+            points = value.reshape(-1, width)
+            copied = min(width, datatype.coord_size)
+            rest = np.zeros((len(points), datatype.coord_size))
+            if datatype.coord_size == 7:
+                rest[:, 6] = 1.0  # identity orientations
+            rest[:, :copied] = points[:, :copied]
+            return rest
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
+
+    def _linked_width(self, checked: CheckedComponent, name: str) -> int | None:
+        """Numbers per element of the positions a field links to: a state's coordinate size, or 3
+        for a topology's points (None when not linked or not known)."""
+        if name in checked.fields or name not in checked.data_links:
+            return None
+        path, _ = checked.data_links[name]
+        target = links.resolve(path, checked.component)
+        source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
+        if source is None or (path.data or name) != "position":
+            return None
+        if source.category is Category.STATE:
+            return (source.datatype or DATATYPES["Vec3d"]).coord_size
+        return 3 if source.category is Category.TOPOLOGY else None
 
     def state_size(self, state: Component) -> int | None:
         points = self.positions(state)

@@ -83,6 +83,9 @@ class MappingOp:
     transpose: Callable[[Buffer, Buffer], str] | None  # parent += Jᵀ child; None: mapForces="0"
     # Non-linear mappings: (parent dx, parent df) -> parent df += kfact dJᵀ/dx(child force) dx.
     geometric: Callable[[Buffer, Buffer], str] | None = None
+    # Assembled systems: (child's first index, parent's first index) -> the code giving J's rows to
+    # the assembler (Assembler::kMapped); None: a mapping whose J is not assembled yet.
+    assembly: Callable[[str, str], str] | None = None
 
 
 @dataclass
@@ -187,6 +190,10 @@ class Group:
     save_energy: bool = False
     first_order: bool = False  # EulerImplicitSolver's firstOrder: (M - h K) v = f, x += h v
 
+    # Assembled systems: the mapped states whose blocks go through their mappings' J, with their
+    # first index past Assembler::kMapped and the component that first needed it (for diagnostics).
+    routed: dict[int, tuple[StatePlan, int, CheckedComponent]] = field(default_factory=dict)
+
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
         start = 0
@@ -195,6 +202,17 @@ class Group:
                 return start
             start += other.size * other.datatype.deriv_size
         return None
+
+    def assembly_offset(self, state: StatePlan, checked: CheckedComponent) -> str:
+        """Where a state's DOFs start for the assembler: an independent state's offset, or, for a
+        mapped one, indices past Assembler::kMapped that J routes to the independent DOFs."""
+        offset = self.offset(state)
+        if offset is not None:
+            return str(offset)
+        if id(state) not in self.routed:
+            start = sum(s.size * s.datatype.deriv_size for s, _, _ in self.routed.values())
+            self.routed[id(state)] = (state, start, checked)
+        return f"sofac::Assembler::kMapped + {self.routed[id(state)][1]}"
 
     @property
     def system_size(self) -> int:
@@ -577,9 +595,50 @@ class _Planner:
         for group in groups.values():
             if group.variational:
                 self._screen_variational(group, owner)
+            if group.routed:
+                self._route_through_mappings(group)
         if self.prune:
             self._leave_unread_out(list(groups.values()))
         return list(groups.values())
+
+    def _route_through_mappings(self, group: Group) -> None:
+        """The rows of J for every mapped state an assembled block lands on, and for their own
+        mapped inputs (chains), recorded before the blocks: A gets J^T K J (SOFA's
+        MatrixLinearSystem projects mapped matrices the same way). Refused where J is not known."""
+        mappings = {id(m.child): m for m in group.mappings}
+        rows: list[tuple[int, str]] = []
+        done: set[int] = set()
+        while len(done) < len(group.routed):
+            for key, (state, start, checked) in list(group.routed.items()):
+                if key in done:
+                    continue
+                done.add(key)
+                mapping = mappings.get(key)
+                where = f"on the mapped state {state.path}"
+                if mapping is None or mapping.assembly is None:
+                    self.unsupported(
+                        checked,
+                        f"a direct solver or assembled preconditioner {where}: its mapping's "
+                        "Jacobian is not assembled yet (RigidMapping, BarycentricMapping, SubsetMapping "
+                        "and IdentityMapping are); use CGLinearSolver",
+                    )
+                    continue
+                if mapping.transpose is None:
+                    self.unsupported(checked, f"an assembled system {where}: its mapping has mapForces=false")
+                    continue
+                if mapping.geometric is not None:
+                    self.unsupported(
+                        checked,
+                        f"an assembled system {where}: its mapping's geometric stiffness is not "
+                        "assembled yet",
+                    )
+                    continue
+                parent = group.assembly_offset(mapping.parent, checked)
+                code = mapping.assembly(f"sofac::Assembler::kMapped + {start}", parent)
+                rows.append((start, f"// J: {mapping.origin}"))
+                rows.append((start, code))
+        rows.sort(key=lambda row: row[0])  # the assembler takes J's rows in order
+        group.assemble[:0] = [Op("mappings' Jacobians, rows in order", [line for _, line in rows])]
 
     def _leave_unread_out(self, groups: list[Group]) -> None:
         """Moves the mapped states nothing in the step reads, and their mappings, out of the step.
@@ -911,6 +970,8 @@ class _Planner:
             return False
         group.linear_solver = linear
         if checked_linear.spec.kernel in ("direct", "precomputed"):
+            if not self._assembles_everything(checked_linear):
+                return False
             group.assembled = group.direct = True
             group.factor_once = checked_linear.spec.kernel == "precomputed"
             return True
@@ -929,6 +990,43 @@ class _Planner:
             ),
             "solves": self.buffer(linear, "solves", [0], "i64", role="scratch"),
         }
+        return True
+
+    def _assembles_everything(self, linear: CheckedComponent) -> bool:
+        """The linear system a direct solver solves assembles M, K and the damping with the
+        projections and the mapped components, as sofac's assembly does. Through a
+        CompositeLinearSystem, that is its solverLinearSystem (else its first linear system, as
+        SOFA picks); its other systems assemble only for display or output: nothing reads them."""
+        system = linear.links.get("linearSystem")
+        if not isinstance(system, Component):
+            return True  # the default one SOFA creates: a MatrixLinearSystem
+        checked = self.checked.of(system)
+        if checked.spec is not None and checked.spec.name == "CompositeLinearSystem":
+            chosen = checked.links.get("solverLinearSystem")
+            if not isinstance(chosen, Component):
+                listed = checked.links.get("linearSystems")
+                chosen = next((c for c in listed or () if isinstance(c, Component)), None)
+            if chosen is None:
+                self.unsupported(checked, "it needs a solverLinearSystem or linearSystems to solve")
+                return False
+            system, checked = chosen, self.checked.of(chosen)
+        plain = ("MatrixLinearSystem", "ConstantSparsityPatternSystem")
+        if checked.spec is None or checked.spec.name not in plain:
+            return True  # other systems are screened where they are planned
+        flags = (
+            "enableAssembly",
+            "assembleStiffness",
+            "assembleMass",
+            "assembleDamping",
+            "applyProjectiveConstraints",
+            "applyMappedComponents",
+        )
+        off = [name for name in flags if self.value(system, name) is False]
+        if off:
+            self.unsupported(
+                checked, f"{', '.join(off)}=false on the system a solver solves is not compiled yet"
+            )
+            return False
         return True
 
     def _attach_mapped(self, owner: dict[int, Group]) -> None:
@@ -2306,18 +2404,9 @@ def _add_springs(
         blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
         jacobians = _ptr(blocks)
         if group.direct or group.assembled_cg:
-            offset1, offset2 = group.offset(first), group.offset(second)
-            if offset1 is None or offset2 is None:
-                planner.unsupported(
-                    checked,
-                    f"{_matrix_solver(group)} with springs on mapped states is not compiled yet "
-                    f"(J^T K J); {_matrix_free_hint(group)}",
-                )
-            else:
-                code = (
-                    f"sofac::assemble_springs<{types}>(A, {table}, {jacobians}, {offset1}, {offset2}, kfact);"
-                )
-                group.assemble.append(Op(origin, [code]))
+            offset1, offset2 = group.assembly_offset(first, checked), group.assembly_offset(second, checked)
+            code = f"sofac::assemble_springs<{types}>(A, {table}, {jacobians}, {offset1}, {offset2}, kfact);"
+            group.assemble.append(Op(origin, [code]))
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -2361,20 +2450,13 @@ def _matrix_free_hint(group: Group) -> str:
 
 
 def _assemble(
-    planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[int], str]
+    planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[str], str]
 ) -> None:
-    """An assembled solver's share of a component: its blocks of A, at the state's offset."""
+    """An assembled solver's share of a component: its blocks of A, at the state's offset (through the
+    mappings' J for a mapped state)."""
     if not group.assembled:
         return
-    offset = group.offset(state)
-    if offset is None:
-        planner.unsupported(
-            checked,
-            f"{_matrix_solver(group)} with forces or masses on mapped states is not compiled yet "
-            f"(J^T K J); {_matrix_free_hint(group)}",
-        )
-        return
-    group.assemble.append(Op(origin_of(checked.component), [code(offset)]))
+    group.assemble.append(Op(origin_of(checked.component), [code(group.assembly_offset(state, checked))]))
 
 
 def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -3003,6 +3085,11 @@ def _lower_rigid_mapping(planner: _Planner, checked: CheckedComponent, owner: di
     if pair not in (("Rigid3d", "Vec3d"), ("Rigid2d", "Vec2d")):
         planner.unsupported(checked, f"RigidMapping {pair[0]},{pair[1]} is not compiled yet")
         return
+    if str(planner.value(component, "geometricStiffness")) != "None":
+        planner.unsupported(
+            checked, "its geometric stiffness is not compiled yet (geometricStiffness=None is)"
+        )
+        return
     dim = child.datatype.coord_size
     points = planner.checked.positions(child.component)
     points = np.zeros((0, dim)) if points is None else points
@@ -3042,6 +3129,10 @@ def _lower_rigid_mapping(planner: _Planner, checked: CheckedComponent, owner: di
             (lambda up, down: _call(f"{prefix}_apply_jt", up, down, frame_buffer, offset, n))
             if maps_forces
             else None,
+            # J depends on the rotated offsets of this step's apply: refilled every assembly.
+            assembly=lambda first, input_first: _call(
+                f"{prefix}_jacobian", "A", first, input_first, frame_buffer, offset, n
+            ),
         )
     )
 
@@ -3104,6 +3195,10 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
             ],
             lambda up, down: _call(f"subset_apply<{t}>", up, down, buffer, n, deriv),
             (lambda up, down: _call(f"subset_apply_jt<{t}>", up, down, buffer, n)) if maps_forces else None,
+            assembly=lambda first, input_first: (
+                "if (A.recording()) "  # a constant selection: once
+                + _call(f"subset_jacobian<{t}>", "A", first, input_first, buffer, n)
+            ),
         )
     )
 
@@ -3164,6 +3259,10 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
             (lambda up, down: _call("linear_map_apply_jt", up, down, index_buffer, weight_buffer, n, k, 3))
             if maps_forces
             else None,
+            assembly=lambda first, input_first: (
+                "if (A.recording()) "  # constant weights: once
+                + _call("linear_jacobian", "A", first, input_first, index_buffer, weight_buffer, n, k, 3)
+            ),
         )
     )
 

@@ -92,6 +92,8 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
         # CG on the assembled matrix (CompressedRowSparseMatrixMat3x3): values refilled each step
         shared_dir / "corpus/sofa/Component/LinearSolver/Iterative/FEMBAR_CGLinearSolver_assembled.scn",
+        # SparseLDLSolver through RigidMapping: J refilled and J^T K J assembled every step
+        shared_dir / "corpus/sofa/Component/LinearSystem/CompositeLinearSystem.scn",
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

@@ -378,3 +378,60 @@ def test_cg_and_the_direct_solvers_agree_on_the_implicit_step(tmp_path: Path) ->
     assert np.abs(final["cg"][-9:, 1] - final["cg"][:9, 1]).min() > 1e-3  # the beam bends
     for name, positions in final.items():
         assert np.abs(positions - final["ldl"]).max() < 1e-9, name
+
+
+def test_direct_solver_refuses_a_mapping_whose_jacobian_it_cannot_assemble(tmp_path: Path) -> None:
+    body = (
+        '<Node name="n"><EulerImplicitSolver/><SparseLDLSolver/>\n'
+        '<MechanicalObject name="dofs" position="0 0 0  1 0 0"/><UniformMass vertexMass="1"/>\n'
+        '<EdgeSetTopologyContainer edges="0 1"/>\n'
+        '<Node name="d"><MechanicalObject template="Vec1d" name="length"/>\n'
+        '<UniformMass vertexMass="1"/>\n'
+        '<DistanceMapping geometricStiffness="None"/></Node></Node>'
+    )
+    with pytest.raises(sofac.SceneError) as failure:
+        sofac.load(scene(tmp_path, body))
+    messages = [d.message for d in failure.value.diagnostics]
+    assert any(
+        "UniformMass at line 5" in m and "/n/d/length: its mapping's Jacobian is not assembled yet" in m
+        for m in messages
+    ), messages
+
+
+def test_the_system_a_direct_solver_solves_assembles_everything(tmp_path: Path) -> None:
+    system = '<MatrixLinearSystem name="s" assembleMass="false"/><SparseLDLSolver linearSystem="@s"/>'
+    with pytest.raises(sofac.SceneError) as failure:
+        sofac.load(scene(tmp_path, oscillator(f"<EulerImplicitSolver/>{system}")))
+    message = failure.value.diagnostics[0].message
+    assert "MatrixLinearSystem" in message and "assembleMass=false on the system a solver solves" in message
+
+
+def test_composite_linear_system_solves_its_solver_linear_system(tmp_path: Path) -> None:
+    """Its other systems (here one without the mass, and their GlobalSystemMatrixImage views) only
+    assemble for display: the step is the plain SparseLDLSolver's, exactly."""
+    composite = (
+        '<EulerImplicitSolver/><Node name="m"><MatrixLinearSystem name="A"/>'
+        '<MatrixLinearSystem name="K" assembleMass="false"/>'
+        '<GlobalSystemMatrixImage linearSystem="@K"/></Node>'
+        '<CompositeLinearSystem name="c" linearSystems="@m/A @m/K" solverLinearSystem="@m/A"/>'
+        '<SparseLDLSolver linearSystem="@c"/>'
+    )
+    positions = []
+    for name, solver in (("plain", "<EulerImplicitSolver/><SparseLDLSolver/>"), ("composite", composite)):
+        sim = sofac.load(scene(tmp_path, oscillator(solver), name=f"{name}.scn"))
+        sim.step(20)
+        positions.append(sim["dofs"].position.copy())
+    assert abs(positions[0][1, 0] - 1.1) > 1e-3  # it moved
+    assert np.array_equal(positions[0], positions[1])
+
+
+def test_rigid_frames_linked_to_grid_points_get_identity_orientations(tmp_path: Path) -> None:
+    """SOFA copies a Vec3d link into Rigid3d coordinates element by element (genericCopyValueFrom):
+    each frame takes a point's x y z and keeps the default, identity, orientation."""
+    body = (
+        '<Node name="n"><RegularGridTopology name="grid" n="1 1 3" min="0 1 0" max="0 1 2"/>'
+        '<MechanicalObject template="Rigid3d" name="frames" position="@grid.position"/></Node>'
+    )
+    sim = sofac.load(scene(tmp_path, body))
+    expected = [[0, 1, z, 0, 0, 0, 1] for z in (0.0, 1.0, 2.0)]
+    assert np.array_equal(sim["frames"].position, expected)

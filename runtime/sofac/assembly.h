@@ -55,13 +55,25 @@ struct BlockRows {
 
 class Assembler {
 public:
+    // Mapped states' scalar DOFs are numbered from kMapped on. Each is a row of the mapping's
+    // Jacobian J, over independent or (chained mappings) other mapped indices, so an entry on
+    // such a row or column lands, weighted, on the rows and columns J maps it to: what a mapped
+    // state's K or M contributes is J^T K J (SOFA's MatrixLinearSystem does the same).
+    static constexpr Index kMapped = Index(1) << 40;
+
     // The block size of the matrix it fills: with 3 (BlockRows<3>), add_block3 finds a whole 3x3
     // block with one slot. Set before start_pattern.
     int block = 1;
 
     // Record (first pass) or add (later passes) one entry of A.
     void add(Index row, Index col, double value) {
-        if (recording_) {
+        if (row >= kMapped) {
+            const auto r = static_cast<std::size_t>(row - kMapped);
+            for (Index k = jstart_[r]; k < jstart_[r + 1]; ++k) add(jcols_[k], col, jweights_[k] * value);
+        } else if (col >= kMapped) {
+            const auto c = static_cast<std::size_t>(col - kMapped);
+            for (Index k = jstart_[c]; k < jstart_[c + 1]; ++k) add(row, jcols_[k], value * jweights_[k]);
+        } else if (recording_) {
             rows_.push_back(row);
             cols_.push_back(col);
             whole_.push_back(0);
@@ -80,7 +92,7 @@ public:
     // factor times the 3x3 block m (rows `stride` apart) at (row0, col0), both multiples of 3 on a
     // 3x3-block matrix. Each entry receives the same number as from add, in the same order.
     void add_block3(Index row0, Index col0, const double* m, Index stride, double factor) {
-        if (block != 3) {
+        if (block != 3 || row0 >= kMapped || col0 >= kMapped) {
             for (int i = 0; i < 3; ++i)
                 for (int j = 0; j < 3; ++j) add(row0 + i, col0 + j, factor * m[stride * i + j]);
             return;
@@ -96,11 +108,28 @@ public:
             for (int j = 0; j < 3; ++j) values[3 * i + j] += factor * m[stride * i + j];
     }
 
+    // Row kMapped + r of J: its columns (the first pass appends the rows in order) and weights
+    // (refilled in place on later passes: the mapping's current values).
+    void jacobian_row(Index row, int count, const Index* columns, const double* weights) {
+        if (recording_) {
+            jcols_.insert(jcols_.end(), columns, columns + count);
+            jweights_.insert(jweights_.end(), weights, weights + count);
+            jstart_.push_back(static_cast<Index>(jcols_.size()));
+        } else {
+            std::copy_n(weights, count, jweights_.data() + jstart_[static_cast<std::size_t>(row - kMapped)]);
+        }
+    }
+
+    bool recording() const { return recording_; }
+
     void start_pattern() {
         recording_ = true;
         rows_.clear();
         cols_.clear();
         whole_.clear();
+        jstart_.assign(1, 0);
+        jcols_.clear();
+        jweights_.clear();
     }
 
     // Build the pattern of an n x n matrix from the recorded entries (plus the whole diagonal).
@@ -165,6 +194,8 @@ private:
     bool recording_ = false;
     std::vector<Index> rows_, cols_, slots_;
     std::vector<char> whole_;  // per recorded entry: a whole 3x3 block (add_block3 on 3x3 blocks)
+    std::vector<Index> jstart_{0}, jcols_;  // J of the mapped DOFs, by rows (CSR)
+    std::vector<double> jweights_;
     double* values_ = nullptr;
     std::size_t cursor_ = 0;
 };

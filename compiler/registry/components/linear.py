@@ -381,7 +381,9 @@ COMPOSITE_LINEAR_SYSTEM = ComponentSpec(
         BTD_MATRIX,
     ),
     default_template=FULL_MATRIX,
-    unsupported_reason="CompositeLinearSystem is not implemented yet",
+    # The solver reads solverLinearSystem (checked where the direct solver is planned); the other
+    # systems only assemble matrices for display or output, which nothing in the step reads.
+    supported=True,
     effects=_SOLVE,
     fields=(
         FieldSpec("linearSystems", LinkList("linear_system"), doc="the delegated systems"),
@@ -456,8 +458,10 @@ GLOBAL_SYSTEM_MATRIX_IMAGE = ComponentSpec(
     name="GlobalSystemMatrixImage",
     category=Category.UTILITY,
     module="SofaMatrix",
-    doc="SofaMatrix plugin: shows the sparsity of the global matrix in the GUI.",
-    unsupported_reason="GlobalSystemMatrixImage (SofaMatrix plugin GUI view) is not supported",
+    doc="SofaMatrix plugin: shows the sparsity of the global matrix in the GUI (visual only: kept "
+    "out of the step).",
+    supported=True,
+    effects=frozenset({Effect.VISUAL}),
     fields=(FieldSpec("linearSystem", Link("linear_system")),),
 )
 

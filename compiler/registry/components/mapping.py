@@ -119,7 +119,12 @@ RIGID_MAPPING = ComponentSpec(
             deprecated=True,
             doc="legacy: number of child points per parent DOF (converted to rigidIndexPerPoint)",
         ),
-        _GEOMETRIC_STIFFNESS,
+        FieldSpec(  # RigidMapping's constructor selects None (NonLinearMappingData defaults to Stabilized)
+            "geometricStiffness",
+            Options(values=GEOMETRIC_STIFFNESS),
+            "None",
+            "geometric stiffness of the mapping: None, Exact, or Stabilized (negative eigenvalues clamped)",
+        ),
         *MAPPING_FIELDS,
     ),
 )
