@@ -171,20 +171,31 @@ def beam(nx: int = 10, ny: int = 10, nz: int = 50) -> Beam:
     return Beam(positions, tetrahedra, fixed)  # type: ignore[arg-type]
 
 
-def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
-    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations or (b) SparseLDLSolver."""
+# W3's linear solvers: (a) CG, (b) a sparse direct solve, SOFA's L D L^T or Cholesky L L^T.
+BEAM_SOLVERS = ("cg", "ldl", "cholesky")
+
+
+def beam_scene(solver: str, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
+    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations ("cg") or (b)
+    SparseLDLSolver ("ldl") or SparseCholeskySolver ("cholesky", from SOFA's CSparseSolvers plugin)."""
     length = beam_length(nz)
-    if direct:
+    if solver == "ldl":
         linear = (
             '        <SparseLDLSolver name="linearsolver" template="CompressedRowSparseMatrixMat3x3d"/>\n'
         )
         plugin = "Sofa.Component.LinearSolver.Direct"
+        which = "(b) SparseLDLSolver"
+    elif solver == "cholesky":
+        linear = '        <SparseCholeskySolver name="linearsolver" template="CompressedRowSparseMatrixd"/>\n'
+        plugin = "CSparseSolvers"
+        which = "(b) SparseCholeskySolver"
     else:
         linear = (
             '        <CGLinearSolver template="GraphScattered" name="linearsolver" '
             f'iterations="{CG_ITERATIONS}" tolerance="0" threshold="0"/>\n'
         )
         plugin = "Sofa.Component.LinearSolver.Iterative"
+        which = f"(a) CG {CG_ITERATIONS} iterations"
     plugins = (
         "Sofa.Component.Constraint.Projective",
         "Sofa.Component.Engine.Select",
@@ -199,7 +210,6 @@ def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
     )
     required = "".join(f'    <RequiredPlugin pluginName="{p}"/>\n' for p in plugins)
     gx, gy, gz = GRAVITY
-    which = "(b) SparseLDLSolver" if direct else f"(a) CG {CG_ITERATIONS} iterations"
     return (
         '<?xml version="1.0"?>\n'
         f"<!-- W3 corotational tetrahedral cantilever of shared/bench/workloads.md, {which}: "
@@ -237,14 +247,18 @@ def write_cloth(folder: Path, n: int) -> tuple[Path, Path]:
     return w1, w2
 
 
-def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> tuple[Path, Path]:
-    """W3 (a) and (b) into ``folder``: (cg.scn, ldl.scn)."""
+def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> tuple[Path, Path, Path]:
+    """W3 (a) and (b) into ``folder``: (cg.scn, ldl.scn, cholesky.scn)."""
     folder.mkdir(parents=True, exist_ok=True)
     suffix = "" if (nx, ny, nz) == (10, 10, 50) else f"_{nx}x{ny}x{nz}"
-    cg, ldl = folder / f"w3_beam_cg25{suffix}.scn", folder / f"w3_beam_ldl{suffix}.scn"
-    cg.write_text(beam_scene(direct=False, nx=nx, ny=ny, nz=nz))
-    ldl.write_text(beam_scene(direct=True, nx=nx, ny=ny, nz=nz))
-    return cg, ldl
+    names = {"cg": f"w3_beam_cg{CG_ITERATIONS}", "ldl": "w3_beam_ldl", "cholesky": "w3_beam_cholesky"}
+    paths = []
+    for solver in BEAM_SOLVERS:
+        path = folder / f"{names[solver]}{suffix}.scn"
+        path.write_text(beam_scene(solver, nx=nx, ny=ny, nz=nz))
+        paths.append(path)
+    cg, ldl, cholesky = paths
+    return cg, ldl, cholesky
 
 
 def main(argv: list[str] | None = None) -> int:

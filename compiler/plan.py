@@ -157,6 +157,7 @@ class Group:
     cg: dict[str, Buffer] = field(default_factory=dict)  # iterations, tolerance, threshold, solves done
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
+    llt: bool = False  # the direct solver factors L L^T (registry role "llt"), else L D L^T
     assembled: bool = False  # it has a sparse direct linear solver: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
@@ -652,6 +653,7 @@ class _Planner:
             spec = self.checked.of(linear).spec if linear is not None else None
             if spec is not None and spec.kernel == "direct":
                 group.linear_solver, group.assembled = linear, True
+                group.llt = spec.role == "llt"
         return group
 
     def _plan_pcg(self, linear: CheckedComponent, group: Group) -> bool:
@@ -680,7 +682,7 @@ class _Planner:
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
             block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
-            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner)):
+            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner), group):
                 return False
             if block is None:
                 self.unsupported(
@@ -719,7 +721,7 @@ class _Planner:
             return False
         return True
 
-    def _warp_is_identity(self, warp: CheckedComponent) -> bool:
+    def _warp_is_identity(self, warp: CheckedComponent, group: Group) -> bool:
         """WarpPreconditioner as sofac compiles it: its RotationMatrixSystem reassembles the main
         system every step (assemblingRate 1), which resets the rotations to identity, and its solver
         is a sparse direct one: the preconditioner is then that solver on this step's matrix."""
@@ -744,6 +746,7 @@ class _Planner:
         if spec is None or spec.kernel != "direct":
             self.unsupported(warp, "its linearSolver must be a sparse direct solver")
             return False
+        group.llt = spec.role == "llt"
         return True
 
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
@@ -907,6 +910,7 @@ class _Planner:
         if checked_linear.spec.kernel in ("direct", "precomputed"):
             group.assembled = group.direct = True
             group.factor_once = checked_linear.spec.kernel == "precomputed"
+            group.llt = checked_linear.spec.role == "llt"
             return True
         group.cg = {
             "iterations": self.buffer(
