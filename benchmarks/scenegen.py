@@ -171,22 +171,34 @@ def beam(nx: int = 10, ny: int = 10, nz: int = 50) -> Beam:
     return Beam(positions, tetrahedra, fixed)  # type: ignore[arg-type]
 
 
-def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50, assembled: bool = False) -> str:
-    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations (matrix-free, or with
-    ``assembled`` on the assembled matrix: CompressedRowSparseMatrixMat3x3d) or (b) SparseLDLSolver."""
+# W3's linear solvers: (a) CG, (b) a sparse direct solve, SOFA's L D L^T or Cholesky L L^T.
+BEAM_SOLVERS = ("cg", "cg_assembled", "ldl", "cholesky")
+
+
+def beam_scene(solver: str, nx: int = 10, ny: int = 10, nz: int = 50) -> str:
+    """W3: the corotational tetrahedral cantilever, (a) CG 25 iterations, matrix-free ("cg") or on
+    the assembled matrix ("cg_assembled": CompressedRowSparseMatrixMat3x3d), or (b) SparseLDLSolver
+    ("ldl") or SparseCholeskySolver ("cholesky", from SOFA's CSparseSolvers plugin)."""
     length = beam_length(nz)
-    if direct:
+    if solver == "ldl":
         linear = (
             '        <SparseLDLSolver name="linearsolver" template="CompressedRowSparseMatrixMat3x3d"/>\n'
         )
         plugin = "Sofa.Component.LinearSolver.Direct"
+        which = "(b) SparseLDLSolver"
+    elif solver == "cholesky":
+        linear = '        <SparseCholeskySolver name="linearsolver" template="CompressedRowSparseMatrixd"/>\n'
+        plugin = "CSparseSolvers"
+        which = "(b) SparseCholeskySolver"
     else:
+        assembled = solver == "cg_assembled"
         template = "CompressedRowSparseMatrixMat3x3d" if assembled else "GraphScattered"
         linear = (
             f'        <CGLinearSolver template="{template}" name="linearsolver" '
             f'iterations="{CG_ITERATIONS}" tolerance="0" threshold="0"/>\n'
         )
         plugin = "Sofa.Component.LinearSolver.Iterative"
+        which = f"(a) CG {CG_ITERATIONS} iterations" + (" on the assembled matrix" if assembled else "")
     plugins = (
         "Sofa.Component.Constraint.Projective",
         "Sofa.Component.Engine.Select",
@@ -201,9 +213,6 @@ def beam_scene(direct: bool, nx: int = 10, ny: int = 10, nz: int = 50, assembled
     )
     required = "".join(f'    <RequiredPlugin pluginName="{p}"/>\n' for p in plugins)
     gx, gy, gz = GRAVITY
-    which = "(b) SparseLDLSolver" if direct else f"(a) CG {CG_ITERATIONS} iterations"
-    if assembled and not direct:
-        which += " on the assembled matrix"
     return (
         '<?xml version="1.0"?>\n'
         f"<!-- W3 corotational tetrahedral cantilever of shared/bench/workloads.md, {which}: "
@@ -241,17 +250,21 @@ def write_cloth(folder: Path, n: int) -> tuple[Path, Path]:
     return w1, w2
 
 
-def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> tuple[Path, Path, Path]:
-    """W3 (a), (b) and (a) on the assembled matrix into ``folder``: (cg.scn, ldl.scn,
-    cg_assembled.scn)."""
+def write_beam(folder: Path, nx: int = 10, ny: int = 10, nz: int = 50) -> dict[str, Path]:
+    """W3's scenes into ``folder``, by solver (BEAM_SOLVERS): cg, cg_assembled, ldl, cholesky."""
     folder.mkdir(parents=True, exist_ok=True)
     suffix = "" if (nx, ny, nz) == (10, 10, 50) else f"_{nx}x{ny}x{nz}"
-    cg, ldl = folder / f"w3_beam_cg25{suffix}.scn", folder / f"w3_beam_ldl{suffix}.scn"
-    assembled = folder / f"w3_beam_cg25_assembled{suffix}.scn"
-    cg.write_text(beam_scene(direct=False, nx=nx, ny=ny, nz=nz))
-    ldl.write_text(beam_scene(direct=True, nx=nx, ny=ny, nz=nz))
-    assembled.write_text(beam_scene(direct=False, nx=nx, ny=ny, nz=nz, assembled=True))
-    return cg, ldl, assembled
+    names = {
+        "cg": f"w3_beam_cg{CG_ITERATIONS}",
+        "cg_assembled": f"w3_beam_cg{CG_ITERATIONS}_assembled",
+        "ldl": "w3_beam_ldl",
+        "cholesky": "w3_beam_cholesky",
+    }
+    paths = {}
+    for solver in BEAM_SOLVERS:
+        paths[solver] = folder / f"{names[solver]}{suffix}.scn"
+        paths[solver].write_text(beam_scene(solver, nx=nx, ny=ny, nz=nz))
+    return paths
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -259,7 +272,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cloth", type=int, metavar="N", help="also write W1/W2 with N x N particles")
     parser.add_argument("--out", type=Path, default=SCENES, help="folder (default benchmarks/scenes)")
     args = parser.parse_args(argv)
-    paths = [*write_beam(args.out)]
+    paths = [*write_beam(args.out).values()]
     if args.cloth:
         paths += write_cloth(args.out, args.cloth)
     for path in paths:

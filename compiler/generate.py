@@ -137,6 +137,7 @@ class _GroupView:
         self.implicit = group.implicit
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
         self.factor_once = group.factor_once
+        self.llt = group.llt
         self.cg = group.cg
         self.minres = group.minres
         self.static = group.static

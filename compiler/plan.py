@@ -162,6 +162,7 @@ class Group:
     assembled_cg: bool = False  # CGLinearSolver on an assembled matrix (a template other than GraphScattered)
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
+    llt: bool = False  # the direct solver factors L L^T (registry role "llt"), else L D L^T
     assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
@@ -719,6 +720,7 @@ class _Planner:
             spec = self.checked.of(linear).spec if linear is not None else None
             if spec is not None and spec.kernel == "direct":
                 group.linear_solver, group.assembled = linear, True
+                group.llt = spec.role == "llt"
         return group
 
     def _plan_pcg(self, linear: CheckedComponent, group: Group) -> bool:
@@ -747,7 +749,7 @@ class _Planner:
         if isinstance(preconditioner, Component) and self.value(component, "use_precond") is not False:
             spec = self.checked.of(preconditioner).spec
             block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
-            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner)):
+            if block == 4 and not self._warp_is_identity(self.checked.of(preconditioner), group):
                 return False
             if block is None:
                 self.unsupported(
@@ -786,7 +788,7 @@ class _Planner:
             return False
         return True
 
-    def _warp_is_identity(self, warp: CheckedComponent) -> bool:
+    def _warp_is_identity(self, warp: CheckedComponent, group: Group) -> bool:
         """WarpPreconditioner as sofac compiles it: its RotationMatrixSystem reassembles the main
         system every step (assemblingRate 1), which resets the rotations to identity, and its solver
         is a sparse direct one: the preconditioner is then that solver on this step's matrix."""
@@ -811,6 +813,7 @@ class _Planner:
         if spec is None or spec.kernel != "direct":
             self.unsupported(warp, "its linearSolver must be a sparse direct solver")
             return False
+        group.llt = spec.role == "llt"
         return True
 
     def _plan_implicit(self, solver: CheckedComponent, group: Group) -> bool:
@@ -974,6 +977,7 @@ class _Planner:
                 return False
             group.assembled = group.direct = True
             group.factor_once = checked_linear.spec.kernel == "precomputed"
+            group.llt = checked_linear.spec.role == "llt"
             return True
         if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:
             # SOFA assembles the system matrix and runs CG on it (CRS, sparse or full: the same numbers)

@@ -88,6 +88,9 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         shared_dir / "corpus/sofa/Demos/liver.scn",  # CG, tetrahedral FEM, barycentric mapping
         shared_dir / "reference/sofa/scenes/c2_beam_tetfem_ldl.scn",  # SparseLDLSolver: factorised each step
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
+        # L L^T below runtime/sofac/direct.h's kSupernodalFlops: CHOLMOD's simplicial kernel (its
+        # supernodal one allocates OpenMP teams in every factorisation)
+        shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_EigenSimplicialLLT.scn",
         preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
         # CG on the assembled matrix (CompressedRowSparseMatrixMat3x3): values refilled each step

@@ -40,7 +40,8 @@ def test_cloth_matches_the_workload_definition(workloads: ModuleType) -> None:
 def test_generated_scenes_check_clean(workloads: ModuleType, tmp_path: Path) -> None:
     from sofac.cli import main as sofac_main
 
-    scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *workloads.scenegen.write_beam(tmp_path, 3, 3, 4)]
+    beams = workloads.scenegen.write_beam(tmp_path, 3, 3, 4).values()
+    scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *beams]
     assert sofac_main(["check", "--quiet", *map(str, scenes)]) == 0
 
 

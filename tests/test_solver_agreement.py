@@ -6,8 +6,9 @@ scene with its own EulerImplicitSolver, all stepped from the same deformed, movi
 system ((1 + h rm) M - h (h + rk) K) dv = b then involves every term of SOFA's EulerImplicitSolver.
 Conjugate gradient run to a tight tolerance (matrix-free, assembled, and PCGLinearSolver with each
 preconditioner) and every sparse direct solver must agree on dv, hence on the new velocities and
-positions, to round-off relative to the step (measured: 1e-14 for CG and PCG; the direct solvers
-share one sparse factorisation and agree exactly). PrecomputedLinearSolver factorises the first step's
+positions, to round-off relative to the step (measured: 1e-14 for CG and PCG; the L D L^T direct
+solvers share one sparse factorisation and agree exactly, the L L^T ones, SparseCholeskySolver and
+EigenSimplicialLLT, factor L L^T instead). PrecomputedLinearSolver factorises the first step's
 matrix, so it agrees on that first step; later, its frozen matrix makes it differ, by much more
 than round-off. (tests/test_compile.py checks a few of them over 15 steps of another scene.)
 """

@@ -132,19 +132,39 @@ public:
         jweights_.clear();
     }
 
-    // Build the pattern of an n x n matrix from the recorded entries (plus the whole diagonal).
-    void finish_pattern(Eigen::SparseMatrix<double>& matrix, Index n) {
+    // Build the pattern of an n x n matrix from the recorded entries (plus the whole diagonal),
+    // without the off-diagonal entries in a row or column of a `fixed` DOF: those contributions
+    // go to that DOF's diagonal, which the projection overwrites (so a direct solver orders and
+    // factors the free DOFs' graph).
+    void finish_pattern(Eigen::SparseMatrix<double>& matrix, Index n, const std::vector<char>& fixed) {
+        const auto target = [&](std::size_t k, Index& row, Index& col) {
+            row = rows_[k];
+            col = cols_[k];
+            if (fixed[static_cast<std::size_t>(row)]) col = row;
+            else if (fixed[static_cast<std::size_t>(col)]) row = col;
+        };
         std::vector<Eigen::Triplet<double>> triplets;
         triplets.reserve(rows_.size() + static_cast<std::size_t>(n));
-        for (std::size_t k = 0; k < rows_.size(); ++k) triplets.emplace_back(rows_[k], cols_[k], 0.0);
+        Index row = 0, col = 0;
+        for (std::size_t k = 0; k < rows_.size(); ++k) {
+            target(k, row, col);
+            if (row != col) triplets.emplace_back(row, col, 0.0);
+        }
         for (Index i = 0; i < n; ++i) triplets.emplace_back(i, i, 0.0);
         matrix.resize(n, n);
         matrix.setFromTriplets(triplets.begin(), triplets.end());
         matrix.makeCompressed();
         slots_.resize(rows_.size());
-        for (std::size_t k = 0; k < rows_.size(); ++k)
-            slots_[k] = static_cast<Index>(&matrix.coeffRef(rows_[k], cols_[k]) - matrix.valuePtr());
+        for (std::size_t k = 0; k < rows_.size(); ++k) {
+            target(k, row, col);
+            slots_[k] = static_cast<Index>(&matrix.coeffRef(row, col) - matrix.valuePtr());
+        }
         recording_ = false;
+    }
+
+    // The same with no projected DOF: every recorded entry in the pattern.
+    void finish_pattern(Eigen::SparseMatrix<double>& matrix, Index n) {
+        finish_pattern(matrix, n, std::vector<char>(static_cast<std::size_t>(n), 0));
     }
 
     // The same for block rows (B must be `block`): the blocks touched, plus the diagonal ones.

@@ -3,7 +3,9 @@
 //
 // The matrix is assembled (assembly.h) from the same blocks the matrix-free product uses, on a
 // pattern recorded once at creation, then CHOLMOD's symbolic analysis; every step only adds values
-// at the recorded slots (no allocation) before the numeric factorisation.
+// at the recorded slots (no allocation) before the numeric factorisation. The pattern leaves out the
+// couplings of the projected DOFs (their rows and columns are cleared by the projection), so the
+// ordering and the factor are those of the free DOFs' graph.
 #pragma once
 
 #include <Eigen/CholmodSupport>
@@ -18,15 +20,27 @@
 
 namespace sofac {
 
-// Eigen's CHOLMOD LDL^T, with access to the factor for cholmod_solve2.
-class CholmodLdlt : public Eigen::CholmodSimplicialLDLT<Eigen::SparseMatrix<double>> {
+// The factorisation a direct solver runs: L D L^T (SOFA's SparseLDLSolver, and the solvers sofac
+// solves the same way), CHOLMOD's simplicial kernel; or L L^T (SOFA's Cholesky solvers), with
+// CHOLMOD's supernodal kernel (dense blocks through BLAS and LAPACK) when CHOLMOD would choose it
+// (flops / nnz(L) >= 40) and the factorisation is big enough, else its simplicial kernel.
+enum class Factorization { LDLT, LLT };
+
+// The supernodal kernel's fixed costs per supernode (BLAS calls, an OpenMP team per parallel
+// region) make it slower below ~1e8 flops per factorisation (W3's beam at 6x6x20, 8x8x30 and
+// 10x10x50 nodes, the reference BLAS: 24% slower at 2.8e7 flops, 8% faster at 2.5e8, 25% at
+// 1.9e9); it also allocates (see factor()).
+inline constexpr double kSupernodalFlops = 1e8;
+
+// Eigen's CHOLMOD wrapper (settings, symbolic analysis), with access to the factor.
+class Cholmod : public Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>> {
 public:
     cholmod_factor* factor() const { return m_cholmodFactor; }
 };
 
 struct DirectSolver {
     Eigen::SparseMatrix<double> matrix;
-    CholmodLdlt factorization;
+    Cholmod factorization;
     Assembler assembler;
     std::vector<char> fixed;  // per scalar DOF: projected out (row and column cleared, diagonal 1)
     Eigen::VectorXd rhs, solution;
@@ -49,8 +63,24 @@ struct DirectSolver {
         solution.resize(n);
     }
 
-    // Once, on the recorded pattern: CHOLMOD's symbolic analysis (ordering, elimination tree).
-    void analyze() { factorization.analyzePattern(matrix); }
+    // Once, on the recorded pattern: CHOLMOD's symbolic analysis (ordering, elimination tree, and
+    // for L L^T the choice of the supernodal kernel).
+    void analyze(Factorization kind) {
+        cholmod_common& common = factorization.cholmod();
+        if (kind == Factorization::LDLT) {
+            factorization.setMode(Eigen::CholmodLDLt);  // simplicial, L D L^T, the factor kept as is
+            factorization.analyzePattern(matrix);
+            return;
+        }
+        factorization.setMode(Eigen::CholmodAuto);  // supernodal or simplicial, kept as is
+        common.final_ll = 1;                        // simplicial: L L^T as well
+        factorization.analyzePattern(matrix);
+        const cholmod_factor* L = factorization.factor();
+        if (L != nullptr && L->is_super && common.fl < kSupernodalFlops) {
+            common.supernodal = CHOLMOD_SIMPLICIAL;
+            factorization.analyzePattern(matrix);
+        }
+    }
 
     // Projective constraints: rows and columns of constrained DOFs cleared, diagonal 1.
     void project() {
@@ -60,22 +90,31 @@ struct DirectSolver {
     }
 
     // After the values are assembled: the projection, then the numeric factorisation. What
-    // cholmod_factorize does for a simplicial factor (Eigen's factorize calls it), step by step, so
-    // that the permuted upper triangle it factors, S = triu(A(p,p)'), is allocated once and then
-    // refilled in place (cholmod_factorize allocates and frees it on every call).
+    // cholmod_factorize does, step by step, so that the permuted triangle it factors is allocated
+    // once and then refilled in place (cholmod_factorize allocates and frees it on every call).
+    // Simplicial: S = triu(A(p,p)') of the lower triangle, factored by cholmod_rowfac (no
+    // allocation). Supernodal: S = tril(A(p,p)') of the upper triangle (what SOFA's CSparse
+    // Cholesky reads, and one transpose instead of cholmod_factorize's two for a lower one),
+    // factored by cholmod_super_numeric, which still allocates in every call: its update
+    // workspace, and one OpenMP team per parallel region (Debian's CHOLMOD is built with OpenMP;
+    // a region whose `if` clause is false still gets a team), ~9 per supernode: 8,700 per step
+    // on W3's beam (negligible next to its 1.9 GFlop, but not allocation-free).
     void factor() {
         project();
         cholmod_common& common = factorization.cholmod();
         cholmod_factor* L = factorization.factor();
-        const Eigen::SparseMatrix<double>& values = matrix;
-        cholmod_sparse a = Eigen::viewAsCholmod(values.selfadjointView<Eigen::Lower>());
-        if (L == nullptr || L->is_super || a.stype >= 0) {  // not the simplicial lower case: Eigen's path
+        if (L == nullptr) {  // no analysis: Eigen's path, which reports the failure
             factorization.factorize(matrix);
             ok = factorization.info() == Eigen::Success;
             return;
         }
+        const Eigen::SparseMatrix<double>& values = matrix;
+        const bool super = L->is_super;
+        cholmod_sparse a = super ? Eigen::viewAsCholmod(values.selfadjointView<Eigen::Upper>())
+                                 : Eigen::viewAsCholmod(values.selfadjointView<Eigen::Lower>());
         common.status = CHOLMOD_OK;
-        cholmod_allocate_work(a.nrow, 2 * a.nrow, 0, &common);  // kept in `common` after the first call
+        // Kept in `common` after the first call: transposes need 2n, the supernodal kernel 2n + 5 nsuper.
+        cholmod_allocate_work(a.nrow, 2 * a.nrow + (super ? 5 * L->nsuper : 0), 0, &common);
         int* perm = L->ordering == CHOLMOD_NATURAL ? nullptr : static_cast<int*>(L->Perm);
         if (permuted_ == nullptr) permuted_ = cholmod_ptranspose(&a, 2, perm, nullptr, 0, &common);
         else cholmod_transpose_sym(&a, 2, perm, permuted_, &common);
@@ -84,10 +123,15 @@ struct DirectSolver {
             return;
         }
         double beta[2] = {0.0, 0.0};
-        L->is_ll = common.final_ll ? 1 : 0;
-        cholmod_rowfac(permuted_, nullptr, beta, 0, a.nrow, L, &common);
-        if (common.status >= CHOLMOD_OK && !common.final_asis)
-            cholmod_change_factor(L->xtype, L->is_ll, 0, common.final_pack, common.final_monotonic, L, &common);
+        if (super) {
+            cholmod_super_numeric(permuted_, nullptr, beta, L, &common);
+        } else {
+            L->is_ll = common.final_ll ? 1 : 0;
+            cholmod_rowfac(permuted_, nullptr, beta, 0, a.nrow, L, &common);
+            if (common.status >= CHOLMOD_OK && !common.final_asis)
+                cholmod_change_factor(L->xtype, L->is_ll, 0, common.final_pack, common.final_monotonic, L,
+                                      &common);
+        }
         ok = common.status >= CHOLMOD_OK && L->minor == L->n;
     }
 
@@ -107,7 +151,8 @@ struct DirectSolver {
         b.dtype = CHOLMOD_DOUBLE;
         // The simplicial solve leaves its workspace Y (4 x n, leading dimension 4) marked as 1 x n,
         // which would make the next call reallocate it: restore the shape it was allocated with.
-        if (y_ && y_->nzmax >= 4 * y_->ncol) y_->nrow = y_->d = 4;
+        // (The supernodal solve's Y, n x 1, keeps its shape.)
+        if (y_ && !factorization.factor()->is_super && y_->nzmax >= 4 * y_->ncol) y_->nrow = y_->d = 4;
         if (!cholmod_solve2(CHOLMOD_A, factorization.factor(), &b, nullptr, &x_, nullptr, &y_, &e_,
                             &factorization.cholmod())) {
             solution.setConstant(std::numeric_limits<double>::quiet_NaN());

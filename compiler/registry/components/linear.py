@@ -122,6 +122,7 @@ SPARSE_LDL_SOLVER = ComponentSpec(
 SPARSE_CHOLESKY_SOLVER = ComponentSpec(
     name="SparseCholeskySolver",
     kernel="direct",
+    role="llt",  # factors L L^T (CHOLMOD's L L^T), where SparseLDLSolver factors L D L^T
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
     doc="Direct sparse Cholesky (L L^T) factorisation. Moved out of SOFA's main repository into the "
@@ -154,10 +155,11 @@ SPARSE_LU_SOLVER = ComponentSpec(
 )
 
 
-def _eigen(name: str, what: str) -> ComponentSpec:
+def _eigen(name: str, what: str, role: str = "") -> ComponentSpec:
     return ComponentSpec(
         name=name,
         kernel="direct",
+        role=role,
         category=Category.LINEAR_SOLVER,
         module=_DIRECT,
         doc=f"Direct sparse {what} factorisation (Eigen) of the assembled matrix.",
@@ -170,7 +172,7 @@ def _eigen(name: str, what: str) -> ComponentSpec:
 
 
 EIGEN_SIMPLICIAL_LDLT = _eigen("EigenSimplicialLDLT", "L D L^T")
-EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T")
+EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T", role="llt")
 EIGEN_SPARSE_LU = _eigen("EigenSparseLU", "LU")
 EIGEN_SPARSE_QR = _eigen("EigenSparseQR", "QR")
 
