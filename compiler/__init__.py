@@ -16,11 +16,21 @@ from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = ["SceneError", "Simulation", "SimulationDiverged", "SofacError", "__version__", "load", "sweep"]
+__all__ = [
+    "ContactNotCompiled",
+    "SceneError",
+    "Simulation",
+    "SimulationDiverged",
+    "SofacError",
+    "__version__",
+    "load",
+    "sweep",
+]
 
 _LAZY = {
     "SceneError": "diagnostics",
     "SofacError": "diagnostics",
+    "ContactNotCompiled": "loader",
     "Simulation": "loader",
     "SimulationDiverged": "loader",
     "load": "loader",

@@ -167,6 +167,7 @@ def render(plan: Plan) -> str:
             any_assembled_cg=any(g.assembled_cg for g in plan.groups),
             dt=plan.dt,
             threads=plan.threads,
+            guard=plan.contact_guard,
             parallel_groups=parallel_groups,
             ptr=_ptr,
             size=_size,

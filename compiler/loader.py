@@ -34,6 +34,11 @@ class ParameterNeedsReset(SofacError):
     """A parameter read only when the simulation is initialised was changed between steps."""
 
 
+class ContactNotCompiled(SofacError):
+    """Two collision models could touch, and sofac does not compile contact response yet: the
+    simulation stopped before the step that SOFA would have run with a contact (see plan.ContactGuard)."""
+
+
 Snapshot = dict[str, tuple[np.ndarray, np.ndarray]]  # state path -> (position, velocity) copies
 
 
@@ -251,6 +256,10 @@ class Simulation:
             )
         self._solver_of = {s.path: g for g in self.plan.groups for s in g.states}
         self._independent = [s for s in self._states.values() if not s.info.mapped]
+        guard = self.plan.contact_guard
+        self._touching = (
+            self._views[[id(b) for b in self.plan.buffers].index(id(guard.touching))] if guard else None
+        )
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
         self._snapshot: Snapshot | None = None  # preallocated copies, refilled at each chunk
@@ -324,6 +333,8 @@ class Simulation:
             done = self._step_saving(count) if self._saving else int(self._native.step(count))
             self._steps += done
             remaining -= count
+            if self._touching is not None and self._touching[0] >= 0:
+                raise self._contact_error(int(self._touching[0]))
             if done < count or not self._finite():
                 raise self._non_finite_error()
             if energy_bound is not None or self._energy_guard is not None:
@@ -346,6 +357,17 @@ class Simulation:
                 if not self._finite():
                     break  # step() reports it
         return done
+
+    def _contact_error(self, pair: int) -> ContactNotCompiled:
+        guard = self.plan.contact_guard
+        assert guard is not None
+        a, b = (int(i) for i in guard.pairs.initial.reshape(-1, 2)[pair])
+        return ContactNotCompiled(
+            f"step {self._steps + 1} (t={self.time:g}): collision models {guard.models[a][0]} and "
+            f"{guard.models[b][0]} could touch (their boxes, grown by radius and alarm distance, overlap); "
+            f"sofac does not compile contact response yet, so it stopped before this step instead of "
+            f"running it without the contact. The states are those after step {self._steps}."
+        )
 
     def guard_energy(self, factor: float | None, *, scale: float | None = None) -> None:
         """Make ``step()`` raise SimulationDiverged when the total energy gains more than

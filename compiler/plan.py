@@ -227,6 +227,20 @@ class Group:
 
 
 @dataclass
+class ContactGuard:
+    """Collision models that could touch, while contact response is not compiled: before every
+    step, each model's box (its state's points grown by its radius and the alarm distance) is
+    tested against the others', and the step stops before the first pair that touches. A run
+    that ends without a stop had no contact: it is SOFA's, exactly."""
+
+    models: list[tuple[str, StatePlan]]  # (origin, state) per collision model
+    margins: Buffer  # per model: its radius plus the intersection method's alarm distance
+    pairs: Buffer  # i64 (model, model) rows: the pairs SOFA would test
+    boxes: Buffer  # scratch, 6 numbers per model
+    touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
+
+
+@dataclass
 class Plan:
     scene_file: str
     dt: Buffer
@@ -245,6 +259,7 @@ class Plan:
     # OpenMP threads for large element loops and independent groups (1: serial, built without OpenMP)
     threads: int = 1
     rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
+    contact_guard: ContactGuard | None = None
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
@@ -273,6 +288,8 @@ class _Planner:
         self.prune = prune
         self.rigid_model = rigid_model
         self.threads = threads
+        self.guarded: list[CheckedComponent] = []  # collision models that could touch (ContactGuard)
+        self.guard: ContactGuard | None = None
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
@@ -351,6 +368,7 @@ class _Planner:
             init_only=self._init_only(groups),
             threads=self.threads,
             rigid_model=self.rigid_model,
+            contact_guard=self.guard,
         )
 
     def _init_only(self, groups: list[Group]) -> frozenset[str]:
@@ -415,6 +433,16 @@ class _Planner:
                 if effect == "gravity" and self.gravity.key in self.pruned:
                     continue
                 effects.append((effect, origin_of(component), spec.category.value))
+        if self.guard is not None:
+            for origin, state in self.guard.models:
+                effects.append(
+                    (
+                        "collision",
+                        origin,
+                        f"contact guard on {state.path}: its box is tested against the other models' "
+                        "before each step, which stops before a contact (response not compiled)",
+                    )
+                )
         for key, why in self.pruned.items():
             effects.append(("pruned", key, why))
         effects.extend(on_read)
@@ -435,12 +463,21 @@ class _Planner:
         """Every component that takes part in the step must have a lowering."""
         has_pipeline = any(c.category is Category.COLLISION_PIPELINE for c in self.checked)
         contacts = has_pipeline and self._contacts_possible()
+        models = [c for c in self.checked if c.category is Category.COLLISION_MODEL]
+        # Models of different nodes could touch: guarded (the step stops before a contact), unless
+        # a model may touch itself, which a box cannot rule out.
+        guard = contacts and not any(self.value(c.component, "selfCollision") for c in models)
         for checked in self.checked:
             spec = checked.spec
             if spec is None:
                 continue
-            if checked.category is Category.COLLISION_MODEL and contacts:
-                self.unsupported(checked, "collision detection and response are not compiled yet")
+            if checked.category is Category.COLLISION_MODEL and contacts and guard:
+                if self.value(checked.component, "active") is not False:
+                    self.guarded.append(checked)  # an effect of the step (see _contact_guard)
+                else:
+                    self.ignored.append((checked.component, "inactive collision model"))
+            elif checked.category is Category.COLLISION_MODEL and contacts:
+                self.unsupported(checked, "self-collision detection and response are not compiled yet")
             elif checked.category is Category.TOPOLOGICAL_MAPPING and self._feeds_a_state(checked):
                 self.unsupported(checked, "its output topology sizes a MechanicalObject; not evaluated yet")
             elif checked.category is Category.COLLISION_MODEL:
@@ -598,9 +635,60 @@ class _Planner:
                 self._screen_variational(group, owner)
             if group.routed:
                 self._route_through_mappings(group)
+        self.guard = self._contact_guard()
         if self.prune:
             self._leave_unread_out(list(groups.values()))
         return list(groups.values())
+
+    def _contact_guard(self) -> ContactGuard | None:
+        """The boxes the step tests before it runs (see ContactGuard): one per collision model on a
+        state, the pairs SOFA would test (models of different nodes, not both static)."""
+        models: list[tuple[CheckedComponent, StatePlan]] = []
+        for checked in self.guarded:
+            state = self.state_of(checked)
+            if state is None or state.datatype.coord_size < 3:
+                self.unsupported(checked, "a collision model needs a MechanicalObject with 3D positions")
+                continue
+            models.append((checked, state))
+        if len(models) < 2:
+            return None
+        alarm = max(
+            (
+                float(self.value(c.component, "alarmDistance") or 0.0)
+                for c in self.checked
+                if c.category is Category.COLLISION_PIPELINE and c.spec and c.spec.field("alarmDistance")
+            ),
+            default=0.0,
+        )
+        margins, static = [], []
+        for checked, _state in models:
+            spec = checked.spec
+            assert spec is not None
+            radius = 0.0
+            if spec.field("radius"):  # spheres: the largest radius
+                radii = self.value(checked.component, "listRadius")
+                radius = float(np.max(radii)) if radii is not None and np.size(radii) else 0.0
+                radius = radius or float(self.value(checked.component, "radius") or 1.0)
+            margins.append(radius + alarm)
+            static.append(
+                not self.value(checked.component, "simulated") and not self.value(checked.component, "moving")
+            )
+        pairs = [
+            (a, b)
+            for a in range(len(models))
+            for b in range(a + 1, len(models))
+            if models[a][0].component.node is not models[b][0].component.node
+            and not (static[a] and static[b])
+        ]
+        if not pairs:
+            return None
+        return ContactGuard(
+            models=[(origin_of(c.component), state) for c, state in models],
+            margins=self.buffer("/", "contact_margins", margins),
+            pairs=self.buffer("/", "contact_pairs", np.array(pairs, dtype=np.int64), "i64", columns=2),
+            boxes=self.buffer("/", "contact_boxes", np.zeros(6 * len(models)), columns=6, role="scratch"),
+            touching=self.buffer("/", "contact_touching", [-1], "i64", role="state"),
+        )
 
     def _route_through_mappings(self, group: Group) -> None:
         """The rows of J for every mapped state an assembled block lands on, and for their own
@@ -668,6 +756,8 @@ class _Planner:
         kinds = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy", "init")
         code = [line for g in groups for kind in kinds for op in getattr(g, kind) for line in op.code]
         read = states_named(code) | {id(p.state) for g in groups for p in g.projections}
+        if self.guard is not None:  # the contact guard reads its models' positions before each step
+            read |= {id(state) for _, state in self.guard.models}
         mappings = [m for g in groups for m in g.mappings]
         growing = True
         while growing:  # a read state's mapping reads its inputs (every input of a multi-mapping)

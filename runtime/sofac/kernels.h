@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cmath>
+#include <limits>
 
 #include "types.h"
 
@@ -494,6 +495,34 @@ inline void scale(double* a, double factor, Index size) {
 // infinite or NaN (the order of the sum does not matter: it is 0 or NaN).
 inline bool all_finite(const double* a, Index size) {
     return !std::isnan((Eigen::Map<const Eigen::ArrayXd>(a, size) * 0.0).sum());
+}
+
+// The axis-aligned box of n points (their first three coordinates, `stride` numbers apart), grown
+// by `margin` on every side: box = {min x, min y, min z, max x, max y, max z}.
+inline void bounding_box(const double* x, Index n, int stride, double margin, double* box) {
+    for (int d = 0; d < 3; ++d) {
+        box[d] = std::numeric_limits<double>::infinity();
+        box[3 + d] = -std::numeric_limits<double>::infinity();
+    }
+    for (Index i = 0; i < n; ++i)
+        for (int d = 0; d < 3; ++d) {
+            box[d] = std::min(box[d], x[stride * i + d]);
+            box[3 + d] = std::max(box[3 + d], x[stride * i + d]);
+        }
+    for (int d = 0; d < 3; ++d) {
+        box[d] -= margin;
+        box[3 + d] += margin;
+    }
+}
+
+// The first of n pairs (rows of two box indices) whose boxes overlap, or -1.
+inline Index first_touching_pair(const double* boxes, const Index* pairs, Index n) {
+    for (Index k = 0; k < n; ++k) {
+        const double* a = boxes + 6 * pairs[2 * k];
+        const double* b = boxes + 6 * pairs[2 * k + 1];
+        if (a[0] <= b[3] && b[0] <= a[3] && a[1] <= b[4] && b[1] <= a[4] && a[2] <= b[5] && b[2] <= a[5]) return k;
+    }
+    return -1;
 }
 
 // Index of the first non-finite number, or -1.
