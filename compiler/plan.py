@@ -1548,6 +1548,12 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         return
     if prefix != "tetra_fem" and method == 3:
         method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
+    if prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0:
+        planner.unsupported(checked, "plasticity (plasticMaxThreshold > 0) is not compiled yet")
+        return
+    if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
+        planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
+        return
     topology = _topology_cells(planner, checked) or {}
     cells = topology.get(kind)
     if (cells is None or not cells.size) and prefix == "tetra_fem":
