@@ -27,7 +27,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import filelock
 import platformdirs
 
 from . import __version__
@@ -185,6 +184,8 @@ def build(
     entry = root / key[:2] / key
     if _valid_entry(entry, key, name):
         return Built(entry / name, key, True, 0.0)
+    import filelock  # only a build takes the lock: a cached entry loads without importing it
+
     (root / "locks").mkdir(parents=True, exist_ok=True)
     with filelock.FileLock(str(root / "locks" / f"{key}.lock"), timeout=600):
         if _valid_entry(entry, key, name):  # built by another process meanwhile
