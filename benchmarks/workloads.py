@@ -8,12 +8,14 @@ For each workload, in this one process:
   ``w2.cpp``, ``w3.cpp``), compiled with g++ and the flags sofac uses for large scenes
   (``sofac.build.LARGE_SCENE_FLAGS`` without the shared-library ones; W3 linked with CHOLMOD) and
   timed inside the C++ program, batch by batch, after the same warm-up;
-- **NumPy / SciPy**: vectorised NumPy (W1) and a ``scipy.sparse`` matrix with
-  ``scipy.sparse.linalg.cg`` (W2), when SciPy is installed;
+- **NumPy / SciPy**: vectorised NumPy (W1); a ``scipy.sparse`` matrix with 25 CG iterations in
+  NumPy (W2, W3) or SuperLU (``scipy.sparse.linalg.splu``, W3's direct variant ``w3ldl``), when
+  SciPy is installed;
 - **SOFA**: SOFA's measured figures from ``shared/reference/sofa/timings.md`` (not run here).
 
-W3 (the corotational tetrahedral cantilever) has no NumPy version; its SOFA figure is that of
-SOFA's own beam scene (same counts). W3asm is W3 with CGLinearSolver on the assembled matrix
+W3 (the corotational tetrahedral cantilever) is vectorised over the elements with ``np.einsum``
+(``scipy_w3``: w3.cpp's formulas, K assembled as a ``scipy.sparse`` matrix each step); its SOFA
+figure is that of SOFA's own beam scene (same counts). W3asm is W3 with CGLinearSolver on the assembled matrix
 (``w3_beam_cg25_assembled.scn``), against the assembled hand-written loop, with sofac's
 matrix-free W3 beside it. Its sparse direct variant (b) is timed with SOFA's SparseLDLSolver
 (``w3ldl``, L D L^T) and SparseCholeskySolver (``w3chol``, L L^T), both against the hand-written
@@ -341,6 +343,131 @@ def scipy_w2(
     return times, x, fewest[0]
 
 
+class BeamArrays:
+    """The W3 beam as NumPy arrays and its rest state, computed as w3.cpp does (independently of
+    sofac): per tetrahedron the local rest edges r_1..r_3 in SOFA's "large" frame, the shape
+    function gradients g_0..g_3 (rows of [r_1 r_2 r_3]^-1, g_0 = -(g_1 + g_2 + g_3)), V lambda and
+    V mu; the 3x3 blocks' DOF indices for assembling K."""
+
+    def __init__(self, beam: scenegen.Beam) -> None:
+        self.x0 = np.array(beam.positions, dtype=float)
+        self.tet = np.array(beam.tetrahedra, dtype=np.int64)
+        self.n = len(self.x0)
+        self.free = np.ones(self.n, dtype=bool)
+        self.free[list(beam.fixed)] = False
+        self.vertex_mass = scenegen.BEAM_TOTAL_MASS / self.n
+        nu, young = scenegen.BEAM_POISSON, scenegen.BEAM_YOUNG
+        frames = self.frames(self.x0)
+        self.rest = self.local_edges(frames, self.x0)  # (e, k, i): local coordinate i of node k + 1
+        inverse = np.linalg.inv(self.rest.transpose(0, 2, 1))  # the columns are r_1..r_3
+        self.grad = np.concatenate([-inverse.sum(axis=1, keepdims=True), inverse], axis=1)  # (e, 4, 3)
+        volume = np.abs(np.linalg.det(self.rest)) / 6.0
+        self.vlambda = volume * young * nu / ((1 + nu) * (1 - 2 * nu))
+        self.vmu = volume * young / (2 * (1 + nu))
+        dofs = 3 * self.tet[:, :, None] + np.arange(3)  # (e, node a, i)
+        # block (a, b) entry (i, j) of each element: row dof (a, i), column dof (b, j)
+        self.rows = np.broadcast_to(dofs[:, :, None, :, None], (len(self.tet), 4, 4, 3, 3)).ravel()
+        self.cols = np.broadcast_to(dofs[:, None, :, None, :], (len(self.tet), 4, 4, 3, 3)).ravel()
+
+    def frames(self, x: np.ndarray) -> np.ndarray:
+        """Each element's rotation (world -> local): rows x = edge 0->1, z = normal of (0->1, 0->2),
+        y = z cross x."""
+        p = x[self.tet[:, :3]]
+        ex = p[:, 1] - p[:, 0]
+        ex /= np.sqrt(np.einsum("ei,ei->e", ex, ex))[:, None]
+        ez = np.cross(ex, p[:, 2] - p[:, 0])
+        ez /= np.sqrt(np.einsum("ei,ei->e", ez, ez))[:, None]
+        return np.stack([ex, np.cross(ez, ex), ez], axis=1)
+
+    def local_edges(self, frames: np.ndarray, x: np.ndarray) -> np.ndarray:
+        p = x[self.tet]
+        return np.einsum("eij,ekj->eki", frames, p[:, 1:] - p[:, :1])
+
+    def forces_and_stiffness(self, x: np.ndarray) -> tuple[np.ndarray, Any]:
+        """f (3 n) = m g + elastic forces, and K (the positive stiffness, f = -K u) as a CSR matrix."""
+        import scipy.sparse as sp
+
+        frames = self.frames(x)
+        d = self.local_edges(frames, x) - self.rest
+        H = np.einsum("eki,ekj->eij", d, self.grad[:, 1:])  # local displacement gradient
+        trace = np.einsum("eii->e", H)
+        S = self.vmu[:, None, None] * (H + H.transpose(0, 2, 1)) + (self.vlambda * trace)[
+            :, None, None
+        ] * np.eye(3)
+        local = -np.einsum("eij,eaj->eai", S, self.grad)
+        world = np.einsum("eji,eaj->eai", frames, local)  # R^T f_local
+        f = np.zeros(3 * self.n)
+        f[1::3] = self.vertex_mass * scenegen.GRAVITY[1]
+        f += np.bincount((3 * self.tet[:, :, None] + np.arange(3)).ravel(), world.ravel(), 3 * self.n)
+        G = np.einsum("eji,eaj->eai", frames, self.grad)  # world gradients R^T g
+        dots = np.einsum("eai,ebi->eab", G, G)
+        blocks = (
+            self.vlambda[:, None, None, None, None] * np.einsum("eai,ebj->eabij", G, G)
+            + self.vmu[:, None, None, None, None] * np.einsum("ebi,eaj->eabij", G, G)
+            + (self.vmu[:, None, None] * dots)[:, :, :, None, None] * np.eye(3)
+        )
+        size = 3 * self.n
+        return f, sp.csr_matrix((blocks.ravel(), (self.rows, self.cols)), shape=(size, size))
+
+
+def scipy_w3(
+    beam: scenegen.Beam, direct: bool, warmup: int, steps: int, batches: int, extra: int = 0
+) -> tuple[list[float], np.ndarray, int]:
+    """W3 with SciPy, as w3.cpp and SOFA's EulerImplicitSolver do it: each step the element
+    rotations, the forces and K assembled as a scipy.sparse matrix, b = h (f - rm M v - (h + rk) K v)
+    on the free DOFs, then ((1 + h rm) M + h (h + rk) K) dv = b solved by 25 CG iterations in NumPy
+    (SOFA's rules, as scipy_w2) or, ``direct``, by SuperLU (scipy.sparse.linalg.splu) on the free
+    DOFs' matrix; v += dv, x += h v. ``extra`` untimed steps follow the batches. Also returns the
+    fewest CG iterations any step ran (0 for the direct solve)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    arrays = BeamArrays(beam)
+    h, m = scenegen.W3_DT, arrays.vertex_mass
+    rk = rm = scenegen.BEAM_RAYLEIGH
+    mfact, kfact = 1.0 + h * rm, h * (h + rk)
+    size = 3 * arrays.n
+    free_mask = np.repeat(arrays.free, 3)
+    free = free_mask.astype(float)
+    x, v = arrays.x0.ravel().copy(), np.zeros(size)
+    identity = sp.identity(size, format="csr")
+    fewest = [0 if direct else scenegen.CG_ITERATIONS]
+
+    def step() -> None:
+        f, K = arrays.forces_and_stiffness(x.reshape(-1, 3))
+        b = free * (h * (f - rm * m * v - (h + rk) * (K @ v)))
+        A = (mfact * m) * identity + kfact * K
+        dv = np.zeros(size)
+        if direct:
+            reduced = A[free_mask][:, free_mask].tocsc()
+            dv[free_mask] = spla.splu(reduced, permc_spec="MMD_AT_PLUS_A").solve(b[free_mask])
+        else:
+            r, p = b, np.zeros(size)
+            rho_previous = 1.0
+            done = 0
+            if r @ r != 0.0:
+                for iteration in range(1, scenegen.CG_ITERATIONS + 1):
+                    rho = r @ r
+                    p = r + (rho / rho_previous) * p if iteration > 1 else r.copy()
+                    q = free * (A @ p)
+                    den = p @ q
+                    if den == 0.0:
+                        break
+                    alpha = rho / den
+                    dv += alpha * p
+                    r = r - alpha * q
+                    rho_previous = rho
+                    done = iteration
+            fewest[0] = min(fewest[0], done)
+        v[...] += dv
+        x[...] += h * v
+
+    times = _timed(step, warmup, steps, batches)
+    for _ in range(extra):
+        step()
+    return times, x.reshape(-1, 3), fewest[0]
+
+
 def _timed(step: Callable[[], None], warmup: int, steps: int, batches: int) -> list[float]:
     for _ in range(warmup):
         step()
@@ -441,7 +568,7 @@ def run_cloth(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[lis
 
 def run_beam(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[list[Row], dict[str, float]]:
     """W3 (CG), W3 with CG on the assembled matrix (w3asm, with sofac's matrix-free CG beside it)
-    or W3 with the sparse direct solver: sofac and the hand-written loops; also the
+    or W3 with the sparse direct solver: sofac, the hand-written loops and (w3, w3ldl) SciPy; also the
     relative difference of the mean tip displacement (the z = L nodes) of each loop from sofac's,
     after all the steps run and, for CG, after ``check_steps`` (25 CG iterations on 15,000 DOFs
     amplify rounding differences exponentially from one step to the next, as in W2: ~6e-13 after
@@ -512,6 +639,27 @@ def run_beam(which: str, setup: Setup, log: Callable[[str], None]) -> tuple[list
         if sofac_short is not None:
             final = run_handwritten(exe, input_file, [*args[:-3], 0, short, 1])[1]
             checks[f"tip displacement, sofac vs {implementation}, after {short} steps"] = relative_norm(
+                tip_displacement(final) - sofac_short, sofac_short
+            )
+    if which in ("w3", "w3ldl") and not have_scipy():
+        log(f"{label}: SciPy not installed, skipped")
+    elif which in ("w3", "w3ldl"):
+        log(f"{label}: SciPy")
+        # CG is slower than the C++ loops: fewer timed steps per batch, then untimed steps up to
+        # the same step count (the direct solve times as many steps as the others)
+        np_steps = steps if direct else max(1, steps // 10)
+        times, final, fewest = scipy_w3(beam, direct, warmup, np_steps, batches, (steps - np_steps) * batches)
+        if direct:
+            note = "scipy.sparse K; SuperLU (splu, MMD on A^T + A) on the free DOFs, not CHOLMOD"
+        else:
+            note = f"scipy.sparse K, CG in NumPy; CG iterations per step >= {fewest}"
+        rows.append(row(which, "SciPy", times, note, final))
+        checks[f"tip displacement, sofac vs SciPy, after {total} steps"] = relative_norm(
+            tip_displacement(final) - sofac_tip, sofac_tip
+        )
+        if sofac_short is not None:
+            final = scipy_w3(beam, direct, 0, short, 1)[1]
+            checks[f"tip displacement, sofac vs SciPy, after {short} steps"] = relative_norm(
                 tip_displacement(final) - sofac_short, sofac_short
             )
     return rows, checks
