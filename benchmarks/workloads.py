@@ -265,6 +265,32 @@ class ClothArrays:
         return f, u, d, intensity
 
 
+def numpy_cg(A: Any, b: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, int]:
+    """CGLinearSolver's rules at tolerance = threshold = 0 (handwritten/cg.h): from 0, at most
+    CG_ITERATIONS iterations, stopping once r.r or p.Ap is exactly 0; every product projected by
+    ``free`` (1 for a free DOF, 0 for a fixed one). Returns the solution and the iterations done."""
+    dv = np.zeros_like(b)
+    r, p = b.copy(), np.zeros_like(b)
+    rho_previous = 1.0
+    done = 0
+    if r @ r != 0.0:
+        for iteration in range(1, scenegen.CG_ITERATIONS + 1):
+            rho = r @ r
+            if iteration > 1 and rho == 0.0:
+                break
+            p = r + (rho / rho_previous) * p if iteration > 1 else r.copy()
+            q = free * (A @ p)
+            den = p @ q
+            if den == 0.0:
+                break
+            alpha = rho / den
+            dv += alpha * p
+            r -= alpha * q
+            rho_previous = rho
+            done = iteration
+    return dv, done
+
+
 def numpy_w1(
     cloth: scenegen.Cloth, warmup: int, steps: int, batches: int, extra: int = 0
 ) -> tuple[list[float], np.ndarray]:
@@ -313,26 +339,7 @@ def scipy_w2(
         flat = blocks.reshape(len(t), 9).ravel()
         K = sp.csr_matrix((np.concatenate([-flat, -flat, flat, flat]), (rows, cols)), shape=(size, size))
         A = m * sp.identity(size, format="csr") - (h * h) * K
-        r = free * (h * (f.ravel() + h * (K @ v.ravel())))
-        dv = np.zeros(size)
-        p = np.zeros(size)
-        rho_previous = 1.0
-        done = 0
-        if r @ r != 0.0:
-            for iteration in range(1, scenegen.CG_ITERATIONS + 1):
-                rho = r @ r
-                if iteration > 1 and rho == 0.0:
-                    break
-                p = r + (rho / rho_previous) * p if iteration > 1 else r.copy()
-                q = free * (A @ p)
-                den = p @ q
-                if den == 0.0:
-                    break
-                alpha = rho / den
-                dv += alpha * p
-                r -= alpha * q
-                rho_previous = rho
-                done = iteration
+        dv, done = numpy_cg(A, free * (h * (f.ravel() + h * (K @ v.ravel()))), free)
         fewest[0] = min(fewest[0], done)
         v[...] += dv.reshape(-1, 3)
         x[...] += h * v
@@ -442,22 +449,7 @@ def scipy_w3(
             reduced = A[free_mask][:, free_mask].tocsc()
             dv[free_mask] = spla.splu(reduced, permc_spec="MMD_AT_PLUS_A").solve(b[free_mask])
         else:
-            r, p = b, np.zeros(size)
-            rho_previous = 1.0
-            done = 0
-            if r @ r != 0.0:
-                for iteration in range(1, scenegen.CG_ITERATIONS + 1):
-                    rho = r @ r
-                    p = r + (rho / rho_previous) * p if iteration > 1 else r.copy()
-                    q = free * (A @ p)
-                    den = p @ q
-                    if den == 0.0:
-                        break
-                    alpha = rho / den
-                    dv += alpha * p
-                    r = r - alpha * q
-                    rho_previous = rho
-                    done = iteration
+            dv, done = numpy_cg(A, b, free)
             fewest[0] = min(fewest[0], done)
         v[...] += dv
         x[...] += h * v
