@@ -97,10 +97,11 @@ class _ProjectionView:
 
 
 class _GroupView:
+    """A group as the template reads it: views of its states, mappings and projections, and the
+    values derived for the template; any other attribute is the group's own."""
+
     def __init__(self, group: Group) -> None:
-        self.ident = group.ident
-        self.scheme = group.scheme
-        self.symplectic = group.symplectic
+        self._group = group
         self.origin = origin_of(group.solver)
         self.states = [_StateView(s) for s in group.states]
         self.mapped = [_StateView(s) for s in group.mapped]
@@ -108,44 +109,25 @@ class _GroupView:
         self.mappings = [_MappingView(m) for m in group.mappings]
         self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
         self.on_read = [_MappingView(m) for m in group.on_read]
-        self.forces = group.forces
-        self.accelerations = group.accelerations
         self.projections = [_ProjectionView(p) for p in group.projections]
-        self.mass_dx = group.mass_dx
-        self.stiffness_dx = group.stiffness_dx
-        self.energy = group.energy
-        self.init = group.init
-        self.direct = group.direct
-        self.pcg = group.pcg
-        self.preconditioner = group.preconditioner
-        self.ssor_omega = group.ssor_omega
         # an assembled system matrix: assemble_<g>, its pattern at init
         self.matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
-        self.assembled_cg = group.assembled_cg
         # The instance member holding it: a direct solver (CHOLMOD, also the preconditioners'
         # container) or the assembled CG's block rows and vectors.
         self.system = f"cg_{group.ident}" if group.assembled_cg else f"direct_{group.ident}"
         self.cg_block = group.cg_block if group.assembled_cg else 0
-        self.assemble = group.assemble
-        self.system_size = group.system_size
         self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
         inert = group.inert_preconditioner
         self.inert_origin = origin_of(inert) if inert is not None else ""
         self.marks = [p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and self.matrix]
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
-        self.implicit = group.implicit
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
-        self.factor_once = group.factor_once
-        self.llt = group.llt
-        self.cg = group.cg
-        self.minres = group.minres
-        self.static = group.static
-        self.newmark = group.newmark
-        self.variational = group.variational
-        self.hamiltonian = group.hamiltonian
-        self.incremental_potential = group.incremental_potential
-        self.first_order = group.first_order
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):  # not the group's (and no recursion before _group is set)
+            raise AttributeError(name)
+        return getattr(self._group, name)
 
 
 def render(plan: Plan) -> str:
