@@ -234,7 +234,7 @@ class ContactGuard:
     that ends without a stop had no contact: it is SOFA's, exactly."""
 
     models: list[tuple[str, StatePlan]]  # (origin, state) per collision model
-    margins: Buffer  # per model: its radius plus the intersection method's alarm distance
+    margins: Buffer  # per model: its radius, the intersection's alarm distance, its contactDistance
     pairs: Buffer  # i64 (model, model) rows: the pairs SOFA would test
     boxes: Buffer  # scratch, 6 numbers per model
     touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
@@ -669,7 +669,8 @@ class _Planner:
                 radii = self.value(checked.component, "listRadius")
                 radius = float(np.max(radii)) if radii is not None and np.size(radii) else 0.0
                 radius = radius or float(self.value(checked.component, "radius") or 1.0)
-            margins.append(radius + alarm)
+            # SOFA's proximity adds each model's contactDistance to the intersection's alarm distance
+            margins.append(radius + alarm + float(self.value(checked.component, "contactDistance") or 0.0))
             static.append(
                 not self.value(checked.component, "simulated") and not self.value(checked.component, "moving")
             )

@@ -66,6 +66,15 @@ def test_the_alarm_distance_widens_the_reach(tmp_path: Path) -> None:
     assert sim.steps == 35
 
 
+def test_a_models_contact_distance_widens_its_reach(tmp_path: Path) -> None:
+    """The left model's contactDistance 1 adds to its box: 2.1 m of reach, reached after 40 steps
+    (2.0 m apart), not 39 (2.2 m)."""
+    sim = sofac.load(write(tmp_path, "skin.scn", left=' contactDistance="1"'))
+    with pytest.raises(sofac.ContactNotCompiled):
+        sim.step(100)
+    assert sim.steps == 40
+
+
 def test_a_run_without_contact_is_the_plain_run(tmp_path: Path) -> None:
     """Balls that never come within reach: the guarded run equals the one without collision
     models bit for bit (the guard only reads positions)."""
