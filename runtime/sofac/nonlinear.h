@@ -18,6 +18,20 @@
 
 namespace sofac {
 
+// An edge's length minus its rest length, its unit direction g / |g| and 1 / |g|, as SOFA's
+// distance mappings compute them (a zero-length edge: the direction (1, 1, 1) / sqrt(3), 1/|g| = 0).
+inline void edge_direction(const double* g, double distance, double rest, double& cx, double& invlen, double* d) {
+    cx = distance - rest;
+    if (distance > DBL_EPSILON) {
+        invlen = 1 / distance;
+        for (int k = 0; k < 3; ++k) d[k] = g[k] * invlen;
+    } else {
+        invlen = 0;
+        const double p = 1.0 / std::sqrt(3.0);
+        for (int k = 0; k < 3; ++k) d[k] = p;
+    }
+}
+
 inline void distance_mapping_apply(const double* px, double* cx, const Index* edges, Index n, const double* rest,
                                    int kind, double* dir, double* invlen) {
     for (Index i = 0; i < n; ++i) {
@@ -32,15 +46,7 @@ inline void distance_mapping_apply(const double* px, double* cx, const Index* ed
             continue;
         }
         const double distance = std::sqrt(norm2);
-        cx[i] = distance - rest[i];
-        if (distance > DBL_EPSILON) {
-            invlen[i] = 1 / distance;
-            for (int k = 0; k < 3; ++k) d[k] = g[k] * invlen[i];
-        } else {
-            invlen[i] = 0;
-            const double p = 1.0 / std::sqrt(3.0);
-            for (int k = 0; k < 3; ++k) d[k] = p;
-        }
+        edge_direction(g, distance, rest[i], cx[i], invlen[i], d);
     }
 }
 
@@ -114,16 +120,8 @@ inline void distance_multi_apply(const double* x0, const double* x1, double* cx,
         double g[3];
         for (int k = 0; k < 3; ++k) g[k] = x1[3 * b[i] + k] - x0[3 * a[i] + k];
         const double distance = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-        cx[i] = distance - rest[i];
         double* d = dir + 3 * i;
-        if (distance > DBL_EPSILON) {
-            invlen[i] = 1 / distance;
-            for (int k = 0; k < 3; ++k) d[k] = g[k] * invlen[i];
-        } else {
-            invlen[i] = 0;
-            const double p = 1.0 / std::sqrt(3.0);
-            for (int k = 0; k < 3; ++k) d[k] = p;
-        }
+        edge_direction(g, distance, rest[i], cx[i], invlen[i], d);
     }
 }
 
