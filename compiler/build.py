@@ -151,7 +151,7 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _valid_entry(entry: Path, key: str, name: str) -> bool:
+def valid_entry(entry: Path, key: str, name: str) -> bool:
     try:
         manifest = json.loads((entry / "manifest.json").read_text())
         return manifest.get("key") == key and manifest.get("sha256") == _sha256(entry / name)
@@ -182,13 +182,13 @@ def build(
     key = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
     root = cache_dir() / kind
     entry = root / key[:2] / key
-    if _valid_entry(entry, key, name):
+    if valid_entry(entry, key, name):
         return Built(entry / name, key, True, 0.0)
     import filelock  # only a build takes the lock: a cached entry loads without importing it
 
     (root / "locks").mkdir(parents=True, exist_ok=True)
     with filelock.FileLock(str(root / "locks" / f"{key}.lock"), timeout=600):
-        if _valid_entry(entry, key, name):  # built by another process meanwhile
+        if valid_entry(entry, key, name):  # built by another process meanwhile
             return Built(entry / name, key, True, 0.0)
         started = time.perf_counter()
         staging = Path(tempfile.mkdtemp(prefix="build-", dir=root))

@@ -15,13 +15,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
-from typing import IO, Any, NamedTuple
+from typing import IO, TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from . import build, generate, plan
-from .check import check_file
+from . import build, warm
 from .diagnostics import SceneError, SofacError
+from .runspec import RunSpec
+
+if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
+    from . import plan
 
 _host: ModuleType | None = None
 
@@ -216,13 +219,51 @@ class _EnergyFile:
 
 
 class Compiled:
-    """A compiled scene: its plan and library; ``instantiate()`` makes independent simulations."""
+    """A compiled scene: its library and run spec; ``instantiate()`` makes independent simulations.
 
-    def __init__(self, scene_plan: plan.Plan, source: str, built: build.Built) -> None:
-        self.plan = scene_plan
-        self.source = source
+    ``plan``, ``source`` and ``checked`` (the checked scene, for rendering and recompiling) are kept
+    when the scene was compiled in this process. A scene taken whole from the cache (``warm.py``)
+    has only its run spec and library: they are computed again on first use."""
+
+    def __init__(
+        self,
+        spec: RunSpec,
+        built: build.Built,
+        *,
+        scene_plan: plan.Plan | None = None,
+        source: str | None = None,
+        checked: Any = None,
+        recompute: Callable[[], Compiled] | None = None,
+    ) -> None:
+        self.spec = spec
         self.built = built
+        self._plan, self._source, self._checked = scene_plan, source, checked
+        self._recompute = recompute
+        self.warm = recompute is not None  # taken from a warm record, not compiled in this process
         self._library = host().Library(str(built.library))
+
+    def _full(self) -> None:
+        if self._plan is None:
+            assert self._recompute is not None
+            full = self._recompute()
+            self._plan, self._source, self._checked = full.plan, full.source, full.checked
+
+    @property
+    def plan(self) -> plan.Plan:
+        self._full()
+        assert self._plan is not None
+        return self._plan
+
+    @property
+    def source(self) -> str:
+        self._full()
+        assert self._source is not None
+        return self._source
+
+    @property
+    def checked(self) -> Any:
+        self._full()
+        return self._checked
 
     def instantiate(self) -> Simulation:
         return Simulation(self)
@@ -235,31 +276,26 @@ class Simulation:
         """``resumed``: the instance takes over from another (``recompile()``), so files it
         writes are appended to rather than emptied."""
         self.compiled = compiled
-        self.plan = compiled.plan
-        initial = [b.initial.copy() for b in self.plan.buffers]
+        spec = self.spec = compiled.spec
+        initial = [b.initial.copy() for b in spec.buffers]
         self._native = host().create(compiled._library, initial)
-        self._views = [self._native.buffer(i, b.kind == "i64") for i, b in enumerate(self.plan.buffers)]
+        self._views = [self._native.buffer(i, b.kind == "i64") for i, b in enumerate(spec.buffers)]
         self._native.init()
         self._states: dict[str, State] = {}
-        unread = {id(s) for g in self.plan.groups for s in g.unread}
-        index = {id(b): i for i, b in enumerate(self.plan.buffers)}
-        for state in self.plan.states:
-            datatype = state.datatype
-            name = sofa_name(state.component)
-            info = StateInfo(state.path, name, state.mapped, datatype.name, state.size, state.simulated)
+        for state in spec.states:
+            info = StateInfo(
+                state.path, state.name, state.mapped, state.template, state.size, state.simulated
+            )
             self._states[state.path] = State(
                 info,
-                self._views[index[id(state.x)]].reshape(-1, datatype.coord_size),
-                self._views[index[id(state.v)]].reshape(-1, datatype.deriv_size),
-                self._views[index[id(state.f)]].reshape(-1, datatype.deriv_size),
-                self._native.update_mapped if id(state) in unread else None,
+                self._views[state.x].reshape(-1, state.coord_size),
+                self._views[state.v].reshape(-1, state.deriv_size),
+                self._views[state.f].reshape(-1, state.deriv_size),
+                self._native.update_mapped if state.computed_on_read else None,
             )
-        self._solver_of = {s.path: g for g in self.plan.groups for s in g.states}
+        self._solver_of = {s.path: spec.solvers[s.solver] for s in spec.states if s.solver >= 0}
         self._independent = [s for s in self._states.values() if not s.info.mapped]
-        guard = self.plan.contact_guard
-        self._touching = (
-            self._views[[id(b) for b in self.plan.buffers].index(id(guard.touching))] if guard else None
-        )
+        self._touching = self._views[spec.contact.touching] if spec.contact else None
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
         self._snapshot: Snapshot | None = None  # preallocated copies, refilled at each chunk
@@ -268,23 +304,20 @@ class Simulation:
         # Parameters read only at init, with the values the instance was initialised with.
         self._init_params = [
             (buffer.key, view)
-            for buffer, view in zip(self.plan.buffers, self._views, strict=True)
-            if buffer.key in self.plan.init_only
+            for buffer, view in zip(spec.buffers, self._views, strict=True)
+            if buffer.key in spec.init_only
         ]
         self._init_values = [view.copy() for _, view in self._init_params]
-        buffer_index = {id(b): i for i, b in enumerate(self.plan.buffers)}
         self._energy_files = [
-            _EnergyFile(
-                g.energy_file,
-                g.save_energy,
-                g.hamiltonian,
-                self._views[buffer_index[id(g.variational["energies"])]],
-                empty=not resumed,
-            )
-            for g in self.plan.groups
-            if g.energy_file
+            _EnergyFile(f.path, f.save, f.hamiltonian, self._views[f.energies], empty=not resumed)
+            for f in spec.energy_files
         ]
         self._saving = [f for f in self._energy_files if f.save]
+
+    @property
+    def plan(self) -> plan.Plan:
+        """The scene's plan (computed again on first use for a scene taken from the warm cache)."""
+        return self.compiled.plan
 
     #: Steps per call of the compiled step: between two chunks, ``step()`` checks the energy bound
     #: (if any) and copies the independent states for ``SimulationDiverged.last_finite``.
@@ -359,12 +392,12 @@ class Simulation:
         return done
 
     def _contact_error(self, pair: int) -> ContactNotCompiled:
-        guard = self.plan.contact_guard
-        assert guard is not None
-        a, b = (int(i) for i in guard.pairs.initial.reshape(-1, 2)[pair])
+        contact = self.spec.contact
+        assert contact is not None
+        a, b = (int(i) for i in self.spec.buffers[contact.pairs].initial.reshape(-1, 2)[pair])
         return ContactNotCompiled(
-            f"step {self._steps + 1} (t={self.time:g}): collision models {guard.models[a][0]} and "
-            f"{guard.models[b][0]} could touch (their boxes, grown by radius and alarm distance, overlap); "
+            f"step {self._steps + 1} (t={self.time:g}): collision models {contact.models[a]} and "
+            f"{contact.models[b]} could touch (their boxes, grown by radius and alarm distance, overlap); "
             f"sofac does not compile contact response yet, so it stopped before this step instead of "
             f"running it without the contact. The states are those after step {self._steps}."
         )
@@ -421,10 +454,10 @@ class Simulation:
         dt = f"{self.dt:g}"
         if group is None:
             return "", f"try a smaller dt (now {dt}) or an implicit solver"
-        solver = plan.origin_of(group.solver)
+        solver = group.origin
         if group.scheme != "implicit":
             return solver, (
-                f"{group.solver.type_name} is explicit, stable only for small enough steps: try a smaller "
+                f"{group.type_name} is explicit, stable only for small enough steps: try a smaller "
                 f"dt (now {dt}) or an implicit solver (EulerImplicitSolver with a CGLinearSolver)"
             )
         if group.direct:
@@ -432,7 +465,7 @@ class Simulation:
                 f"try a smaller dt (now {dt}); a failed factorisation (a singular or indefinite system "
                 "matrix: an inverted element, a stiff spring compressed at a large dt) also gives NaN"
             )
-        linear = group.linear_solver.type_name if group.linear_solver is not None else "the linear solver"
+        linear = group.linear_solver or "the linear solver"
         gain = "an unconverged solve can add energy: " if energy else ""
         return solver, (
             f"try a smaller dt (now {dt}); {gain}give {linear} more iterations or a smaller tolerance, "
@@ -550,7 +583,7 @@ class Simulation:
 
     def reset(self) -> None:
         """Back to the initial state and time 0 (tuned parameters are kept)."""
-        for buffer, view in zip(self.plan.buffers, self._views, strict=True):
+        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.role in ("state", "scratch"):
                 view[:] = buffer.initial
         self._native.time = 0.0
@@ -585,18 +618,18 @@ class Simulation:
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity),
         unless ``recompile``: then the scene is recompiled with every effect kept and the
         simulation goes on from where it is (see ``recompile()``)."""
-        if key in self.plan.pruned:
+        if key in self.spec.pruned:
             if not recompile:
                 raise PrunedEffectError(
-                    f"{key}: {self.plan.pruned[key]}, so the compiled step has no code for it and changing "
+                    f"{key}: {self.spec.pruned[key]}, so the compiled step has no code for it and changing "
                     "it would have no effect; use sim.param(key, recompile=True) to recompile with it "
                     "(the state carries over), or load the scene with sofac.load(path, prune=False)"
                 )
             self.recompile(prune=False)
-        for buffer, view in zip(self.plan.buffers, self._views, strict=True):
+        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.key == key and buffer.role == "param":
                 return view
-        names = ", ".join(b.key for b in self.plan.buffers if b.role == "param")
+        names = ", ".join(b.key for b in self.spec.buffers if b.role == "param")
         raise KeyError(f"no parameter {key!r}; parameters: {names}")
 
     def recompile(self, *, prune: bool = False) -> None:
@@ -606,15 +639,15 @@ class Simulation:
         Arrays taken before (``sim[path].position``, ``sim.param(...)``) view the old instance:
         take them again."""
         compiled = compile_checked(
-            self.compiled.checked, prune=prune, rigid_model=self.plan.rigid_model, threads=self.plan.threads
+            self.compiled.checked, prune=prune, rigid_model=self.spec.rigid_model, threads=self.spec.threads
         )
         fresh = Simulation(compiled, resumed=True)
         now = {
             buffer.key: view
-            for buffer, view in zip(self.plan.buffers, self._views, strict=True)
+            for buffer, view in zip(self.spec.buffers, self._views, strict=True)
             if buffer.role != "data"
         }
-        for buffer, view in zip(fresh.plan.buffers, fresh._views, strict=True):
+        for buffer, view in zip(fresh.spec.buffers, fresh._views, strict=True):
             old = now.get(buffer.key)
             if buffer.role != "data" and old is not None and old.shape == view.shape:
                 view[...] = old
@@ -628,16 +661,16 @@ class Simulation:
     def output(self, key: str) -> np.ndarray:
         """A read-only view of a value the step computes, such as a VariationalSymplecticSolver's
         ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included)."""
-        for buffer, view in zip(self.plan.buffers, self._views, strict=True):
+        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.key == key and buffer.role == "state":
                 out = view.view()
                 out.flags.writeable = False
                 return out
-        names = ", ".join(b.key for b in self.plan.buffers if b.role == "state")
+        names = ", ".join(b.key for b in self.spec.buffers if b.role == "state")
         raise KeyError(f"no output {key!r}; outputs: {names}")
 
     def params(self) -> dict[str, np.ndarray]:
-        return {b.key: v for b, v in zip(self.plan.buffers, self._views, strict=True) if b.role == "param"}
+        return {b.key: v for b, v in zip(self.spec.buffers, self._views, strict=True) if b.role == "param"}
 
     def render(self, width: int = 640, height: int = 480, camera: Any = None, **options: Any) -> np.ndarray:
         """An off-screen picture (height, width, 3) of the scene's visual models (see sofac.render)."""
@@ -670,7 +703,9 @@ def compile_scene(
     rigid_model: str = "sofa",
     threads: int = 1,
 ) -> Compiled:
-    """Check, plan, generate and build a scene (or take it from the cache)."""
+    """Check, plan, generate and build a scene (the build may come from the cache)."""
+    from .check import check_file
+
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
@@ -680,14 +715,15 @@ def compile_scene(
 def compile_checked(
     checked: Any, diagnostics: Any = None, *, prune: bool = True, rigid_model: str = "sofa", threads: int = 1
 ) -> Compiled:
+    from . import generate, plan
+    from .runspec import run_spec
+
     scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
     built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
-    compiled = Compiled(scene_plan, source, built)
-    compiled.checked = checked  # the checked scene, for consumers such as rendering (visual models)
-    return compiled
+    return Compiled(run_spec(scene_plan), built, scene_plan=scene_plan, source=source, checked=checked)
 
 
 def load(
@@ -700,11 +736,24 @@ def load(
     threads: int = 1,
 ) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
-    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread."""
+    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
+
+    A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
+    record (warm.py) without being compiled again."""
     started = time.perf_counter()
-    sim = compile_scene(
-        path, data_roots=data_roots, prune=prune, rigid_model=rigid_model, threads=threads
-    ).instantiate()
+    options: dict[str, Any] = {
+        "data_roots": tuple(data_roots),
+        "prune": prune,
+        "rigid_model": rigid_model,
+        "threads": threads,
+    }
+    record = warm.lookup(path, **options)
+    if record is not None:
+        compiled = Compiled(record.spec, record.built, recompute=lambda: compile_scene(path, **options))
+    else:
+        compiled = compile_scene(path, **options)
+        warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
+    sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
         sim.dt = dt

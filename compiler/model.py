@@ -227,6 +227,8 @@ class Scene:
     data_roots: list[Path] = field(default_factory=list)
     # Every file read while parsing (the scene, its includes), for caching and diagnostics.
     sources: list[Path] = field(default_factory=list)
+    # Every referenced file looked up (meshes...), each candidate tried -> whether it was a file.
+    lookups: dict[Path, bool] = field(default_factory=dict)
 
     @property
     def display_name(self) -> str:

@@ -19,6 +19,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .datafiles import (
+    DataFileLookup,
+    default_data_roots,
+    find_data_file,
+    real_path,
+    resolve_data_file,
+)
 from .diagnostics import Diagnostics, SceneError, SourceLoc, relative_name
 from .model import Attribute, Component, Node, Scene, _Element
 from .registry import NameStatus, lookup
@@ -47,92 +54,6 @@ _STRUCTURAL = frozenset({"Node", "Object", "include", "Attribute", "Data"})
 _MACRO_NAME_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 _GROUP_NAMES = frozenset({"Group", "_Group_"})
 _MERGE_NAME = "_Merge_"
-
-
-# --- data roots and file lookup ------------------------------------------------------------------
-
-
-def _real(path: Path) -> Path:
-    return Path(os.path.realpath(path))
-
-
-def _is_within(path: Path, root: Path) -> bool:
-    return path == root or root in path.parents
-
-
-def _auto_data_root(directory: Path) -> Path | None:
-    """The nearest directory at or above ``directory`` holding ``Objects/`` or ``mesh/`` (a SOFA
-    data tree, as in SOFA's ``share/`` + ``examples/``). The filesystem root is never used."""
-    for candidate in (directory, *directory.parents):
-        if candidate == Path(candidate.anchor):
-            break
-        if (candidate / "Objects").is_dir() or (candidate / "mesh").is_dir():
-            return candidate
-    return None
-
-
-def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list[Path]:
-    """The ordered, de-duplicated allowed roots: the scene's directory, the explicit roots, the
-    ``SOFAC_DATA_PATH`` entries, then the auto-detected SOFA data root. Only existing directories."""
-    candidates: list[Path] = [Path(scene_dir), *(Path(r) for r in data_roots)]
-    env = os.environ.get("SOFAC_DATA_PATH", "")
-    candidates.extend(Path(entry) for entry in env.split(os.pathsep) if entry.strip())
-    try:
-        auto = _auto_data_root(_real(Path(scene_dir)))
-    except (OSError, ValueError, RuntimeError):
-        auto = None
-    if auto is not None:
-        candidates.append(auto)
-    roots: list[Path] = []
-    for candidate in candidates:
-        try:
-            real = _real(candidate.expanduser())
-        except (OSError, ValueError, RuntimeError):
-            continue
-        if real.is_dir() and real not in roots:
-            roots.append(real)
-    return roots
-
-
-@dataclass(frozen=True)
-class DataFileLookup:
-    """Result of looking a referenced file up: the file found (its real path), the directories
-    searched in order, and candidates refused because they lie outside every allowed root."""
-
-    path: Path | None
-    searched: tuple[Path, ...]
-    refused: tuple[Path, ...]
-
-
-def find_data_file(name: str, relative_to: Path, scene: Scene) -> DataFileLookup:
-    """Locate ``name`` as SOFA does: relative to ``relative_to`` (the referencing file's directory)
-    first, then in each data root. A candidate whose real path (symlinks resolved) is outside all
-    allowed roots is refused, whether or not it exists (no probing outside the roots)."""
-    relative_to = Path(relative_to)
-    allowed = [_real(r) for r in scene.data_roots] or [_real(relative_to)]
-    if not name or "\0" in name:
-        return DataFileLookup(None, (), ())
-    target = Path(name)
-    bases = [] if target.is_absolute() else [relative_to, *(r for r in scene.data_roots if r != relative_to)]
-    candidates = [target] if target.is_absolute() else [base / target for base in bases]
-    refused: list[Path] = []
-    for candidate in candidates:
-        try:
-            real = _real(candidate)
-        except (OSError, ValueError, RuntimeError):
-            continue
-        if not any(_is_within(real, root) for root in allowed):
-            refused.append(candidate)
-            continue
-        if real.is_file():
-            return DataFileLookup(real, tuple(bases), tuple(refused))
-    return DataFileLookup(None, tuple(bases), tuple(refused))
-
-
-def resolve_data_file(name: str, relative_to: Path, scene: Scene) -> Path | None:
-    """The real path of a referenced file, or None if it is missing or outside the allowed roots
-    (use :func:`find_data_file` to tell which: its ``refused`` is non-empty for E108)."""
-    return find_data_file(name, relative_to, scene).path
 
 
 # --- reading files -------------------------------------------------------------------------------
@@ -240,7 +161,7 @@ class _Builder:
             reason = getattr(exc, "strerror", None) or str(exc)
             self.error("E100", at, f"cannot read {display}: {reason}")
             return None
-        real = _real(path)
+        real = real_path(path)
         return self.load_bytes(data, display, real, directory or real.parent)
 
     # --- elements ---
@@ -584,7 +505,7 @@ def parse_string(
 ) -> Scene:
     """Read scene text. Includes resolve relative to ``base_dir`` (default: the cwd), which also
     serves as the scene directory for the data roots; ``filename`` names it in diagnostics."""
-    directory = _real(Path(base_dir) if base_dir is not None else Path.cwd())
+    directory = real_path(Path(base_dir) if base_dir is not None else Path.cwd())
     errors_before = len(diagnostics.errors)
     scene = Scene(
         Node("", SourceLoc(filename, 0)),
@@ -600,7 +521,7 @@ def parse_string(
         raise SceneError(diagnostics)
     # A string that names a real file can still be part of a cycle; otherwise it has no path.
     candidate = directory / filename
-    real = _real(candidate) if not filename.startswith("<") and candidate.is_file() else None
+    real = real_path(candidate) if not filename.startswith("<") and candidate.is_file() else None
     f = builder.load_bytes(text, filename, real, directory, from_disk=False)
     if f is None:
         raise SceneError(diagnostics)
