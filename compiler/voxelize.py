@@ -57,6 +57,8 @@ def regular_grid(
     cell_width: float = 0.0,
 ) -> RegularGrid:
     """SparseGridTopology::init then buildFromTriangleMesh: the regular grid around the surface."""
+    if not np.isfinite(vertices).all():
+        raise VoxelError("the surface has a non-finite vertex coordinate")
     counts = tuple(max(int(c), 2) for c in n)  # init: at least 2 points per axis
     lo = np.asarray(low, dtype=np.float64)
     hi = np.asarray(high, dtype=np.float64)
@@ -90,7 +92,7 @@ def _cube_of(grid: RegularGrid, points: np.ndarray) -> np.ndarray:
     n = np.asarray(grid.resolution(), dtype=np.int64)
     origin, step = grid.frame()
     x = ((points - origin) * step) * (1.0 / (step * step))  # p.dx * inv_dx2, dx = (step_x, 0, 0)...
-    cell = np.floor(x).astype(np.int64)
+    cell = np.floor(np.clip(x, -1.0, n)).astype(np.int64)  # clipped: far points stay outside, no overflow
     inside = ((cell >= 0) & (cell <= n - 2)).all(axis=1)
     return np.where(inside[:, None], cell, -1)
 

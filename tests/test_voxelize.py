@@ -193,3 +193,21 @@ def test_scene_topology_outputs(corpus_dir: Path) -> None:
         assert points is not None and len(points) == DRAGONS[k][2]
         reference = _reference_points(corpus_dir.parents[1], k)
         assert np.abs(points - reference).max() <= 5e-6 * np.abs(reference).max()
+
+
+def test_oversized_grid_is_a_diagnostic_not_a_crash(tmp_path: Path) -> None:
+    vertices, triangles = cube_surface(0.0, 1.0)
+    lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [
+        f"f {a + 1} {b + 1} {c + 1}" for a, b, c in triangles
+    ]
+    (tmp_path / "cube.obj").write_text("\n".join(lines) + "\n")
+    (tmp_path / "scene.scn").write_text(
+        '<Node name="root" dt="0.01">\n'
+        "  <EulerImplicitSolver/> <CGLinearSolver/>\n"
+        '  <SparseGridTopology n="10000 10000 10000" fileTopology="cube.obj"/>\n'
+        "  <MechanicalObject/>\n"
+        "</Node>\n"
+    )
+    _, diagnostics = check_file(tmp_path / "scene.scn")
+    (found,) = [d for d in diagnostics if d.code == "E207"]
+    assert found.loc.line == 3 and found.loc.attribute == "n" and "lower n" in found.message
