@@ -622,7 +622,7 @@ class _Checker:
             if error.code != "E219":  # missing files are reported by _check_files
                 self.diags.add(
                     error.code,
-                    checked.component.attribute_loc(error.attribute)
+                    checked.component.attribute_loc(self._attribute_name(checked, error.attribute))
                     if error.attribute
                     else checked.component.loc,
                     f"{checked.spec.name} {checked.component.label!r}: {error}",

@@ -166,6 +166,80 @@ def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
     return {}
 
 
+def sparse_grid(ctx: Context) -> Outputs:
+    """SparseGridTopology voxelising a surface mesh file (see voxelize.py): its points and hexahedra,
+    plus what its barycentric mapper needs (the regular grid, each regular cube's sparse index or -1,
+    which sparse cubes are BOUNDARY). Like SOFA's, it derives no edges, triangles or quads."""
+    from . import voxelize
+
+    levels = int(ctx.value("nbVirtualFinerLevels") or 0)
+    if levels:
+        raise EvaluationError(
+            f"nbVirtualFinerLevels={levels} (virtual finer grids) is not supported yet; remove it",
+            "nbVirtualFinerLevels",
+            code="E222",
+        )
+    path = ctx.file("filename")
+    if path is None:
+        if ctx.is_set("filename"):
+            raise EvaluationError("no readable file", "filename")
+        raise EvaluationError(
+            "building the grid from position/triangles/facets (no fileTopology) is not supported yet; "
+            'give the surface as fileTopology="mesh.obj"',
+            "position" if ctx.is_set("position") else None,
+            code="E222",
+        )
+    if path.suffix.lower() != ".obj":
+        raise EvaluationError(
+            f"voxelising {path.suffix or 'extensionless'} files is not supported yet (only .obj "
+            "surfaces; .raw/.voxel voxel files and other formats are not); convert the surface to .obj",
+            "filename",
+            code="E222",
+        )
+    try:
+        mesh = meshes.read_mesh(path)
+    except meshes.MeshError as error:
+        raise EvaluationError(str(error), "filename") from None
+    given = [name for name in ("position", "edges", "triangles", "quads", "hexahedra") if ctx.is_set(name)]
+    if given:  # SOFA clears the points but appends its cells to the given ones: not reproduced
+        raise EvaluationError(
+            f"{given[0]} given with fileTopology is not supported (SOFA mixes it with the voxelised "
+            "grid); remove it",
+            given[0],
+            code="E222",
+        )
+
+    def triple(name: str) -> tuple[float, float, float]:
+        x, y, z = (float(v) for v in np.asarray(ctx.value(name), dtype=float).ravel()[:3])
+        return x, y, z
+
+    try:
+        nx, ny, nz = (int(c) for c in triple("n"))
+        grid = voxelize.regular_grid(
+            mesh.positions, (nx, ny, nz), triple("min"), triple("max"), float(ctx.value("cellWidth") or 0.0)
+        )
+        triangles = voxelize.triangulate(mesh.triangles, mesh.quads)
+        voxels = voxelize.classify(grid, mesh.positions, triangles)
+    except voxelize.VoxelError as error:
+        raise EvaluationError(str(error), error.attribute, code="E207") from None
+    sparse = voxelize.sparse_grid(voxels, only_inside=bool(ctx.value("onlyInsideCells")))
+    if not len(sparse.hexahedra):
+        raise EvaluationError(
+            "the surface encloses no cell of the grid (SOFA leaves the topology invalid); check the "
+            "mesh and n/min/max",
+            "filename",
+            code="E207",
+        )
+    return {
+        "position": sparse.points.ravel(),
+        "hexahedra": sparse.hexahedra.ravel(),
+        "grid_resolution": np.asarray(grid.resolution(), dtype=np.int64),
+        "grid_bounds": np.concatenate([grid.min, grid.max]).astype(float),
+        "regular_to_sparse": sparse.regular_to_sparse,
+        "boundary_cells": sparse.boundary.astype(np.int64),
+    }
+
+
 def box_roi(ctx: Context) -> Outputs:
     """Indices of the input points inside any of the boxes (xmin ymin zmin xmax ymax zmax)."""
     value = ctx.value("box")
@@ -390,5 +464,6 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "sparse_grid": sparse_grid,
     "box_roi": box_roi,
 }

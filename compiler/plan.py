@@ -291,6 +291,7 @@ class _Planner:
         self.guarded: list[CheckedComponent] = []  # collision models that could touch (ContactGuard)
         self.guard: ContactGuard | None = None
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
+        self.refused: set[int] = set()  # components whose one refusal says all (no follow-up E222)
         self.lowered: list[Component] = []  # components whose kernels are in the step
         self.buffers: list[Buffer] = []
         self.buffer_count = 0  # buffers ever made: identifiers stay unique when one is dropped
@@ -329,6 +330,8 @@ class _Planner:
 
     def unsupported(self, checked: CheckedComponent, why: str) -> None:
         component = checked.component
+        if id(component) in self.refused:
+            return
         self.diags.add(
             "E222",
             component.loc,
@@ -1269,10 +1272,21 @@ def _topology_of(planner: _Planner, checked: CheckedComponent) -> Component | No
     return None
 
 
-def _topology_cells(planner: _Planner, checked: CheckedComponent) -> dict[str, np.ndarray] | None:
-    """The elements of the topology a component uses."""
+def _topology_cells(
+    planner: _Planner, checked: CheckedComponent, *, sparse_grid_ok: bool = False
+) -> dict[str, np.ndarray] | None:
+    """The elements of the topology a component uses. A SparseGridTopology's only serve callers
+    that read nothing else (``sparse_grid_ok``): SOFA's FEM and masses also weight its boundary
+    cells (fillWeighted's stiffness and mass coefficients), which is not compiled."""
     topology = _topology_of(planner, checked)
     if topology is None:
+        return None
+    spec = planner.checked.of(topology).spec
+    if spec is not None and spec.role == "sparse_grid" and not sparse_grid_ok:
+        planner.unsupported(
+            checked, "on a SparseGridTopology it is not compiled yet (SOFA weights the boundary cells)"
+        )
+        planner.refused.add(id(checked.component))  # its "needs cells" follow-up would mislead
         return None
     cells: dict[str, np.ndarray] = {}
     for kind in (*CELL_KINDS, "resolution"):
@@ -2709,9 +2723,13 @@ def _lower_mesh_springs(planner: _Planner, checked: CheckedComponent, owner: dic
             continue
         ks = float(both_k if both_k is not None else planner.value(component, f"{prefix}Stiffness") or 0.0)
         kd = float(both_d if both_d is not None else planner.value(component, f"{prefix}Damping") or 0.0)
-        pairs = [(0, 1), (1, 2), (2, 0)] if corners == 3 else None
+        if ks == 0.0 and kd == 0.0:  # SOFA skips the kind: its pairs stay free for the next kinds
+            continue
+        # SOFA's order: every corner pair (p, q), p < q (a hexahedron's 28, a SparseGridTopology's
+        # only elements: it derives no edges or quads)
+        pairs = [(p, q) for p in range(corners) for q in range(p + 1, corners)]
         for element in np.asarray(elements, dtype=np.int64).reshape(-1, corners):
-            for a, b in pairs or [(p, q) for p in range(corners) for q in range(p + 1, corners)]:
+            for a, b in pairs:
                 i, j = sorted((int(element[a]), int(element[b])))
                 if (i, j) in seen or i == j:
                     continue
@@ -3305,7 +3323,7 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
 
 
 def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    from .barycentric import RegularGrid, map_cells, mapper_for
+    from .barycentric import RegularGrid, SparseGrid, map_cells, mapper_for
 
     ends = _mapping_ends(planner, checked, owner)
     if ends is None:
@@ -3320,7 +3338,7 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
     probe = CheckedComponent(
         parent.component, None, links={"topology": given} if isinstance(given, Component) else {}
     )
-    cells = _topology_cells(planner, probe) or {}
+    cells = _topology_cells(planner, probe, sparse_grid_ok=True) or {}
     # The input topology's class decides which of SOFA's mappers embeds the points.
     topology = _topology_of(planner, probe)
     topology_spec = planner.checked.of(topology).spec if topology is not None else None
@@ -3329,9 +3347,20 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
         grid = RegularGrid(tuple(int(c) for c in cells["resolution"]), tuple(bounds[:3]), tuple(bounds[3:]))
-    elif mode == "sparse_grid":
-        planner.unsupported(checked, "a BarycentricMapping on a SparseGridTopology is not compiled yet")
-        return
+    elif mode == "sparse_grid" and topology is not None:
+        table = planner.value(topology, "regular_to_sparse")
+        if table is None or "hexahedra" not in cells:
+            planner.unsupported(checked, "its SparseGridTopology's cells are not known at compile time")
+            return
+        resolution = np.asarray(planner.value(topology, "grid_resolution"), dtype=np.int64)
+        bounds = np.asarray(planner.value(topology, "grid_bounds"), dtype=float)
+        grid = SparseGrid(
+            RegularGrid(tuple(int(c) for c in resolution), tuple(bounds[:3]), tuple(bounds[3:])),
+            np.asarray(planner.value(topology, "position"), dtype=float).reshape(-1, 3),
+            cells["hexahedra"].reshape(-1, 8),
+            np.asarray(table, dtype=np.int64),
+            np.asarray(planner.value(topology, "boundary_cells"), dtype=bool),
+        )
     rest = planner.checked.positions(parent.component)
     points = planner.checked.positions(child.component)
     if rest is None or points is None:

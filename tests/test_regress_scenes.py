@@ -30,6 +30,9 @@ SCENES = [
     # Two collision models (sphere surfaces of two livers that never come within reach): the contact
     # guard tests their boxes before each of the 10,000 steps and never stops the run.
     "Component/Topology/Container/Grid/RegularGridTopology.scn",
+    # Three dragons voxelised by SparseGridTopology (SOFA's points, in SOFA's order), MeshSpringForceField
+    # on its hexahedra, barycentric sphere surfaces that never touch.
+    "Component/Topology/Container/Grid/SparseGridTopology.scn",
 ]
 
 

@@ -134,6 +134,7 @@ SPARSE_GRID_TOPOLOGY = ComponentSpec(
     former_names=("SparseGrid",),
     supported=True,
     effects=_GENERATED,
+    compute="sparse_grid",
     fields=_SPARSE_GRID_FIELDS,
 )
 
