@@ -90,7 +90,7 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         shared_dir / "corpus/sofa/Demos/liver.scn",  # CG, tetrahedral FEM, barycentric mapping
         shared_dir / "reference/sofa/scenes/c2_beam_tetfem_ldl.scn",  # SparseLDLSolver: factorised each step
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
-        # L L^T below runtime/sofac/direct.h's kSupernodalFlops: CHOLMOD's simplicial kernel
+        # L L^T (runtime/sofac/direct.h's supernodal kernel)
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_EigenSimplicialLLT.scn",
         preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
@@ -124,9 +124,9 @@ def test_variational_symplectic_solver_does_not_allocate_in_a_step(shim: Path, t
 
 
 def test_supernodal_cholesky_does_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
-    # W3's SparseCholeskySolver beam at 8x8x20 nodes: 1.2e8 flops per factorisation, above
-    # runtime/sofac/direct.h's kSupernodalFlops (1e8), so the supernodal kernel (SupernodalCholesky:
-    # CHOLMOD's cholmod_super_numeric allocated ~9 times per supernode). 8x8x18 would be 1.08e8.
+    # W3's SparseCholeskySolver beam at 8x8x20 nodes (1.2e8 flops per factorisation): many
+    # supernodes, each updated by its descendants, in runtime/sofac/direct.h's SupernodalCholesky
+    # (CHOLMOD's cholmod_super_numeric allocated 2,753 times per step here).
     sys.path.insert(0, str(BENCHMARKS))
     try:
         scenegen = importlib.import_module("scenegen")

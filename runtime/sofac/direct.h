@@ -23,15 +23,12 @@ namespace sofac {
 
 // The factorisation a direct solver runs: L D L^T (SOFA's SparseLDLSolver, and the solvers sofac
 // solves the same way), CHOLMOD's simplicial kernel; or L L^T (SOFA's Cholesky solvers), with a
-// supernodal kernel (SupernodalCholesky: dense blocks through BLAS and LAPACK) when CHOLMOD would
-// choose one (flops / nnz(L) >= 40) and the factorisation is big enough, else CHOLMOD's simplicial
-// kernel.
+// supernodal kernel (SupernodalCholesky: dense blocks through BLAS and LAPACK) when CHOLMOD's
+// analysis chooses one (flops / nnz(L) >= 40), else CHOLMOD's simplicial kernel. (sofac's
+// supernodal kernel has no per-supernode thread teams: unlike CHOLMOD's, it is faster than the
+// simplicial one on small factors too, e.g. W3's beam at 6x6x20 nodes, 2.8e7 flops: 6.8 against
+// 9.3 ms per step.)
 enum class Factorization { LDLT, LLT };
-
-// The supernodal kernel's fixed costs per supernode (BLAS calls) make it slower below ~1e8 flops
-// per factorisation (measured with CHOLMOD's kernel, W3's beam at 6x6x20, 8x8x30 and 10x10x50
-// nodes, the reference BLAS: 24% slower at 2.8e7 flops, 8% faster at 2.5e8, 25% at 1.9e9).
-inline constexpr double kSupernodalFlops = 1e8;
 
 // The Fortran BLAS and LAPACK routines CHOLMOD's supernodal kernel calls (Debian links CHOLMOD with
 // the reference libraries, which allocate nothing). gfortran passes each CHARACTER argument's
@@ -236,7 +233,7 @@ struct DirectSolver {
     }
 
     // Once, on the recorded pattern: CHOLMOD's symbolic analysis (ordering, elimination tree, and
-    // for L L^T the choice of the supernodal kernel).
+    // for L L^T the choice of the supernodal or the simplicial kernel).
     void analyze(Factorization kind) {
         cholmod_common& common = factorization.cholmod();
         if (kind == Factorization::LDLT) {
@@ -247,11 +244,6 @@ struct DirectSolver {
         factorization.setMode(Eigen::CholmodAuto);  // supernodal or simplicial, kept as is
         common.final_ll = 1;                        // simplicial: L L^T as well
         factorization.analyzePattern(matrix);
-        const cholmod_factor* L = factorization.factor();
-        if (L != nullptr && L->is_super && common.fl < kSupernodalFlops) {
-            common.supernodal = CHOLMOD_SIMPLICIAL;
-            factorization.analyzePattern(matrix);
-        }
     }
 
     // Projective constraints: rows and columns of constrained DOFs cleared, diagonal 1.
