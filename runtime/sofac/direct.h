@@ -1,5 +1,6 @@
 // Sparse direct solves of the implicit system A dv = b, A = mfact M + kfact K (SOFA's
-// SparseLDLSolver and friends), with SuiteSparse's CHOLMOD through Eigen.
+// SparseLDLSolver and friends), with SuiteSparse's CHOLMOD through Eigen (ordering, symbolic
+// analysis, simplicial factorisations, solves) and sofac's own supernodal L L^T numeric kernel.
 //
 // The matrix is assembled (assembly.h) from the same blocks the matrix-free product uses, on a
 // pattern recorded once at creation, then CHOLMOD's symbolic analysis; every step only adds values
