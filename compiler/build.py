@@ -235,7 +235,8 @@ def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0, o
                 "(apt-get install libsuitesparse-dev)"
             )
         includes += (SUITESPARSE_INCLUDE,)
-        libraries = ("-lcholmod",)
+        # LAPACK and BLAS: direct.h's supernodal Cholesky calls them (the ones CHOLMOD is linked with)
+        libraries = ("-lcholmod", "-llapack", "-lblas")
     return build(
         source,
         kind="scenes",

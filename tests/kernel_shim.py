@@ -60,7 +60,7 @@ def build_shim(
     command += ["-Wall", "-Werror", f"-I{resource_dir('runtime')}", f"-I{eigen_include()}"]
     if cholmod:
         command.append(f"-I{SUITESPARSE_INCLUDE}")
-    command += ["shim.cpp", "-o", "shim.so", *(["-lcholmod"] if cholmod else [])]
+    command += ["shim.cpp", "-o", "shim.so", *(["-lcholmod", "-llapack", "-lblas"] if cholmod else [])]
     result = subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     return ctypes.CDLL(str(folder / "shim.so"))

@@ -10,6 +10,7 @@ through the host module) is counted over 1 and 20 steps: both must allocate noth
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import platform
@@ -21,6 +22,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+BENCHMARKS = REPO / "benchmarks"
 SHIM = Path(__file__).resolve().parent / "data" / "alloc" / "count_alloc.c"
 
 PROBE = r"""
@@ -88,8 +90,7 @@ def test_corpus_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path) -
         shared_dir / "corpus/sofa/Demos/liver.scn",  # CG, tetrahedral FEM, barycentric mapping
         shared_dir / "reference/sofa/scenes/c2_beam_tetfem_ldl.scn",  # SparseLDLSolver: factorised each step
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_PrecomputedLinearSolver.scn",
-        # L L^T below runtime/sofac/direct.h's kSupernodalFlops: CHOLMOD's simplicial kernel (its
-        # supernodal one allocates OpenMP teams in every factorisation)
+        # L L^T (runtime/sofac/direct.h's supernodal kernel)
         shared_dir / "corpus/sofa/Component/LinearSolver/Direct/FEMBAR_EigenSimplicialLLT.scn",
         preconditioners / "FEMBAR_PCG_JacobiPreconditioner.scn",
         preconditioners / "FEMBAR_PCG_PrecomputedWarpPreconditioner.scn",  # no PCG iteration
@@ -120,3 +121,17 @@ def test_variational_symplectic_solver_does_not_allocate_in_a_step(shim: Path, t
         paths.append(path)
     counts = allocations(shim, paths)
     assert counts == {str(path): [0, 0] for path in paths}
+
+
+def test_supernodal_cholesky_does_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
+    # W3's SparseCholeskySolver beam at 8x8x20 nodes (1.2e8 flops per factorisation): many
+    # supernodes, each updated by its descendants, in runtime/sofac/direct.h's SupernodalCholesky
+    # (CHOLMOD's cholmod_super_numeric allocated 2,753 times per step here).
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        scenegen = importlib.import_module("scenegen")
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    path = tmp_path / "w3_beam_cholesky_8x8x20.scn"
+    path.write_text(scenegen.beam_scene("cholesky", 8, 8, 20))
+    assert allocations(shim, [path]) == {str(path): [0, 0]}

@@ -2,7 +2,8 @@
 
 The assembled pattern leaves out the couplings of the projected DOFs (their contributions go to
 the DOF's diagonal, which the projection overwrites), and each factorisation (L D L^T, CHOLMOD's
-simplicial kernel; L L^T, its supernodal kernel for big enough factors, else its simplicial one)
+simplicial kernel; L L^T, sofac's supernodal kernel when CHOLMOD's analysis makes a supernodal
+factor, else CHOLMOD's simplicial one)
 must solve the projected system: rows and columns of the fixed DOFs cleared, diagonal 1. Two
 factorisations in a row with other values check that the permuted matrix and the factor are
 refilled, not reused stale.
@@ -52,6 +53,55 @@ API void solve(Index n, const Index* rows, const Index* cols, const double* valu
             if (it.row() != it.col() && (D.fixed[it.row()] || D.fixed[it.col()])) ++info[1];
     info[2] = D.factorization.factor()->is_super;
 }
+
+// The same kind of input, L L^T, one pass per set of values: sofac's supernodal factor (L->x)
+// against cholmod_super_numeric's on the same symbolic factor, and sofac's solve. Out per pass:
+// {max |L_sofac - L_cholmod|, max |L_cholmod|, ||A x - b|| / (||A||_F ||x|| + ||b||)}; info =
+// {supernodal, supernodes, flops, then per pass: ok, L->minor (sofac), L->minor (CHOLMOD)}.
+API void compare_supernodal(Index n, const Index* rows, const Index* cols, const double* values, Index count,
+                            Index passes, const Index* fixed, const double* b, double* out, double* info) {
+    sofac::DirectSolver D;
+    D.resize(n);
+    for (Index i = 0; i < n; ++i) D.fixed[i] = fixed[i] != 0;
+    D.assembler.start_pattern();
+    for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], 0.0);
+    D.assembler.finish_pattern(D.matrix, n, D.fixed);
+    D.analyze(sofac::Factorization::LLT);
+    cholmod_common& common = D.factorization.cholmod();
+    cholmod_factor* L = D.factorization.factor();
+    info[0] = L->is_super;
+    info[1] = static_cast<double>(L->nsuper);
+    info[2] = common.fl;
+    if (!L->is_super) return;
+    cholmod_sparse* permuted = nullptr;
+    for (Index pass = 0; pass < passes; ++pass) {
+        D.assembler.start_values(D.matrix);
+        for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], values[pass * count + k]);
+        D.factor();
+        for (Index i = 0; i < n; ++i) D.rhs[i] = b[i];
+        D.solve();
+        info[3 + 3 * pass] = D.ok;
+        info[4 + 3 * pass] = static_cast<double>(L->minor);
+        const Eigen::VectorXd residual = D.matrix * D.solution - D.rhs;
+        out[3 * pass + 2] = residual.norm() / (D.matrix.norm() * D.solution.norm() + D.rhs.norm());
+        const double* x = static_cast<const double*>(L->x);
+        const std::vector<double> ours(x, x + L->xsize);
+        // CHOLMOD's kernel on S = tril(A(p,p)) of the same (projected) values.
+        const Eigen::SparseMatrix<double>& matrix = D.matrix;
+        cholmod_sparse a = Eigen::viewAsCholmod(matrix.selfadjointView<Eigen::Upper>());
+        cholmod_free_sparse(&permuted, &common);
+        permuted = cholmod_ptranspose(&a, 2, static_cast<int*>(L->Perm), nullptr, 0, &common);
+        double beta[2] = {0.0, 0.0};
+        cholmod_super_numeric(permuted, nullptr, beta, L, &common);
+        info[5 + 3 * pass] = static_cast<double>(L->minor);
+        out[3 * pass] = out[3 * pass + 1] = 0.0;
+        for (std::size_t k = 0; k < ours.size(); ++k) {
+            out[3 * pass] = std::max(out[3 * pass], std::abs(ours[k] - x[k]));
+            out[3 * pass + 1] = std::max(out[3 * pass + 1], std::abs(x[k]));
+        }
+    }
+    cholmod_free_sparse(&permuted, &common);
+}
 """
 
 
@@ -59,6 +109,8 @@ API void solve(Index n, const Index* rows, const Index* cols, const double* valu
 def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library = build_shim(tmp_path_factory, "direct_solver", SHIM, optimize="-O1", cholmod=True)
     library.solve.argtypes = [ctypes.c_int64, I64, I64, D, ctypes.c_int64, I64, ctypes.c_int, D, D, I64]
+    sizes = [ctypes.c_int64, ctypes.c_int64]
+    library.compare_supernodal.argtypes = [ctypes.c_int64, I64, I64, D, *sizes, I64, D, D, D]
     return library
 
 
@@ -100,9 +152,9 @@ def dense_projected(
     [
         (40, 3, False, False),  # L D L^T: always simplicial
         (40, 3, True, False),  # L L^T, sparse: CHOLMOD picks its simplicial kernel
-        (12, 40, True, False),  # L L^T, dense blocks but < 1e8 flops: simplicial as well
+        (12, 40, True, True),  # L L^T, dense blocks: CHOLMOD picks a supernodal factor, sofac's kernel
         (20, 150, False, False),
-        (20, 150, True, True),  # L L^T, dense blocks, ~4e8 flops: the supernodal kernel
+        (20, 150, True, True),
     ],
 )
 def test_direct_solver_solves_the_projected_system(
@@ -137,8 +189,8 @@ def test_direct_solver_solves_the_projected_system(
 
 
 def test_a_matrix_that_is_not_positive_definite_gives_nan(lib: ctypes.CDLL) -> None:
-    """A failed L L^T factorisation (a negative pivot) is reported as NaN, for both of CHOLMOD's
-    kernels (the supernodal one for the dense blocks, the simplicial one for the thin ones)."""
+    """A failed L L^T factorisation (a negative pivot) is reported as NaN, for both kernels (sofac's
+    supernodal one for the dense blocks, CHOLMOD's simplicial one for the thin ones)."""
     for blocks, width in ((20, 150), (40, 3)):
         n = blocks * width
         rows, cols, values = block_system(blocks, width, seed=3)
@@ -150,3 +202,62 @@ def test_a_matrix_that_is_not_positive_definite_gives_nan(lib: ctypes.CDLL) -> N
         lib.solve(n, _i(rows), _i(cols), _d(values), len(rows), _i(fixed), 1, _d(b), _d(x), _i(info))
         assert info[3] == 0
         assert np.isnan(x).all(), (blocks, width)
+
+
+def hexahedral_beam(nx: int, ny: int, nz: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contributions (rows, cols, values) to a 3-D FEM-like matrix on a beam of nx x ny x nz nodes,
+    3 DOFs each: every hexahedron adds a random symmetric positive definite 24 x 24 block on its 8
+    nodes, and every DOF a positive diagonal term (a mass), so the matrix is positive definite."""
+    rng = np.random.default_rng(seed)
+    node = np.arange(nx * ny * nz).reshape(nz, ny, nx)
+    offsets = [(k, j, i) for k in (0, 1) for j in (0, 1) for i in (0, 1)]
+    corners = [node[k : nz - 1 + k, j : ny - 1 + j, i : nx - 1 + i] for k, j, i in offsets]
+    hexes = np.stack([c.ravel() for c in corners], axis=1)  # (elements, 8)
+    dofs = (3 * hexes[:, :, None] + np.arange(3)).reshape(len(hexes), 24)
+    b = rng.standard_normal((len(hexes), 24, 30))
+    blocks = b @ b.transpose(0, 2, 1) / 30.0
+    rows = np.repeat(dofs, 24, axis=1).ravel()
+    cols = np.tile(dofs, (1, 24)).ravel()
+    n = 3 * nx * ny * nz
+    index = np.arange(n)
+    rows = np.concatenate([rows, index]).astype(np.int64)
+    cols = np.concatenate([cols, index]).astype(np.int64)
+    values = np.concatenate([blocks.ravel(), np.full(n, 0.01)])
+    return rows, cols, values
+
+
+def test_supernodal_factor_matches_cholmods_kernel_on_a_3d_beam(lib: ctypes.CDLL) -> None:
+    """sofac's supernodal L L^T (runtime/sofac/direct.h's SupernodalCholesky) against
+    cholmod_super_numeric on the same symbolic factor of a clamped 3-D beam: hundreds of
+    supernodes, each updated by its descendants. Two passes with other values (the factor must be
+    refilled), then a third where one DOF's diagonal is negative: both kernels must stop at the
+    same column (L->minor), and the solve gives NaN."""
+    nx, ny, nz = 7, 7, 28
+    n = 3 * nx * ny * nz
+    rows, cols, first = hexahedral_beam(nx, ny, nz, seed=1)
+    _, _, second = hexahedral_beam(nx, ny, nz, seed=2)
+    third = second.copy()
+    bad = 3 * (nx * ny * nz // 2) + 1  # a DOF in the middle of the beam
+    third[-n + bad] = -1e3  # its (second) diagonal contribution: a negative pivot whatever the order
+    values = np.concatenate([first, second, third])
+    fixed = np.zeros(n, dtype=np.int64)
+    fixed[: 3 * nx * ny] = 1  # the first layer of nodes clamped
+    rng = np.random.default_rng(5)
+    b = rng.standard_normal(n)
+    b[fixed != 0] = 0.0
+    out = np.zeros(9)
+    info = np.zeros(12)
+    count = len(rows)
+    lib.compare_supernodal(n, _i(rows), _i(cols), _d(values), count, 3, _i(fixed), _d(b), _d(out), _d(info))
+    is_super, supernodes, flops = info[:3]
+    assert is_super == 1 and flops > 1e8  # CHOLMOD's analysis picks the supernodal kernel
+    assert supernodes > 300
+    for p in range(2):
+        ok, minor, cholmod_minor = info[3 + 3 * p : 6 + 3 * p]
+        difference, largest, backward = out[3 * p : 3 * p + 3]
+        assert ok == 1 and minor == n and cholmod_minor == n
+        assert difference <= 1e-12 * largest, (p, difference / largest)
+        assert backward < 1e-14, (p, backward)
+    ok, minor, cholmod_minor = info[9:12]
+    assert ok == 0
+    assert minor < n and minor == cholmod_minor
