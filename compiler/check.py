@@ -673,12 +673,23 @@ class _Checker:
         state = checked.component
         datatype = checked.datatype or DATATYPES["Vec3d"]
         value = self.value(checked, "position", raw=True)
-        if value is None or np.size(value) == 0:
+        velocity = self.value(checked, "velocity", raw=True)
+        # MechanicalObject::init also takes its topology's points when it holds one position and at
+        # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
+        # size > 1 resized it at parse time (Vec3 states only: other widths would need converting).
+        single = (
+            datatype.coord_size == 3
+            and np.size(value) == 3
+            and np.size(velocity) <= datatype.deriv_size
+            and int(checked.fields.get("size", 0)) <= 1
+        )
+        if value is None or np.size(value) == 0 or single:
             topology, _ = links.pick_in_node(
                 state.node, lambda c: self._is(c, Category.TOPOLOGY), climb=False
             )
-            if topology is not None:
-                value = self.value(self.checked.of(topology), "position")
+            points = self.value(self.checked.of(topology), "position") if topology is not None else None
+            if points is not None and np.size(points):
+                value = points
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
             if not count:

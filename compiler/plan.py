@@ -1276,15 +1276,17 @@ def _topology_cells(
     planner: _Planner, checked: CheckedComponent, *, sparse_grid_ok: bool = False
 ) -> dict[str, np.ndarray] | None:
     """The elements of the topology a component uses. A SparseGridTopology's only serve callers
-    that read nothing else (``sparse_grid_ok``): SOFA's FEM and masses also weight its boundary
-    cells (fillWeighted's stiffness and mass coefficients), which is not compiled."""
+    that read nothing else or apply its per-cell coefficients themselves (``sparse_grid_ok``, see
+    _sparse_grid_coefficients): SOFA's other FEM and masses on it are not compiled."""
     topology = _topology_of(planner, checked)
     if topology is None:
         return None
     spec = planner.checked.of(topology).spec
     if spec is not None and spec.role == "sparse_grid" and not sparse_grid_ok:
         planner.unsupported(
-            checked, "on a SparseGridTopology it is not compiled yet (SOFA weights the boundary cells)"
+            checked,
+            "on a SparseGridTopology it is not compiled yet (HexahedronFEMForceField(AndMass) and "
+            "BarycentricMapping are)",
         )
         planner.refused.add(id(checked.component))  # its "needs cells" follow-up would mislead
         return None
@@ -1294,6 +1296,22 @@ def _topology_cells(
         if value is not None and np.size(value):
             cells[kind] = np.asarray(value, dtype=np.int64).ravel()
     return cells
+
+
+def _sparse_grid_coefficients(planner: _Planner, checked: CheckedComponent) -> np.ndarray | None:
+    """The per-cell stiffness (= mass) coefficients of the SparseGridTopology a component uses (SOFA's
+    HexahedronFEMForceField scales each element stiffness by them, ...AndMass each element mass and
+    particle mass); None when its topology is not a sparse grid."""
+    from .voxelize import cell_coefficients
+
+    topology = _topology_of(planner, checked)
+    spec = planner.checked.of(topology).spec if topology is not None else None
+    if topology is None or spec is None or spec.role != "sparse_grid":
+        return None
+    boundary = planner.value(topology, "boundary_cells")
+    if boundary is None:
+        return None
+    return cell_coefficients(np.asarray(boundary), bool(planner.value(topology, "fillWeighted")))
 
 
 def _split_hexahedra(cells: dict[str, np.ndarray]) -> np.ndarray | None:
@@ -1569,7 +1587,8 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
         planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
         return
-    topology = _topology_cells(planner, checked) or {}
+    # HexahedronFEMForceField(AndMass) applies a SparseGridTopology's cell coefficients (below)
+    topology = _topology_cells(planner, checked, sparse_grid_ok=prefix == "hexa_fem") or {}
     cells = topology.get(kind)
     if (cells is None or not cells.size) and prefix == "tetra_fem":
         cells = _split_hexahedra(topology)
@@ -1588,6 +1607,13 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
     )
     padded = -(-count // TETRA_LANES) * TETRA_LANES if kind == "tetrahedra" else count
     data = planner.buffer(component, "elements", np.zeros(padded * sizes[method]), role="scratch")
+    coefficients = _sparse_grid_coefficients(planner, checked) if prefix == "hexa_fem" else None
+    if coefficients is not None and len(coefficients) != count:
+        planner.unsupported(checked, "its SparseGridTopology's cell coefficients do not match its hexahedra")
+        return
+    coefficient_buffer = (
+        planner.buffer(component, "stiffnessCoefs", coefficients) if coefficients is not None else None
+    )
     origin = origin_of(component)
     group.init.append(
         Op(
@@ -1604,6 +1630,7 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                     _count(poisson_buffer),
                     method,
                     data,
+                    *([coefficient_buffer] if coefficient_buffer is not None else []),
                 )
             ],
         )
@@ -1613,7 +1640,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)])
     )
     and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
-    if and_mass and not _lower_hexa_mass(planner, checked, state, group, elements, count, data, method):
+    if and_mass and not _lower_hexa_mass(
+        planner, checked, state, group, elements, count, data, method, coefficient_buffer
+    ):
         return
     if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
         group.energy.append(
@@ -2314,9 +2343,11 @@ def _lower_hexa_mass(
     count: int,
     data: Buffer,
     method: int,
+    coefficients: Buffer | None,
 ) -> bool:
     """HexahedronFEMForceFieldAndMass's mass: SOFA's element mass matrices (consistent, or lumped
-    onto the diagonal) in a scalar CSR matrix, and its weight from the particle masses (vol/8)."""
+    onto the diagonal) in a scalar CSR matrix, and its weight from the particle masses (vol/8),
+    both scaled by a SparseGridTopology's cell coefficients (``coefficients``) when it has one."""
     from . import element_fem
 
     component = checked.component
@@ -2362,6 +2393,7 @@ def _lower_hexa_mass(
                     "true" if lumped else "false",
                     values,
                     particle,
+                    *([coefficients] if coefficients is not None else []),
                 )
             ],
         )

@@ -342,3 +342,11 @@ def triangulate(triangles: np.ndarray, quads: np.ndarray) -> np.ndarray:
     quads = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
     fans = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     return np.concatenate([np.asarray(triangles, dtype=np.int64).reshape(-1, 3), fans])
+
+
+def cell_coefficients(boundary: np.ndarray, fill_weighted: bool) -> np.ndarray:
+    """SparseGridTopology's per-cell stiffness and mass coefficients (getStiffnessCoef and
+    getMassCoef, equal when built from a surface without virtual finer levels): 0.5 for a BOUNDARY
+    cell when ``fillWeighted``, else 1. ``boundary``: whether each sparse cell is BOUNDARY."""
+    flags = np.asarray(boundary, dtype=bool).ravel()
+    return np.where(flags & bool(fill_weighted), 0.5, 1.0)

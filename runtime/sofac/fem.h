@@ -1275,10 +1275,12 @@ inline void hexa_fem_init(const Index* hexa, Index n_hexa, const double* rest_x,
 // edges 0-1, 0-3, 0-4 of the rotated rest element. It is accumulated into the scalar CSR matrix
 // (row_begin, cols, values: the element node pairs; lumped: the diagonal, holding the row sums).
 // particle[i] (SOFA's _particleMasses, used for the weight) sums vol * density / 8 over the
-// elements of node i, vol from the rest positions.
+// elements of node i, vol from the rest positions. mass_coef[i] (optional; SparseGridTopology's
+// getMassCoef, 1 otherwise) scales both of element i's masses, where SOFA applies it.
 inline void hexa_fem_mass_init(const Index* hexa, Index n_hexa, const double* rest_x, const double* element_data,
                                int method, const double* density, const Index* row_begin, const Index* cols,
-                               Index n_rows, bool lumped, double* values, double* particle) {
+                               Index n_rows, bool lumped, double* values, double* particle,
+                               const double* mass_coef = nullptr) {
     using namespace fem_detail;
     const int stride = hexa_fem_data_size(method);
     const double rho = density[0];
@@ -1297,15 +1299,16 @@ inline void hexa_fem_mass_init(const Index* hexa, Index n_hexa, const double* re
         const Index* h = hexa + 8 * i;
         V3 nodes[8];
         for (int w = 0; w < 8; ++w) nodes[w] = load(rest_x + 3 * h[w]);
+        const double coef = mass_coef ? mass_coef[i] : 1.0;
         const double volume = norm(sub(nodes[1], nodes[0])) * norm(sub(nodes[3], nodes[0])) *
-                              norm(sub(nodes[4], nodes[0]));
+                              norm(sub(nodes[4], nodes[0])) * coef;
         const double mass = (volume * rho) / 8.0;
         for (int w = 0; w < 8; ++w) particle[h[w]] += mass;
         const double* e = element_data + i * stride + HREST;
         V3 q[8];
         for (int w = 0; w < 8; ++w) q[w] = load(e + 3 * w);
         const double vol = norm(sub(q[1], q[0])) * norm(sub(q[3], q[0])) * norm(sub(q[4], q[0]));
-        const double m = vol * integrated;
+        const double m = (vol * integrated) * coef;  // SOFA scales the finished element matrix
         for (int a = 0; a < 8; ++a)
             for (int b = 0; b < 8; ++b) {
                 if (lumped)
