@@ -397,7 +397,7 @@ class Simulation:
         a, b = (int(i) for i in self.spec.buffers[contact.pairs].initial.reshape(-1, 2)[pair])
         return ContactNotCompiled(
             f"step {self._steps + 1} (t={self.time:g}): collision models {contact.models[a]} and "
-            f"{contact.models[b]} could touch (their boxes, grown by radius and alarm distance, overlap); "
+            f"{contact.models[b]} could touch (their boxes come within SOFA's proximity distance); "
             f"sofac does not compile contact response yet, so it stopped before this step instead of "
             f"running it without the contact. The states are those after step {self._steps}."
         )

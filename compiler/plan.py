@@ -229,12 +229,13 @@ class Group:
 @dataclass
 class ContactGuard:
     """Collision models that could touch, while contact response is not compiled: before every
-    step, each model's box (its state's points grown by its radius and the alarm distance) is
+    step, each model's box (its state's points grown by its radius, its contactDistance and half
+    the alarm distance, so that two boxes meet where SOFA's proximity test would pair them) is
     tested against the others', and the step stops before the first pair that touches. A run
     that ends without a stop had no contact: it is SOFA's, exactly."""
 
     models: list[tuple[str, StatePlan]]  # (origin, state) per collision model
-    margins: Buffer  # per model: its radius, the intersection's alarm distance, its contactDistance
+    margins: Buffer  # per model: radius + contactDistance + half the intersection's alarm distance
     pairs: Buffer  # i64 (model, model) rows: the pairs SOFA would test
     boxes: Buffer  # scratch, 6 numbers per model
     touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
@@ -672,8 +673,10 @@ class _Planner:
                 radii = self.value(checked.component, "listRadius")
                 radius = float(np.max(radii)) if radii is not None and np.size(radii) else 0.0
                 radius = radius or float(self.value(checked.component, "radius") or 1.0)
-            # SOFA's proximity adds each model's contactDistance to the intersection's alarm distance
-            margins.append(radius + alarm + float(self.value(checked.component, "contactDistance") or 0.0))
+            # SOFA's box test (BaseProximityIntersection) lets two boxes be alarmDistance plus both
+            # models' contactDistance apart: half the alarm distance grows each box.
+            contact = float(self.value(checked.component, "contactDistance") or 0.0)
+            margins.append(radius + 0.5 * alarm + contact)
             static.append(
                 not self.value(checked.component, "simulated") and not self.value(checked.component, "moving")
             )

@@ -57,9 +57,10 @@ def test_the_step_stops_before_the_balls_could_touch(tmp_path: Path) -> None:
 
 
 def test_the_alarm_distance_widens_the_reach(tmp_path: Path) -> None:
-    """NewProximityIntersection's alarmDistance 1 grows each box by 1 more: 3.1 m of reach, reached
-    after 35 steps (3.0 m apart), not 34 (3.2 m)."""
-    proximity = '<NewProximityIntersection alarmDistance="1" contactDistance="0.5"/>'
+    """NewProximityIntersection's alarmDistance 2 is the gap SOFA's box test allows between two
+    models (each box grows by half of it): 3.1 m of reach, reached after 35 steps (3.0 m apart),
+    not 34 (3.2 m). The intersection's own contactDistance does not count."""
+    proximity = '<NewProximityIntersection alarmDistance="2" contactDistance="0.5"/>'
     sim = sofac.load(write(tmp_path, "near.scn", intersection=proximity))
     with pytest.raises(sofac.ContactNotCompiled):
         sim.step(100)
