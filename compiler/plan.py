@@ -1670,22 +1670,18 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                 ],
             )
         )
+        # Tetrahedra: element matrices a block of TETRA_LANES at once, one per vector lane (fem.h).
+        if prefix in ("tetra_fem", "tetracorot_fem"):
+            assembler = "assemble_elements<4, sofac::TETRA_LANES>"
+            matrices = f"sofac::{prefix}_element_matrices"
+        else:
+            assembler, matrices = f"assemble_elements<{corners}>", f"sofac::{prefix}_element_matrix"
         _assemble(
             planner,
             checked,
             group,
             state,
-            lambda offset: _call(
-                f"assemble_elements<{corners}>",
-                "A",
-                elements,
-                count,
-                data,
-                method,
-                offset,
-                "kfact",
-                f"sofac::{prefix}_element_matrix",
-            ),
+            lambda offset: _call(assembler, "A", elements, count, data, method, offset, "kfact", matrices),
         )
 
 

@@ -84,6 +84,22 @@ API void tet_dforce_level(int level, const Index* t, Index n, const double* dx, 
 #endif
     if (level == 0) tetra_dforce_default(t, n, dx, df, k, data, method, nullptr, nullptr);
 }
+// The element matrices of elements [0, n), a block of TETRA_LANES at a time (level -1: dispatched).
+API void tet_matrices_level(int level, const double* data, Index n, int method, double* out) {
+    using namespace sofac::fem_detail;
+    const int lanes = sofac::TETRA_LANES, size = sofac::tetra_fem_data_size(method);
+    std::vector<double> block(144 * lanes);
+    for (Index first = 0; first < n; first += lanes) {
+        const double* d = data + first * size;
+        if (level < 0) sofac::tetra_fem_element_matrices(data, first, method, block.data());
+#ifdef SOFAC_X86_VARIANTS
+        if (level == 2) tetra_element_matrices_avx512(d, method, block.data());
+        if (level == 1) tetra_element_matrices_avx2(d, method, block.data());
+#endif
+        if (level == 0) tetra_element_matrices_default(d, method, block.data());
+        std::copy_n(block.data(), 144 * std::min<Index>(lanes, n - first), out + 144 * first);
+    }
+}
 API void corot_force(const Index* t, Index n, const double* x, double* f, double* data, int method) {
     sofac::tetracorot_fem_add_force(t, n, x, f, data, method);
 }
@@ -659,6 +675,15 @@ def test_tetra_element_matrix_is_sofas_product_to_the_bit(lib: ctypes.CDLL, meth
         record = field.data[start : start + size * lanes : lanes]  # element e's numbers
         expected = sofa_tetra_element_matrix(record[:24], method)
         assert np.array_equal(field.element_matrix(e), expected), e
+    # The assembled solvers' blocks of TETRA_LANES matrices (one per vector lane, every
+    # instruction-set copy this processor runs) give the same numbers; n - 2 of them: a short last block.
+    n = len(tetra) - 2
+    assert n % lanes
+    one_by_one = np.array([field.element_matrix(e) for e in range(n)])
+    for level in (-1, *range(lib.vector_level() + 1)):
+        blocks = np.zeros(144 * n)
+        lib.tet_matrices_level(level, _d(field.data), ctypes.c_int64(n), method, _d(blocks))
+        assert np.array_equal(blocks.reshape(-1, 12, 12), one_by_one), level
 
 
 def test_tetra_material_lists_and_factors(lib: ctypes.CDLL) -> None:

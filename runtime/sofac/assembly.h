@@ -343,17 +343,23 @@ inline void assemble_springs(Assembler& A, const Springs& s, const double* jacob
 
 // Elements (FEM): `matrix(element_data, e, method, out)` gives the positive stiffness of element e
 // (corners x corners blocks of 3x3, row-major); the force Jacobian is its negative.
-template <int Corners, class ElementMatrix>
+// With Block > 1, `matrix(element_data, first, method, out)` gives the matrices of elements first ..
+// first + Block - 1 at once, one after the other (tetrahedra: one vector lane per element); they
+// are added element after element all the same.
+template <int Corners, int Block = 1, class ElementMatrix>
 inline void assemble_elements(Assembler& A, const Index* elements, Index count, const double* element_data,
                               int method, Index offset, double kfact, ElementMatrix matrix) {
     constexpr int N = 3 * Corners;
-    double out[N * N];
-    for (Index e = 0; e < count; ++e) {
-        matrix(element_data, e, method, out);
-        const Index* nodes = elements + Corners * e;
-        for (int a = 0; a < Corners; ++a)
-            for (int b = 0; b < Corners; ++b)
-                A.add_block3(offset + 3 * nodes[a], offset + 3 * nodes[b], out + 3 * a * N + 3 * b, N, -kfact);
+    double out[Block * N * N];
+    for (Index first = 0; first < count; first += Block) {
+        matrix(element_data, first, method, out);
+        for (Index e = first; e < std::min<Index>(first + Block, count); ++e) {
+            const double* m = out + (e - first) * N * N;
+            const Index* nodes = elements + Corners * e;
+            for (int a = 0; a < Corners; ++a)
+                for (int b = 0; b < Corners; ++b)
+                    A.add_block3(offset + 3 * nodes[a], offset + 3 * nodes[b], m + 3 * a * N + 3 * b, N, -kfact);
+        }
     }
 }
 

@@ -860,6 +860,62 @@ __attribute__((always_inline)) inline void tetra_dforce_method(const Index* tetr
         tetra_dforce_blocks<true>(tetra, n, dx, df, kfactor, data, tetra_fem_data_size(method), slots, deferred);
 }
 
+// R J K J^T R^T of one element (T = double) or of TETRA_LANES elements (T = Lanes, one per lane):
+// the positive stiffness, 12x12 row-major, from a record's TJ, TMAT and (rotated) TROT fields.
+// SOFA's order of operations (TetrahedronFEMForceField's assembled matrix, structural zeros of J
+// and K skipped); without rotation R is the identity, multiplied all the same.
+template <class T>
+__attribute__((always_inline)) inline void tetra_element_matrix(const T* d, bool rotated, T* out) {
+    // Row 3n + c of J has its non-zeros in the columns column[c][0..2] (increasing): the cofactors
+    // (a, b, g) of node n in the order cofactor[c][0..2]. Column c < 3 is the only one below 3.
+    constexpr int column[3][3] = {{0, 3, 5}, {1, 3, 4}, {2, 4, 5}};
+    constexpr int cofactor[3][3] = {{0, 1, 2}, {1, 0, 2}, {2, 1, 0}};
+    T Jv[12][3];
+    for (int n = 0; n < 4; ++n)
+        for (int c = 0; c < 3; ++c)
+            for (int t = 0; t < 3; ++t) Jv[3 * n + c][t] = d[TJ + 3 * n + cofactor[c][t]];
+    // K: K00 on the diagonal and K01 off it in the upper-left 3x3 block, K33 on the lower diagonal.
+    const T K00 = d[TMAT], K01 = d[TMAT + 1], K33 = d[TMAT + 2];
+    const T zero = T{}, one = zero + 1.0;
+    T JK[12][6];  // one term each: J[i][c] K[c][j] (j < 3), J[i][j] K33 (j >= 3)
+    for (int i = 0; i < 12; ++i) {
+        const int c = i % 3;
+        for (int j = 0; j < 3; ++j) JK[i][j] = Jv[i][0] * (j == c ? K00 : K01);
+        for (int j = 3; j < 6; ++j) JK[i][j] = zero;
+        JK[i][column[c][1]] = Jv[i][1] * K33;
+        JK[i][column[c][2]] = Jv[i][2] * K33;
+    }
+    T JKJt[12][12];
+    for (int i = 0; i < 12; ++i)
+        for (int j = 0; j < 12; ++j) {
+            const int* k = column[j % 3];
+            JKJt[i][j] = JK[i][k[0]] * Jv[j][0] + JK[i][k[1]] * Jv[j][1] + JK[i][k[2]] * Jv[j][2];
+        }
+    T R[9];
+    for (int k = 0; k < 9; ++k) R[k] = rotated ? d[TROT + k] : (k % 4 == 0 ? one : zero);
+    T S[12][12];  // RR JKJt, RR = diag(R, R, R, R)
+    for (int i = 0; i < 12; ++i) {
+        const int b = i - i % 3;
+        const T r0 = R[3 * (i % 3)], r1 = R[3 * (i % 3) + 1], r2 = R[3 * (i % 3) + 2];
+        for (int j = 0; j < 12; ++j) S[i][j] = r0 * JKJt[b][j] + r1 * JKJt[b + 1][j] + r2 * JKJt[b + 2][j];
+    }
+    for (int i = 0; i < 12; ++i)
+        for (int b = 0; b < 12; b += 3)
+            for (int j = 0; j < 3; ++j)
+                out[12 * i + b + j] = S[i][b] * R[3 * j] + S[i][b + 1] * R[3 * j + 1] + S[i][b + 2] * R[3 * j + 2];
+}
+
+// tetra_element_matrix of the TETRA_LANES elements of one data block, element after element in out.
+__attribute__((always_inline)) inline void tetra_element_matrices_block(const double* block, int method,
+                                                                        double* out) {
+    Lanes d[TROT + 9];
+    load_lanes(block, 0, method == 0 ? TROT : TROT + 9, d);
+    Lanes m[144];
+    tetra_element_matrix<Lanes>(d, method != 0, m);
+    for (int l = 0; l < TETRA_LANES; ++l)
+        for (int k = 0; k < 144; ++k) out[144 * l + k] = m[k][l];
+}
+
 // The block kernels compiled for baseline x86-64 (the library's own target) and, chosen at run time
 // by what the processor has, for AVX2 and for AVX-512 F+VL (the same 4-wide vectors, with 32
 // registers instead of 16: fewer spills, about 10% faster). No fused multiply-add: the targets do
@@ -872,6 +928,9 @@ inline void tetra_dforce_default(const Index* tetra, Index n, const double* dx, 
 inline void tetra_force_large_default(const Index* tetra, Index n, const double* x, double* f, double* data,
                                       const Index* slots, double* deferred) {
     tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
+}
+inline void tetra_element_matrices_default(const double* block, int method, double* out) {
+    tetra_element_matrices_block(block, method, out);
 }
 
 #if defined(__GNUC__) && defined(__x86_64__)
@@ -894,6 +953,14 @@ __attribute__((target("avx512f,avx512vl"))) inline void tetra_dforce_avx512(
 __attribute__((target("avx512f,avx512vl"))) inline void tetra_force_large_avx512(
     const Index* tetra, Index n, const double* x, double* f, double* data, const Index* slots, double* deferred) {
     tetra_force_large_blocks(tetra, n, x, f, data, slots, deferred);
+}
+__attribute__((target("avx2"))) inline void tetra_element_matrices_avx2(const double* block, int method,
+                                                                        double* out) {
+    tetra_element_matrices_block(block, method, out);
+}
+__attribute__((target("avx512f,avx512vl"))) inline void tetra_element_matrices_avx512(const double* block,
+                                                                                      int method, double* out) {
+    tetra_element_matrices_block(block, method, out);
 }
 // 2: AVX-512 F+VL, 1: AVX2, 0: neither. A scene library is built for the processor it runs on
 // (sofac.build defines SOFAC_VECTOR_LEVEL from it, and the flag is part of the cache key), so only
@@ -927,6 +994,14 @@ inline void tetra_force_large_dispatch(const Index* tetra, Index n, const double
     if (level == 1) return tetra_force_large_avx2(tetra, n, x, f, data, slots, deferred);
 #endif
     tetra_force_large_default(tetra, n, x, f, data, slots, deferred);
+}
+inline void tetra_element_matrices_dispatch(const double* block, int method, double* out) {
+#ifdef SOFAC_X86_VARIANTS
+    const int level = vector_level();
+    if (level == 2) return tetra_element_matrices_avx512(block, method, out);
+    if (level == 1) return tetra_element_matrices_avx2(block, method, out);
+#endif
+    tetra_element_matrices_default(block, method, out);
 }
 
 }  // namespace fem_detail
@@ -1009,41 +1084,14 @@ inline void tetra_fem_element_matrix(const double* element_data, Index e, int me
     using namespace fem_detail;
     double d[TROT + 9];
     tetra_unpack(element_data, e, tetra_fem_data_size(method), 0, method == 0 ? TROT : TROT + 9, d);
-    // Row 3n + c of J has its non-zeros in the columns column[c][0..2] (increasing): the cofactors
-    // (a, b, g) of node n in the order cofactor[c][0..2]. Column c < 3 is the only one below 3.
-    constexpr int column[3][3] = {{0, 3, 5}, {1, 3, 4}, {2, 4, 5}};
-    constexpr int cofactor[3][3] = {{0, 1, 2}, {1, 0, 2}, {2, 1, 0}};
-    double Jv[12][3];
-    for (int n = 0; n < 4; ++n)
-        for (int c = 0; c < 3; ++c)
-            for (int t = 0; t < 3; ++t) Jv[3 * n + c][t] = d[TJ + 3 * n + cofactor[c][t]];
-    // K: K00 on the diagonal and K01 off it in the upper-left 3x3 block, K33 on the lower diagonal.
-    const double K00 = d[TMAT], K01 = d[TMAT + 1], K33 = d[TMAT + 2];
-    double JK[12][6];  // one term each: J[i][c] K[c][j] (j < 3), J[i][j] K33 (j >= 3)
-    for (int i = 0; i < 12; ++i) {
-        const int c = i % 3;
-        for (int j = 0; j < 3; ++j) JK[i][j] = Jv[i][0] * (j == c ? K00 : K01);
-        for (int j = 3; j < 6; ++j) JK[i][j] = 0.0;
-        JK[i][column[c][1]] = Jv[i][1] * K33;
-        JK[i][column[c][2]] = Jv[i][2] * K33;
-    }
-    double JKJt[12][12];
-    for (int i = 0; i < 12; ++i)
-        for (int j = 0; j < 12; ++j) {
-            const int* k = column[j % 3];
-            JKJt[i][j] = JK[i][k[0]] * Jv[j][0] + JK[i][k[1]] * Jv[j][1] + JK[i][k[2]] * Jv[j][2];
-        }
-    const M3 R = method == 0 ? identity() : load_m(d + TROT);
-    double S[12][12];  // RR JKJt, RR = diag(R, R, R, R)
-    for (int i = 0; i < 12; ++i) {
-        const int b = i - i % 3;
-        const double r0 = R(i % 3, 0), r1 = R(i % 3, 1), r2 = R(i % 3, 2);
-        for (int j = 0; j < 12; ++j) S[i][j] = r0 * JKJt[b][j] + r1 * JKJt[b + 1][j] + r2 * JKJt[b + 2][j];
-    }
-    for (int i = 0; i < 12; ++i)
-        for (int b = 0; b < 12; b += 3)
-            for (int j = 0; j < 3; ++j)
-                out[12 * i + b + j] = S[i][b] * R(j, 0) + S[i][b + 1] * R(j, 1) + S[i][b + 2] * R(j, 2);
+    tetra_element_matrix<double>(d, method != 0, out);
+}
+
+// The matrices of elements first .. first + TETRA_LANES - 1 (one block of the element data; past the
+// last element, unused), 144 numbers each, one after the other: each the same numbers as
+// tetra_fem_element_matrix's, computed TETRA_LANES at once with this processor's vector copy.
+inline void tetra_fem_element_matrices(const double* element_data, Index first, int method, double* out) {
+    fem_detail::tetra_element_matrices_dispatch(element_data + first * tetra_fem_data_size(method), method, out);
 }
 
 // ================================================================================================
@@ -1075,6 +1123,9 @@ inline void tetracorot_fem_add_dforce(const Index* tetra, Index n, const double*
 }
 inline void tetracorot_fem_element_matrix(const double* element_data, Index e, int method, double* out) {
     tetra_fem_element_matrix(element_data, e, method, out);
+}
+inline void tetracorot_fem_element_matrices(const double* element_data, Index first, int method, double* out) {
+    tetra_fem_element_matrices(element_data, first, method, out);
 }
 
 // ================================================================================================
