@@ -62,7 +62,7 @@ API void tet_dforce_scalar(const Index* t, Index n, const double* dx, double* df
 }
 API int vector_level() {
 #ifdef SOFAC_X86_VARIANTS
-    return sofac::fem_detail::vector_level();
+    return sofac::vector_level();
 #else
     return 0;
 #endif

@@ -933,8 +933,7 @@ inline void tetra_element_matrices_default(const double* block, int method, doub
     tetra_element_matrices_block(block, method, out);
 }
 
-#if defined(__GNUC__) && defined(__x86_64__)
-#define SOFAC_X86_VARIANTS 1
+#ifdef SOFAC_X86_VARIANTS
 __attribute__((target("avx2"))) inline void tetra_dforce_avx2(const Index* tetra, Index n, const double* dx,
                                                               double* df, double kfactor, const double* data,
                                                               int method, const Index* slots, double* deferred) {
@@ -961,18 +960,6 @@ __attribute__((target("avx2"))) inline void tetra_element_matrices_avx2(const do
 __attribute__((target("avx512f,avx512vl"))) inline void tetra_element_matrices_avx512(const double* block,
                                                                                       int method, double* out) {
     tetra_element_matrices_block(block, method, out);
-}
-// 2: AVX-512 F+VL, 1: AVX2, 0: neither. A scene library is built for the processor it runs on
-// (sofac.build defines SOFAC_VECTOR_LEVEL from it, and the flag is part of the cache key), so only
-// that copy is compiled: the others would triple the kernels' compile time. Without the define
-// (tests, other builds), the processor is asked at run time.
-inline int vector_level() {
-#ifdef SOFAC_VECTOR_LEVEL
-    return SOFAC_VECTOR_LEVEL;
-#else
-    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) return 2;
-    return __builtin_cpu_supports("avx2") ? 1 : 0;
-#endif
 }
 #endif
 

@@ -13,6 +13,25 @@ namespace sofac {
 
 using Index = std::int64_t;
 
+#if defined(__GNUC__) && defined(__x86_64__)
+// Kernels with copies compiled for AVX2 and AVX-512 (GCC's target attribute), chosen by
+// vector_level(): wider vectors, the same IEEE operations per lane (no fused multiply-add), so
+// the same numbers as the baseline copy.
+#define SOFAC_X86_VARIANTS 1
+// 2: AVX-512 F+VL, 1: AVX2, 0: neither. A scene library is built for the processor it runs on
+// (sofac.build defines SOFAC_VECTOR_LEVEL from it, and the flag is part of the cache key), so only
+// that copy is compiled: the others would triple the kernels' compile time. Without the define
+// (tests, other builds), the processor is asked at run time.
+inline int vector_level() {
+#ifdef SOFAC_VECTOR_LEVEL
+    return SOFAC_VECTOR_LEVEL;
+#else
+    if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl")) return 2;
+    return __builtin_cpu_supports("avx2") ? 1 : 0;
+#endif
+}
+#endif
+
 template <int N>
 struct VecTypes {
     static constexpr int coord = N;
