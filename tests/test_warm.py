@@ -138,3 +138,15 @@ def test_a_damaged_record_or_library_is_a_miss(tmp_path: Path, damage: str) -> N
     assert not sim.compiled.warm
     assert np.array_equal(x, expected)
     assert run(path)[0].compiled.warm  # and the record was written again
+
+
+def test_sofac_run_is_warm_the_second_time(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from sofac.cli import main
+
+    path = liver(tmp_path)
+    outputs = []
+    for _ in range(2):
+        assert main(["run", str(path), "--steps", "3"]) == 0
+        outputs.append(capsys.readouterr().out.splitlines())
+    assert "(warm record)" not in outputs[0][0] and "(warm record)" in outputs[1][0]
+    assert outputs[0][1:] == outputs[1][1:]  # the same states after 3 steps
