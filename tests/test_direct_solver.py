@@ -24,17 +24,23 @@ SHIM = r"""
 using sofac::Index;
 #define API extern "C" __attribute__((visibility("default")))
 
+// A solver on the pattern of the entries (rows[k], cols[k]), DOFs with fixed[i] != 0 projected.
+static void record_pattern(sofac::DirectSolver& D, Index n, const Index* rows, const Index* cols, Index count,
+                           const Index* fixed) {
+    D.resize(n);
+    for (Index i = 0; i < n; ++i) D.fixed[i] = fixed[i] != 0;
+    D.assembler.start_pattern();
+    for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], 0.0);
+    D.assembler.finish_pattern(D.matrix, n, D.fixed);
+}
+
 // Entries (rows[k], cols[k]) of an n x n matrix with values values[pass * count + k], two passes
 // (two factorisations); fixed[i] != 0 projects DOF i. Out: each pass's solution of A x = b, and
 // info = {stored entries, off-diagonal entries in fixed rows or columns, supernodal, ok}.
 API void solve(Index n, const Index* rows, const Index* cols, const double* values, Index count,
                const Index* fixed, int llt, const double* b, double* x, Index* info) {
     sofac::DirectSolver D;
-    D.resize(n);
-    for (Index i = 0; i < n; ++i) D.fixed[i] = fixed[i] != 0;
-    D.assembler.start_pattern();
-    for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], 0.0);
-    D.assembler.finish_pattern(D.matrix, n, D.fixed);
+    record_pattern(D, n, rows, cols, count, fixed);
     D.analyze(llt ? sofac::Factorization::LLT : sofac::Factorization::LDLT);
     info[3] = 1;
     for (int pass = 0; pass < 2; ++pass) {
@@ -61,11 +67,7 @@ API void solve(Index n, const Index* rows, const Index* cols, const double* valu
 API void compare_supernodal(Index n, const Index* rows, const Index* cols, const double* values, Index count,
                             Index passes, const Index* fixed, const double* b, double* out, double* info) {
     sofac::DirectSolver D;
-    D.resize(n);
-    for (Index i = 0; i < n; ++i) D.fixed[i] = fixed[i] != 0;
-    D.assembler.start_pattern();
-    for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], 0.0);
-    D.assembler.finish_pattern(D.matrix, n, D.fixed);
+    record_pattern(D, n, rows, cols, count, fixed);
     D.analyze(sofac::Factorization::LLT);
     cholmod_common& common = D.factorization.cholmod();
     cholmod_factor* L = D.factorization.factor();
