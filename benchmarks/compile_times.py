@@ -73,7 +73,7 @@ class Result:
 
 
 def machine() -> str:
-    from sofac import build
+    from sofac.build import compiler as build
 
     compiler = build.compiler()
     try:
@@ -88,7 +88,7 @@ def machine() -> str:
 def build_host() -> tuple[float, bool]:
     """Build the host module into the fresh cache; then load it and sofac's stages (not timed), so
     that the first scene's cold compile does not pay for imports."""
-    from sofac import build
+    from sofac.build import compiler as build
 
     started = time.perf_counter()
     built = build.build_host()

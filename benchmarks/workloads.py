@@ -6,7 +6,7 @@ For each workload, in this one process:
   steps, then ``--batches`` timed batches of ``sim.step(steps)``;
 - **hand-written**: an independent C++ loop of the same algorithm (``handwritten/w1.cpp``,
   ``w2.cpp``, ``w3.cpp``), compiled with g++ and the flags sofac uses for large scenes
-  (``sofac.build.LARGE_SCENE_FLAGS`` without the shared-library ones; W3 linked with CHOLMOD) and
+  (``sofac.build.compiler.LARGE_SCENE_FLAGS`` without the shared-library ones; W3 linked with CHOLMOD) and
   timed inside the C++ program, batch by batch, after the same warm-up;
 - **NumPy / SciPy**: vectorised NumPy (W1); a ``scipy.sparse`` matrix with 25 CG iterations in
   NumPy (W2, W3) or SuperLU (``scipy.sparse.linalg.splu``, W3's direct variant ``w3ldl``), when
@@ -166,14 +166,14 @@ def time_sofac(scene: Path, warmup: int, steps: int, batches: int) -> tuple[list
 def handwritten_flags() -> list[str]:
     """The flags sofac compiles the cloth scenes with (a large scene: ``-O3``), without those that
     make a shared library."""
-    from sofac.build import LARGE_SCENE_FLAGS
+    from sofac.build.compiler import LARGE_SCENE_FLAGS
 
     return [f for f in LARGE_SCENE_FLAGS if f not in ("-shared", "-fPIC", "-fvisibility=hidden", "-w")]
 
 
 def build_handwritten(name: str, out: Path) -> Path:
     """Compile ``handwritten/NAME.cpp`` into ``out`` (W3 with CHOLMOD); returns the executable."""
-    from sofac.build import SUITESPARSE_INCLUDE, compiler
+    from sofac.build.compiler import SUITESPARSE_INCLUDE, compiler
 
     out.mkdir(parents=True, exist_ok=True)
     exe = out / name

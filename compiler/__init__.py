@@ -1,13 +1,15 @@
 """sofac: a compiler for SOFA physics scenes.
 
-The pipeline, one module per stage, data flowing one way::
+The pipeline, one package per stage, data flowing one way (docs/architecture.md)::
 
-    parse     (parse.py)     .scn text -> Scene model (model.py), includes and macros expanded
-    check     (check.py)     Scene -> CheckedScene: types, links, templates, mappings; diagnostics
-    plan      (plan.py)      CheckedScene -> Plan: buffers, mechanical groups, the step's kernel calls
-    generate  (generate.py)  Plan -> C++ source (templates/*.j2 over runtime/sofac kernels)
-    build     (build.py)     C++ -> shared library, in a content-addressed cache
-    load      (loader.py)    library -> Simulation (numpy views of the native state)
+    front/    .scn text -> Scene model (includes and macros expanded)
+    check/    Scene -> CheckedScene: types, links, templates, mappings; diagnostics
+    plan/     CheckedScene -> Plan: typed data (buffers, groups, the calls of each step)
+    codegen/  Plan -> C++ source (templates/*.j2 arrange calls to the runtime/sofac kernels)
+    build/    C++ -> shared library, in a content-addressed cache
+    load/     library -> Simulation (numpy views of the native state)
+
+pipeline.py drives them; the tools beside them (accuracy/, render/, sweep/, regress/, cli/) use it.
 """
 
 from __future__ import annotations
@@ -30,11 +32,11 @@ __all__ = [
 _LAZY = {
     "SceneError": "diagnostics",
     "SofacError": "diagnostics",
-    "ContactNotCompiled": "loader",
-    "Simulation": "loader",
-    "SimulationDiverged": "loader",
-    "load": "loader",
-    "sweep": "sweeps",
+    "ContactNotCompiled": "load.loader",
+    "Simulation": "load.loader",
+    "SimulationDiverged": "load.loader",
+    "load": "pipeline",
+    "sweep": "sweep.runner",
 }
 
 

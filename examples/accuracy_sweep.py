@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sofac import accuracy
-from sofac.accuracy_plots import plot_all
+from sofac.accuracy import measure as accuracy
+from sofac.accuracy.plots import plot_all
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO / "scenes"

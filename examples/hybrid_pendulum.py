@@ -12,8 +12,8 @@ import sys
 from pathlib import Path
 
 from sofac.diagnostics import Diagnostics
-from sofac.model import Node, Scene
-from sofac.writer import save_scene
+from sofac.front.model import Node, Scene
+from sofac.front.writer import save_scene
 
 # The document's parameters.
 END_POS = 1.0  # x of the free end of the string
@@ -91,7 +91,7 @@ def create_scene() -> Node:
 def _check(root: Node) -> None:
     """Run the check stage if it exists yet and print what it says."""
     try:
-        from sofac.check import check_scene
+        from sofac.check.checker import check_scene
     except ImportError:
         print("check stage not available")
         return

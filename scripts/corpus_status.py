@@ -23,9 +23,9 @@ from pathlib import Path
 
 import sofac
 from sofac import registry
-from sofac.check import check_file
+from sofac.check.checker import check_file
 from sofac.diagnostics import Diagnostic, Diagnostics
-from sofac.parse import parse_scene
+from sofac.front.parse import parse_scene
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"

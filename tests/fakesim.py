@@ -1,6 +1,6 @@
 """A numpy stand-in for a loaded simulation: particles in free fall, with exact known states.
 
-It offers what ``sofac.writestate`` and ``sofac.regress`` use of ``sofac.load(path)``: ``dt``,
+It offers what ``sofac.regress.states`` and ``sofac.regress.suite`` use of ``sofac.load(path)``: ``dt``,
 ``time`` (accumulated ``+= dt`` per step, as SOFA does), ``step(n)``, ``states()`` and
 ``sim[path].position/.velocity``. Positions follow ``x(t) = x0 + v0 t + g t^2 / 2`` evaluated at
 ``t = k dt`` exactly, so tests know every recorded value.

@@ -12,7 +12,7 @@ import subprocess
 
 import numpy as np
 import pytest
-from sofac.build import SUITESPARSE_INCLUDE, eigen_include
+from sofac.build.compiler import SUITESPARSE_INCLUDE, eigen_include
 from sofac.resources import resource_dir
 
 D = ctypes.POINTER(ctypes.c_double)

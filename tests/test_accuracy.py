@@ -1,4 +1,4 @@
-"""``sofac accuracy`` and ``sofac.accuracy.sweep``: orders of convergence against the oscillator's
+"""``sofac accuracy`` and ``sofac.accuracy.measure.sweep``: orders of convergence against the oscillator's
 analytic solution, outputs of the command, divergence as a result, the solver swap in the model."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ import math
 from pathlib import Path
 
 import pytest
-from sofac import accuracy
-from sofac.accuracy import AccuracyError, Record, Solver, Sweep, SweepInfo
-from sofac.accuracy_plots import pareto_front
-from sofac.cli import main
+from sofac.accuracy import measure as accuracy
+from sofac.accuracy.measure import AccuracyError, Record, Solver, Sweep, SweepInfo
+from sofac.accuracy.plots import pareto_front
+from sofac.cli.main import main
 from sofac.diagnostics import SofacError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -16,9 +16,16 @@ import pytest
 from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
-from sofac import barycentric, meshes
-from sofac.barycentric import RegularGrid, SparseGrid, barycentric_embedding, barycentric_map, mapper_for
-from sofac.masses import mesh_matrix_mass, mesh_matrix_mass_multiply, topology_edges
+from sofac.front import meshes
+from sofac.geometry import barycentric
+from sofac.geometry.barycentric import (
+    RegularGrid,
+    SparseGrid,
+    barycentric_embedding,
+    barycentric_map,
+    mapper_for,
+)
+from sofac.geometry.masses import mesh_matrix_mass, mesh_matrix_mass_multiply, topology_edges
 
 RUNTIME = Path(__file__).resolve().parents[1] / "runtime"
 KUHN = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])

@@ -38,7 +38,7 @@ def test_cloth_matches_the_workload_definition(workloads: ModuleType) -> None:
 
 
 def test_generated_scenes_check_clean(workloads: ModuleType, tmp_path: Path) -> None:
-    from sofac.cli import main as sofac_main
+    from sofac.cli.main import main as sofac_main
 
     beams = workloads.scenegen.write_beam(tmp_path, 3, 3, 4).values()
     scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *beams]
@@ -81,7 +81,7 @@ def test_beam_mesh_matches_the_workload_definition(workloads: ModuleType) -> Non
 
 @pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
 def test_beam_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) -> None:
-    from sofac.build import SUITESPARSE_INCLUDE
+    from sofac.build.compiler import SUITESPARSE_INCLUDE
 
     if not (SUITESPARSE_INCLUDE / "cholmod.h").is_file():
         pytest.skip("needs SuiteSparse (CHOLMOD)")

@@ -3,9 +3,9 @@
 Three groups:
 
 * usage and version tests run ``sofac`` both as ``python -m sofac`` and as the installed console script;
-* command-flow tests run the CLI with ``sofac.check.check_file`` replaced by a fake, so they do not
+* command-flow tests run the CLI with ``sofac.check.checker.check_file`` replaced by a fake, so they do not
   depend on the parse and check stages;
-* end-to-end tests use the real ``check_file`` and are skipped until ``sofac.parse`` exists.
+* end-to-end tests use the real ``check_file`` and are skipped until ``sofac.front.parse`` exists.
 """
 
 from __future__ import annotations
@@ -21,11 +21,11 @@ from pathlib import Path
 import pytest
 import sofac
 from lxml import etree
-from sofac.cli import find_scenes, is_scene_xml, main
+from sofac.cli.main import find_scenes, is_scene_xml, main
 
 REPO = Path(__file__).resolve().parents[1]
-HAVE_PARSE = importlib.util.find_spec("sofac.parse") is not None
-needs_parse = pytest.mark.skipif(not HAVE_PARSE, reason="sofac.parse (the parse stage) is not written yet")
+HAVE_PARSE = importlib.util.find_spec("sofac.front.parse") is not None
+needs_parse = pytest.mark.skipif(not HAVE_PARSE, reason="sofac.front.parse is not written yet")
 
 
 def _console_script() -> str | None:
@@ -185,12 +185,12 @@ def test_main_in_process_returns_codes(tmp_path: Path, capsys: pytest.CaptureFix
 
 # --- command flow with a fake check stage ----------------------------------------------------------
 
-# Replaces sofac.check.check_file: the scene text decides the diagnostics.
+# Replaces sofac.check.checker.check_file: the scene text decides the diagnostics.
 FAKE_CHECK = """
 import sys
 from pathlib import Path
 
-import sofac.check
+import sofac.check.checker
 from sofac.diagnostics import Diagnostics, SourceLoc, relative_name
 
 def fake_check_file(path, *, data_roots=(), allow_unsupported=False):
@@ -209,8 +209,8 @@ def fake_check_file(path, *, data_roots=(), allow_unsupported=False):
         diags.add("E222", SourceLoc(name, 4), "unsupported component X")
     return None, diags
 
-sofac.check.check_file = fake_check_file
-from sofac.cli import main
+sofac.check.checker.check_file = fake_check_file
+from sofac.cli.main import main
 sys.exit(main(sys.argv[1:]))
 """
 

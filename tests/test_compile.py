@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import build
-from sofac.loader import compile_scene
+from sofac.build import compiler as build
+from sofac.pipeline import compile_scene
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -180,7 +180,7 @@ def _rotation(q: np.ndarray) -> np.ndarray:
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    from sofac.meshes import quaternion_multiply
+    from sofac.front.meshes import quaternion_multiply
 
     return quaternion_multiply(a, b)
 

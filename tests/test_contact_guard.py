@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac.loader import compile_scene
+from sofac.pipeline import compile_scene
 
 TWO_BALLS = """<Node name="root" gravity="0 0 0" dt="0.1"><DefaultAnimationLoop/>
   <CollisionPipeline/><BruteForceBroadPhase/><BVHNarrowPhase/>{intersection}

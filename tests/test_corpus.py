@@ -21,11 +21,11 @@ from pathlib import Path
 import pytest
 from manifest_updates import IMPLEMENTED_SINCE_MANIFEST
 from sofac import registry
-from sofac.check import CheckedScene, check_file
-from sofac.cli import find_scenes, main
+from sofac.check.checker import CheckedScene, check_file
+from sofac.cli.main import find_scenes, main
 from sofac.diagnostics import Diagnostic, Diagnostics, Severity
-from sofac.model import Component, Node
-from sofac.parse import parse_scene
+from sofac.front.model import Component, Node
+from sofac.front.parse import parse_scene
 
 # Diagnostics about the text itself: they may point at any line (an unclosed tag, a repaired '&').
 TEXT_CODES = {"E101", "E102", "E104", "W105"}

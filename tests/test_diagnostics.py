@@ -1,7 +1,7 @@
 """One test per diagnostic code: a tiny scene that triggers exactly that code, at an exact line.
 
 Every case writes its scene (and any included or referenced file) under ``tmp_path``, checks it with
-:func:`sofac.check.check_file` and compares the *whole* list of diagnostics with the one expected:
+:func:`sofac.check.checker.check_file` and compares the *whole* list of diagnostics with the one expected:
 code, file, line and attribute. Most scenes start with :data:`HEAD` (lines 1-5: a root node with a
 solver pair and a three-DOF Vec3d state), so their first line of interest is line 6.
 
@@ -16,10 +16,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
-from sofac.check import check_file
-from sofac.cli import main
+from sofac.check.checker import check_file
+from sofac.cli.main import main
 from sofac.diagnostics import CODES, Diagnostic, Diagnostics, SceneError, Severity
-from sofac.parse import parse_scene
+from sofac.front.parse import parse_scene
 
 COMPILER = Path(__file__).resolve().parents[1] / "compiler"
 

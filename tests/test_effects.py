@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 import sofac
-from sofac.loader import PrunedEffectError, compile_scene
+from sofac.load.loader import PrunedEffectError
+from sofac.pipeline import compile_scene
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -99,7 +100,7 @@ def test_inert_visual_nodes_change_neither_the_step_nor_the_results(tmp_path: Pa
 
 
 def test_inspect_effects_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from sofac.cli import main
+    from sofac.cli.main import main
 
     assert main(["inspect", str(REPO / "scenes" / "oscillator.scn"), "--effects"]) == 0
     out = capsys.readouterr().out
@@ -169,7 +170,7 @@ def test_liver_collision_spheres_are_mapped_only_when_read(
 ) -> None:
     import json
 
-    from sofac.cli import main
+    from sofac.cli.main import main
 
     scene = corpus_dir / "Demos" / "liver.scn"
     lazy, eager = compile_scene(scene), compile_scene(scene, prune=False)
@@ -266,8 +267,8 @@ def test_a_mapped_state_something_acts_on_is_computed_every_step(tmp_path: Path)
 
 
 def test_states_read_on_demand_are_what_writestate_and_sweeps_record(tmp_path: Path) -> None:
-    from sofac.sweeps import sweep
-    from sofac.writestate import export_states
+    from sofac.regress.states import export_states
+    from sofac.sweep.runner import sweep
 
     inside = SKIN.format(below=TIP.format(tip=""))
     lazy = compile_scene(springs(tmp_path, "lazy.scn", inside)).instantiate()

@@ -17,8 +17,8 @@ import pytest
 from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
-from sofac import element_fem
-from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid
+from sofac.geometry import element_fem
+from sofac.geometry.fem_topology import hexahedra_from_grid, tetrahedra_from_grid
 
 SHIM = r"""
 #include "sofac/element_fem.h"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from kernel_shim import D, build_shim
 from kernel_shim import doubles as _d
-from sofac.loader import compile_scene
+from sofac.pipeline import compile_scene
 
 SHIM = r"""
 #include "sofac/loads.h"

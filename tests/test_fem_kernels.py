@@ -1,4 +1,4 @@
-"""The finite-element kernels of runtime/sofac/fem.h and the grid splits of sofac.fem_topology.
+"""The finite-element kernels of runtime/sofac/fem.h and the grid splits of sofac.geometry.fem_topology.
 
 The kernels are compiled once per session into a small shared library (plain C wrappers, loaded with
 ctypes) and checked against: rigid-motion invariance, finite differences, the linear small-strain
@@ -18,8 +18,8 @@ import pytest
 from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
-from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid, tetrahedra_from_hexahedra
-from sofac.plan import TETRA_LANES
+from sofac.geometry.fem_topology import hexahedra_from_grid, tetrahedra_from_grid, tetrahedra_from_hexahedra
+from sofac.plan.planner import TETRA_LANES
 
 SHIM = r"""
 #include "sofac/fem.h"

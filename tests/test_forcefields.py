@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac.loader import compile_scene
-from sofac.plan import format_schedule
+from sofac.pipeline import compile_scene
+from sofac.plan.planner import format_schedule
 
 DT = 1e-3
 MESH_SPRINGS = """\

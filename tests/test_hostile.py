@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 from lxml import etree
-from sofac import xmlsafe
 from sofac.diagnostics import Diagnostics, SceneError
-from sofac.parse import parse_scene, parse_string
+from sofac.front import xmlsafe
+from sofac.front.parse import parse_scene, parse_string
 
 SECRET = "TOP-SECRET-7f3a9c"
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac.meshes import read_mesh
+from sofac.front.meshes import read_mesh
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 FIXED = [35, 91, 167]

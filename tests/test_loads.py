@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import sofac
 from sofac.diagnostics import SceneError
-from sofac.loader import compile_scene
-from sofac.plan import format_effects
+from sofac.pipeline import compile_scene
+from sofac.plan.planner import format_effects
 
 H = 0.01
 GRAVITY = np.array([0.0, -10.0, 0.0])
@@ -169,7 +169,7 @@ def test_zero_velocity_damping_is_compiled_out(tmp_path: Path) -> None:
     effects = format_effects(compile_scene(path).plan)
     assert "/n/damper.dampingCoefficient" in effects and "no damping force computed" in effects
     sim = sofac.load(path)
-    with pytest.raises(sofac.loader.PrunedEffectError, match="prune=False"):
+    with pytest.raises(sofac.load.loader.PrunedEffectError, match="prune=False"):
         sim.param("/n/damper.dampingCoefficient")
     kept = sofac.load(path, prune=False)
     kept.param("/n/damper.dampingCoefficient")[0] = 4.0
@@ -216,7 +216,7 @@ PRESSED_CUBE = """\
 
 
 def test_surface_of_the_tetrahedra_and_the_triangles_a_box_selects(tmp_path: Path) -> None:
-    from sofac.check import check_file
+    from sofac.check.checker import check_file
 
     path = tmp_path / "pressed.scn"
     path.write_text(PRESSED_CUBE.format(pressure="0 0 0"))
@@ -252,7 +252,7 @@ def test_triangle_pressure_pushes_with_pressure_times_area(tmp_path: Path) -> No
 
 def test_simple_boundary_conditions_pass_sofas_regression_criterion(shared_dir: Path) -> None:
     # Point, Line and Plane constraints, a pressure on Tetra2Triangle's surface selected by a BoxROI.
-    from sofac.regress import Status, run_regression
+    from sofac.regress.suite import Status, run_regression
 
     reference = shared_dir / "reference" / "sofa-regression"
     (result,) = run_regression(
@@ -339,7 +339,7 @@ def test_linear_velocity_on_some_coordinates_and_after_its_end(tmp_path: Path) -
 
 
 def test_a_parameter_read_only_at_init_needs_a_reset() -> None:
-    from sofac.loader import ParameterNeedsReset
+    from sofac.load.loader import ParameterNeedsReset
 
     beam = Path(__file__).resolve().parents[1] / "scenes" / "beam.scn"
     sim = sofac.load(beam)

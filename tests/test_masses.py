@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac import meshes
-from sofac.masses import (
+from sofac.front import meshes
+from sofac.geometry.masses import (
     diagonal_mass,
     element_measures,
     mesh_matrix_mass,

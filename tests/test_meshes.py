@@ -1,4 +1,4 @@
-"""Tests for sofac.meshes: mesh/data file readers and SOFA's point transformation."""
+"""Tests for sofac.front.meshes: mesh/data file readers and SOFA's point transformation."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac import meshes
-from sofac.meshes import MeshError, apply_transform, count_points, read_mesh, read_rigid, read_spheres
+from sofac.front import meshes
+from sofac.front.meshes import MeshError, apply_transform, count_points, read_mesh, read_rigid, read_spheres
 
 
 def _shared() -> Path | None:

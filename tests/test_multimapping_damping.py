@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 import sofac
-from sofac.evaluate import UnknownInput, transform_engine
+from sofac.check.evaluate import UnknownInput, transform_engine
 
 DAMPED = """<Node name="root" dt="{h}" gravity="0 0 0">
   <DefaultAnimationLoop/>

@@ -4,7 +4,7 @@ Each example takes one scene of :data:`SAMPLE` (real SOFA scenes from ``shared/c
 applies a mutation to its text (delete an attribute, swap a template, corrupt a number, truncate
 the file, duplicate a component, misspell a component), writes it to a temporary folder and checks
 it with the corpus and the scene's own folder as data roots, so its includes, macros and meshes are
-still found. Whatever the mutation, :func:`sofac.check.check_file` must return normally and every
+still found. Whatever the mutation, :func:`sofac.check.checker.check_file` must return normally and every
 diagnostic must name a file, a line that exists in that file, and a code from ``CODES``.
 """
 
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from sofac.check import check_file
+from sofac.check.checker import check_file
 from sofac.diagnostics import CODES, Diagnostics
 
 pytest.importorskip("hypothesis")

@@ -136,7 +136,7 @@ def test_wheel_contains_runtime_templates_and_scenes(built_wheel: Path, source_c
     # the package itself and the console script
     assert {"sofac/cli.py", "sofac/report.py", "sofac/resources.py", "sofac/__main__.py"} <= names
     entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
-    assert "sofac = sofac.cli:main" in zipfile.ZipFile(built_wheel).read(entry_points).decode()
+    assert "sofac = sofac.cli.main:main" in zipfile.ZipFile(built_wheel).read(entry_points).decode()
 
 
 def test_resources_resolve_from_the_installed_wheel(built_wheel: Path, tmp_path: Path) -> None:

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 from sofac.diagnostics import Diagnostics, SceneError
-from sofac.model import Component, Node, Scene
-from sofac.parse import (
+from sofac.front.model import Component, Node, Scene
+from sofac.front.parse import (
     default_data_roots,
     find_data_file,
     parse_scene,

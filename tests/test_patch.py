@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sofac
-from sofac.fem_topology import hexahedra_from_grid, tetrahedra_from_grid
+from sofac.geometry.fem_topology import hexahedra_from_grid, tetrahedra_from_grid
 
 YOUNG, NU = 3000.0, 0.3
 COUNTS = (4, 4, 4)

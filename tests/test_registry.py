@@ -316,7 +316,7 @@ def test_spec_is_consistent(spec: ComponentSpec) -> None:
     if spec.needs_linear_solver:
         assert spec.category is Category.ODE_SOLVER
     if spec.compute:
-        from sofac import evaluate
+        from sofac.check import evaluate
 
         assert spec.compute in evaluate.EVALUATORS, f"{spec.name}: no evaluator {spec.compute!r}"
 

@@ -9,8 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fakesim import FakeInfo, FakeView, FallingSim, regression_loader, two_body_sim
-from sofac import cli, regress
-from sofac.regress import (
+from sofac.cli import main as cli
+from sofac.regress import suite as regress
+from sofac.regress.states import StateBlock, export_states, read_state_file, write_state_file
+from sofac.regress.suite import (
     RegressionEntry,
     RegressionListError,
     Status,
@@ -26,7 +28,6 @@ from sofac.regress import (
     state_file_error,
     summary_line,
 )
-from sofac.writestate import StateBlock, export_states, read_state_file, write_state_file
 
 # Hand-made references for fakesim.two_body_sim() (dt 0.5, gravity (0, -2, 0)), 4 steps, LAST_ONLY:
 # blocks at T=0 (exact states) and T=1.5 (after 3 steps, a few scalars off by known amounts).
@@ -78,7 +79,7 @@ def mini(tmp_path: Path) -> Path:
 
 
 def write_refs(path: Path, text: str) -> None:
-    from sofac.writestate import parse_state_text
+    from sofac.regress.states import parse_state_text
 
     write_state_file(path, parse_state_text(text), precision=6)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac.regress import Status, run_regression
+from sofac.regress.suite import Status, run_regression
 
 SCENES = [
     "Component/SolidMechanics/FEM/HexahedronFEMForceFieldAndMass.scn",

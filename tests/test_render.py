@@ -1,4 +1,4 @@
-"""Off-screen rendering (sofac.render, ``sofac render``): a stored reference picture, objects drawn
+"""Off-screen rendering (sofac.render.picture, ``sofac render``): a stored reference picture, objects drawn
 where their states are, visual models following their mappings, cameras, layers, errors.
 
 The reference picture is tests/data/render_hybrid_pendulum.png; after a deliberate change to the
@@ -16,10 +16,10 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 import sofac
-from sofac import render
-from sofac.check import check_file
-from sofac.cli import main
+from sofac.check.checker import check_file
+from sofac.cli.main import main
 from sofac.diagnostics import SofacError
+from sofac.render import picture as render
 
 REPO = Path(__file__).resolve().parents[1]
 PENDULUM = REPO / "scenes" / "hybrid_pendulum.scn"

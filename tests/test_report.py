@@ -6,8 +6,7 @@ import json
 
 import pytest
 from lxml import etree
-from sofac.diagnostics import Diagnostic, Severity, SourceLoc
-from sofac.report import (
+from sofac.cli.report import (
     FORMATS,
     FileResult,
     escape_data,
@@ -19,6 +18,7 @@ from sofac.report import (
     render_results,
     summary,
 )
+from sofac.diagnostics import Diagnostic, Severity, SourceLoc
 
 
 def diag(

@@ -11,8 +11,8 @@ import pytest
 from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
-from sofac.bending import bending_springs
-from sofac.loader import compile_scene
+from sofac.geometry.bending import bending_springs
+from sofac.pipeline import compile_scene
 
 SHIM = r"""
 #include "sofac/shell.h"

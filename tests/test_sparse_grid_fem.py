@@ -11,8 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import meshes, voxelize
-from sofac.barycentric import RegularGrid
+from sofac.front import meshes
+from sofac.geometry import voxelize
+from sofac.geometry.barycentric import RegularGrid
 
 # The surface [0.5, 3.5]^3 in a grid of unit cells from -1 to 5 (see test_voxelize.py).
 GRID = 'n="7 7 7" min="-1 -1 -1" max="5 5 5"'

@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import build
-from sofac.loader import PrunedEffectError, compile_scene
+from sofac.build import compiler as build
+from sofac.load.loader import PrunedEffectError
+from sofac.pipeline import compile_scene
 
 CLOTH = """<Node name="root" gravity="0 -9.81 0" dt="{dt}"><DefaultAnimationLoop/>
   <Node name="cloth">{solver}

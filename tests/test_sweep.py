@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import sweeps
-from sofac.cli import main
-from sofac.sweeps import SweepError
+from sofac.cli.main import main
+from sofac.sweep import runner as sweeps
+from sofac.sweep.runner import SweepError
 
 pytest.importorskip("distributed")
 xr = pytest.importorskip("xarray")

@@ -7,8 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import check, generate, plan
-from sofac.plan import MIN_ELEMENTS_PER_THREAD, element_split
+from sofac.check import checker as check
+from sofac.codegen import cpp as generate
+from sofac.plan import planner as plan
+from sofac.plan.planner import MIN_ELEMENTS_PER_THREAD, element_split
 
 BEAM = """
     <Node name="{name}">
@@ -80,10 +82,10 @@ def test_independent_groups_step_in_parallel(tmp_path: Path) -> None:
     two = _scene(tmp_path, "two.scn", [TETRA, HEXA])
     checked, diagnostics = check.check_file(two)
     threaded = plan.plan_scene(checked, diagnostics, threads=2)
-    source = generate.render(threaded)
+    source = generate.generate_source(threaded)
     assert "#pragma omp parallel for schedule(dynamic, 1) num_threads(2)" in source
     assert "case 1: step_g1(S, dt); break;" in source
-    serial = generate.render(plan.plan_scene(checked, diagnostics))
+    serial = generate.generate_source(plan.plan_scene(checked, diagnostics))
     assert generate.independent_groups(serial, threaded)
     assert "#pragma omp" not in serial
     # A buffer of group 0 used in group 1's section makes them dependent.
@@ -95,7 +97,7 @@ def test_independent_groups_step_in_parallel(tmp_path: Path) -> None:
     one = _scene(tmp_path, "one.scn", [TETRA])
     checked, diagnostics = check.check_file(one)
     single = plan.plan_scene(checked, diagnostics, threads=2)
-    assert not generate.independent_groups(generate.render(single), single)
+    assert not generate.independent_groups(generate.generate_source(single), single)
 
 
 def test_small_loops_stay_serial(tmp_path: Path) -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac.check import check_file
+from sofac.check.checker import check_file
 
 M, K, L, A = 1.0, 100.0, 1.0, 0.1  # omega = 10 rad/s
 W = math.sqrt(K / M)

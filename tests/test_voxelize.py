@@ -1,5 +1,5 @@
-"""SparseGridTopology's voxelisation (sofac.voxelize, the ``sparse_grid`` evaluator): an analytic closed
-cube, the polygon-cube test on hand-made cases, and the three dragons of SOFA's
+"""SparseGridTopology's voxelisation (sofac.geometry.voxelize, the ``sparse_grid`` evaluator): an analytic
+closed cube, the polygon-cube test on hand-made cases, and the three dragons of SOFA's
 SparseGridTopology.scn against the points SOFA recorded in its regression references."""
 
 from __future__ import annotations
@@ -9,10 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sofac import meshes, voxelize
-from sofac.barycentric import RegularGrid, barycentric_embedding
-from sofac.check import check_file
-from sofac.voxelize import BOUNDARY, INSIDE, OUTSIDE
+from sofac.check.checker import check_file
+from sofac.front import meshes
+from sofac.geometry import voxelize
+from sofac.geometry.barycentric import RegularGrid, barycentric_embedding
+from sofac.geometry.voxelize import BOUNDARY, INSIDE, OUTSIDE
 
 SCENE = "Component/Topology/Container/Grid/SparseGridTopology.scn"
 # (n, dz) of DragonCoarse, DragonMiddle, DragonFine, and the number of points SOFA gave each.

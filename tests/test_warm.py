@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac import warm
+from sofac.load import warm
 from sofac.resources import bundled_scene
 
 STATE = "/Liver/dofs"
@@ -72,8 +72,8 @@ def test_the_warm_path_imports_no_front_end(tmp_path: Path) -> None:
     probe = (
         "import sys, sofac\n"
         f"sim = sofac.load({str(path)!r})\n"
-        "front = sorted(m for m in ('lxml', 'jinja2', 'sofac.parse', 'sofac.check', 'sofac.plan',"
-        " 'sofac.generate') if m in sys.modules)\n"
+        "front = sorted(m for m in ('lxml', 'jinja2', 'sofac.front.parse', 'sofac.check.checker',"
+        " 'sofac.plan.planner', 'sofac.codegen.cpp') if m in sys.modules)\n"
         "print(sim.compiled.warm, front)\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
@@ -141,7 +141,7 @@ def test_a_damaged_record_or_library_is_a_miss(tmp_path: Path, damage: str) -> N
 
 
 def test_sofac_run_is_warm_the_second_time(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from sofac.cli import main
+    from sofac.cli.main import main
 
     path = liver(tmp_path)
     outputs = []

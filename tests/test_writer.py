@@ -1,7 +1,7 @@
-"""Tests for sofac.writer: model -> .scn XML, and the round trip parse -> write -> parse.
+"""Tests for sofac.front.writer: model -> .scn XML, and the round trip parse -> write -> parse.
 
 The round trip is tested twice: with a tiny private lxml reader defined here (so the writer can be
-tested on its own), and with the real parse stage ``sofac.parse`` when it is importable.
+tested on its own), and with the real parse stage ``sofac.front.parse`` when it is importable.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from types import ModuleType
 import pytest
 from lxml import etree
 from sofac.diagnostics import Diagnostics, SourceLoc
-from sofac.model import Component, Node, Scene
-from sofac.writer import WriteError, same_structure, save_scene, write_scene
+from sofac.front.model import Component, Node, Scene
+from sofac.front.writer import WriteError, same_structure, save_scene, write_scene
 
 try:
     from hypothesis import given, settings
@@ -52,7 +52,7 @@ def _corpus() -> Path | None:
 CORPUS = _corpus()
 
 
-# --- a private reader, independent of sofac.parse ---------------------------------------------
+# --- a private reader, independent of sofac.front.parse ---------------------------------------------
 
 _XmlElement = etree._Element
 
@@ -90,14 +90,14 @@ def read_private(text: str, filename: str = "<test>") -> Scene:
 
 def _sofac_parse() -> ModuleType | None:
     try:
-        from sofac import parse
+        from sofac.front import parse
     except ImportError:
         return None
     return parse
 
 
 PARSE = _sofac_parse()
-needs_parse = pytest.mark.skipif(PARSE is None, reason="sofac.parse (the parse stage) is not written yet")
+needs_parse = pytest.mark.skipif(PARSE is None, reason="sofac.front.parse is not written yet")
 
 
 def read_sofac(text: str, filename: str = "<test>") -> Scene:
@@ -110,7 +110,7 @@ def read_sofac(text: str, filename: str = "<test>") -> Scene:
 
 READERS: list[object] = [
     pytest.param(read_private, id="private-reader"),
-    pytest.param(read_sofac, id="sofac.parse", marks=needs_parse),
+    pytest.param(read_sofac, id="sofac.front.parse", marks=needs_parse),
 ]
 
 

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 from fakesim import FakeInfo, FallingSim, two_body_sim
 from sofac.diagnostics import Diagnostics
-from sofac.parse import parse_scene
-from sofac.regress import parse_regression_list, reference_files
-from sofac.writestate import (
+from sofac.front.parse import parse_scene
+from sofac.regress.states import (
     StateBlock,
     StateFileError,
     StateRecorder,
@@ -27,6 +26,7 @@ from sofac.writestate import (
     state_file_name,
     write_state_file,
 )
+from sofac.regress.suite import parse_regression_list, reference_files
 
 
 @pytest.fixture(scope="session")
@@ -225,7 +225,7 @@ def test_sofas_selection_rule_names_every_reference_file(regression_dir: Path, c
     the node or above it, skipped with MAPPED=0 when a mapping is in the node or above it; an
     unnamed MechanicalObject is called MechanicalObject1 (SOFA counts unnamed objects per class in
     each node). This gives exactly the K and NAME of every reference file."""
-    from sofac.check import check_file
+    from sofac.check.checker import check_file
     from sofac.registry import Category
 
     mappings = (Category.MAPPING, Category.MULTI_MAPPING)

@@ -10,7 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from sofac.loader import Compiled, Simulation, compile_scene
+from sofac.load.loader import Compiled, Simulation
+from sofac.pipeline import compile_scene
 
 ROOT = '<Node name="root" gravity="{gravity}" dt="{dt}"><DefaultAnimationLoop/>{body}</Node>'
 NO_GRAVITY = "0 0 0"

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 import sofac
-from sofac.cli import main
+from sofac.cli.main import main
 from sofac.diagnostics import SofacError
 
 from .scenes import EXACT_CG, Scenes, implicit, line, springs_body

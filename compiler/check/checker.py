@@ -1,0 +1,1225 @@
+"""Check stage: Scene -> CheckedScene, with diagnostics.
+
+Reads every component through its registry spec: resolves names (aliases, renamed and former
+names), parses each attribute into a typed field, resolves links and ``src=``, infers templates from
+the mechanical states as SOFA's factory does, and checks the scene's structure (states, mappings,
+solvers, indices, files). It never compiles anything and never raises for a scene problem: every
+problem becomes a diagnostic with a file, a line and a hint.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sofac import registry
+from sofac.check import evaluate
+from sofac.diagnostics import Diagnostics, SceneError, SourceLoc
+from sofac.front import links, meshes
+from sofac.front.model import Component, Node, Scene
+from sofac.geometry.fem_topology import CELL_KINDS
+from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
+from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
+from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
+from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, Springs
+
+# Attributes SOFA handles itself rather than as Data of the component.
+_RESERVED = frozenset({"template", "src", "type"})
+# Link attributes that name the mechanical state(s) a component acts on.
+_STATE_LINK_ROLES = ("mstate", "object1", "object2", "input", "output")
+
+
+@dataclass
+class CheckedComponent:
+    component: Component
+    spec: ComponentSpec | None  # None: unknown component
+    template: str | None = None  # canonical template ("Vec3d", "Rigid3d,Vec3d", matrix type...)
+    fields: dict[str, Any] = field(default_factory=dict)  # typed values of explicit attributes
+    links: dict[str, Component | Node] = field(default_factory=dict)  # resolved object links
+    link_lists: dict[str, list[Component]] = field(default_factory=dict)  # resolved multi-links
+    # Attributes whose value is a link to another component's Data: field -> (path, location).
+    data_links: dict[str, tuple[links.LinkPath, SourceLoc]] = field(default_factory=dict)
+    src: Component | None = None
+    # The state this component acts on (masses, force fields, constraints, collision models...).
+    state: Component | None = None
+    outputs: dict[str, np.ndarray] | None = None  # evaluated outputs (loaders, grids, BoxROI)
+    size: int | None = None  # number of DOFs, for states whose size is known statically
+    cache: dict[str, Any] = field(default_factory=dict)  # derived values (a state's positions)
+
+    @property
+    def category(self) -> Category | None:
+        return self.spec.category if self.spec else None
+
+    @property
+    def datatype(self) -> DataType | None:
+        if self.template is None:
+            return None
+        return DATATYPES.get(split_template(self.template)[0])
+
+
+@dataclass
+class CheckedScene:
+    scene: Scene
+    components: dict[int, CheckedComponent] = field(default_factory=dict)  # by id(component)
+    check_seconds: float = 0.0
+    # The checker, kept for the later stages' value look-ups (value(), positions()).
+    resolver: Any = field(default=None, repr=False, compare=False)
+
+    def value(self, component: Component, name: str) -> Any:
+        """The value a component's field has: written, linked, from src, computed, or default."""
+        return self.resolver.value(self.of(component), name)
+
+    def positions(self, state: Component) -> np.ndarray | None:
+        """A MechanicalObject's initial positions (n, coord_size), as SOFA's init computes them."""
+        return self.resolver.positions(state)
+
+    def of(self, component: Component) -> CheckedComponent:
+        return self.components[id(component)]
+
+    def __iter__(self) -> Iterator[CheckedComponent]:
+        return iter(self.components.values())
+
+    def states(self) -> list[CheckedComponent]:
+        return [c for c in self if c.category is Category.STATE]
+
+    def mapping_of(self, state: Component) -> CheckedComponent | None:
+        """The mechanical mapping whose output is ``state`` (None for an independent state)."""
+        for checked in self:
+            if (
+                checked.category in (Category.MAPPING, Category.MULTI_MAPPING)
+                and checked.links.get("output") is state
+            ):
+                return checked
+        return None
+
+    def solver_of(self, node: Node) -> CheckedComponent | None:
+        """The ODE solver that integrates ``node`` (the topmost one on its path, as SOFA's visitor)."""
+        for candidate in (*reversed(list(node.ancestors())), node):
+            for component in candidate.objects:
+                checked = self.components.get(id(component))
+                if checked and checked.category is Category.ODE_SOLVER:
+                    return checked
+        return None
+
+
+def _fmt_types(types: Sequence[str]) -> str:
+    return ", ".join(types) if types else "(none)"
+
+
+class _Checker:
+    def __init__(self, scene: Scene, diagnostics: Diagnostics) -> None:
+        self.scene = scene
+        self.diags = diagnostics
+        self.checked = CheckedScene(scene)
+        self.checked.resolver = self
+        self._referenced: set[int] | None = None  # ids of components some link names
+
+    # ------------------------------------------------------------------------------------------
+    def run(self) -> CheckedScene:
+        components = list(self.scene.root.components())
+        for component in components:
+            self.checked.components[id(component)] = self._resolve_spec(component)
+        for node in self.scene.root.walk():
+            self._check_node(node)
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._parse_fields(checked)
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._resolve_links(checked)
+        for node in self.scene.root.walk():
+            self._check_states_of(node)
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._resolve_template(checked)
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._check_counts(checked)
+                self._check_data_links(checked)
+                self._check_required(checked)
+        self._check_mappings()
+        self._check_solvers()
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._check_files(checked)
+        for checked in self.checked:
+            if checked.spec is not None:
+                self._check_indices(checked)
+        self._check_plugins()
+        for checked in self.checked:
+            if checked.spec is not None and checked.spec.kernel == "uniform_mass":
+                self._check_rigid_inertia(checked)
+        for checked in self.checked.states():
+            checked.size = self.state_size(checked.component)
+        return self.checked
+
+    # --- names -------------------------------------------------------------------------------
+    def _resolve_spec(self, component: Component) -> CheckedComponent:
+        name = component.type_name
+        resolution = registry.lookup(name)
+        if resolution is None or resolution.spec.name == "Node":
+            suggestions = registry.suggest(name)
+            hint = (
+                f"did you mean {' or '.join(suggestions)}?"
+                if suggestions
+                else ("check the spelling; `sofac inspect --components` lists the known components")
+            )
+            self.diags.add("E200", component.loc, f"unknown component {name!r}", hint)
+            return CheckedComponent(component, None)
+        spec = resolution.spec
+        if resolution.status is NameStatus.FORMER:
+            self.diags.add(
+                "E201",
+                component.loc,
+                f"{name!r} is no longer accepted by SOFA: the component is now {spec.name!r}",
+                f"rename <{name}> to <{spec.name}>",
+            )
+        elif resolution.status is NameStatus.RENAMED:
+            self.diags.add(
+                "W202",
+                component.loc,
+                f"{name!r} is a legacy name of {spec.name!r}",
+                f"rename <{name}> to <{spec.name}>",
+            )
+        if spec.deprecated:
+            self.diags.add("W202", component.loc, f"{spec.name} is deprecated in SOFA", spec.deprecated)
+        if not spec.supported:
+            reason = spec.unsupported_reason or f"{spec.name} is not implemented in sofac yet"
+            self.diags.add(
+                "E222",
+                component.loc,
+                f"unsupported component {spec.name} at line {component.loc.line}: {reason}",
+                "remove it, or pass --allow-unsupported to only validate the scene",
+            )
+        return CheckedComponent(component, spec)
+
+    # --- nodes -------------------------------------------------------------------------------
+    def _check_node(self, node: Node) -> None:
+        spec = registry.node_spec()
+        values = self._parse_attributes(node, spec, None, {})
+        if node.parent is None:
+            return
+        root_values = {
+            name: self._node_value(node.root, name) for name in ("dt", "gravity") if name in values
+        }
+        for name, root_value in root_values.items():
+            if not np.allclose(values[name], root_value):
+                self.diags.add(
+                    "W225",
+                    node.attribute_loc(name),
+                    f"node {node.path!r} sets {name}, but SOFA uses only the root's {name} "
+                    f"({spec.field(name).type.format(np.asarray(root_value))})",  # type: ignore[union-attr]
+                    "use a <Gravity> component to change gravity for a subtree"
+                    if name == "gravity"
+                    else "set dt on the root node",
+                )
+
+    def _node_value(self, node: Node, name: str) -> Any:
+        spec = registry.node_spec().field(name)
+        assert spec is not None
+        text = node.get(name)
+        if text is not None:
+            try:
+                return spec.type.parse(text)
+            except FieldValueError:
+                pass
+        return spec.default
+
+    # --- fields ------------------------------------------------------------------------------
+    def _parse_attributes(
+        self,
+        element: Component | Node,
+        spec: ComponentSpec,
+        checked: CheckedComponent | None,
+        out: dict[str, Any],
+    ) -> dict[str, Any]:
+        owner = (
+            f"{spec.name} {element.label!r}" if isinstance(element, Component) else f"node {element.path!r}"
+        )
+        for attribute in element.attributes.values():
+            name = attribute.name
+            if name.startswith(("_", "NO")) or (isinstance(element, Component) and name in _RESERVED):
+                continue
+            if isinstance(element, Node) and name == "name":
+                continue
+            field_spec = spec.field(name)
+            if field_spec is None:
+                self._unknown_attribute(spec, owner, attribute.name, attribute.loc)
+                continue
+            if field_spec.deprecated:
+                self.diags.add(
+                    "W225",
+                    attribute.loc,
+                    f"{owner}: attribute {name!r} is a legacy spelling SOFA warns about",
+                )
+            if links.is_link(attribute.value) and not isinstance(field_spec.type, Link):
+                if checked is not None:
+                    path = links.parse_link(attribute.value)
+                    assert path is not None
+                    checked.data_links[field_spec.name] = (path, attribute.loc)
+                continue
+            try:
+                value = field_spec.type.parse(attribute.value)
+            except FieldValueError as error:
+                self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
+                continue
+            if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
+                # Only the mass itself: a rigid mass's volume and inertia terms may be 0 (or negative
+                # off the diagonal).
+                self.diags.add(
+                    "E207",
+                    attribute.loc,
+                    f"{owner}: {name}={attribute.value.strip()[:40]!r}: the mass (its first number) "
+                    "must be > 0",
+                    "use a physically meaningful value",
+                )
+                continue
+            if field_spec.valid is not None and not self._valid(value, field_spec):
+                self.diags.add(
+                    "E207",
+                    attribute.loc,
+                    f"{owner}: {name}={attribute.value.strip()[:40]!r} {field_spec.valid[1]}",
+                    "use a physically meaningful value",
+                )
+                continue
+            out[field_spec.name] = value
+        return out
+
+    @staticmethod
+    def _valid(value: Any, field_spec: FieldSpec) -> bool:
+        assert field_spec.valid is not None
+        predicate = field_spec.valid[0]
+        numbers = np.atleast_1d(np.asarray(value, dtype=float)) if not isinstance(value, str) else None
+        if numbers is None:
+            return True
+        return all(predicate(float(x)) for x in numbers)
+
+    def _unknown_attribute(self, spec: ComponentSpec, owner: str, name: str, loc: SourceLoc) -> None:
+        import difflib
+
+        close = difflib.get_close_matches(name, spec.field_names, n=1, cutoff=0.7)
+        hint = f"did you mean {close[0]!r}?" if close else "SOFA ignores attributes it does not know"
+        self.diags.add("W203", loc, f"{owner} has no attribute {name!r}", hint)
+
+    def _parse_fields(self, checked: CheckedComponent) -> None:
+        assert checked.spec is not None
+        self._parse_attributes(checked.component, checked.spec, checked, checked.fields)
+        src_text = checked.component.get("src")
+        if src_text is not None:
+            loc = checked.component.attribute_loc("src")
+            source = links.resolve_src(src_text, checked.component)
+            if source is None:
+                self.diags.add(
+                    "E213",
+                    loc,
+                    f"{checked.spec.name} {checked.component.label!r}: src={src_text!r} names no object "
+                    f"of node {checked.component.node.path!r}",
+                    'src looks only in the current node: write src="@../name" for a parent\'s object',
+                )
+            else:
+                checked.src = source
+
+    # --- links -------------------------------------------------------------------------------
+    def _resolve_links(self, checked: CheckedComponent) -> None:
+        assert checked.spec is not None
+        component = checked.component
+        for field_spec in checked.spec.fields:
+            if not isinstance(field_spec.type, Link):
+                continue
+            attribute = next(
+                (
+                    component.attributes[a]
+                    for a in (field_spec.name, *field_spec.aliases)
+                    if a in component.attributes
+                ),
+                None,
+            )
+            text = attribute.value if attribute else field_spec.default
+            if text is None:
+                continue
+            loc = attribute.loc if attribute else component.loc
+            if isinstance(field_spec.type, LinkList):
+                targets = []
+                for item in str(text).split():
+                    path = links.parse_link(item if item.startswith("@") else "@" + item)
+                    found = links.resolve(path, component) if path is not None else None
+                    if isinstance(found, Node):
+                        role = field_spec.type.target
+                        found = self._singleton(found, role) if role in ("state", "topology") else None
+                    if found is None:
+                        self.diags.add(
+                            "E213",
+                            loc,
+                            f"{checked.spec.name} {component.label!r}: {field_spec.name}: {item!r} "
+                            "points to nothing",
+                            "paths are relative to the component's node: '@../name' is in the parent node",
+                        )
+                    else:
+                        targets.append(found)
+                checked.link_lists[field_spec.name] = targets
+                continue
+            text = str(text).strip()
+            if not text.startswith("@"):
+                text = "@" + text  # old scenes write object1="name"
+            path = links.parse_link(text)
+            assert path is not None
+            target = links.resolve(path, component)
+            if target is None:
+                if attribute is not None:
+                    self.diags.add(
+                        "E213",
+                        loc,
+                        f"{checked.spec.name} {component.label!r}: {field_spec.name}={attribute.value!r} "
+                        "points to nothing",
+                        "paths are relative to the component's node: '@../name' is in the parent node",
+                    )
+                continue
+            wanted = field_spec.type.target
+            if isinstance(target, Node) and wanted in ("state", "topology"):
+                target = self._singleton(target, wanted)
+                if target is None:
+                    if attribute is not None:
+                        self.diags.add(
+                            "E213",
+                            loc,
+                            f"{checked.spec.name} {component.label!r}: {field_spec.name}={attribute.value!r} "
+                            f"names a node with no {'mechanical state' if wanted == 'state' else 'topology'}",
+                        )
+                    continue
+            checked.links[field_spec.name] = target
+
+    def _singleton(self, node: Node, role: str) -> Component | None:
+        """SOFA's fallback when a link names a node: its (or its ancestors') state / topology."""
+
+        def accept(component: Component) -> bool:
+            checked = self.checked.components.get(id(component))
+            if checked is None or checked.spec is None:
+                return False
+            if role == "state":
+                return checked.category in (Category.STATE, Category.VISUAL)
+            return checked.category is Category.TOPOLOGY
+
+        if role == "state":
+            # A mechanical state takes precedence over a visual model in the same node.
+            for candidate in (node, *node.ancestors()):
+                states = [c for c in candidate.objects if self._is(c, Category.STATE)]
+                if states:
+                    return states[0]
+                visuals = [c for c in candidate.objects if self._is(c, Category.VISUAL)]
+                if visuals:
+                    return visuals[0]
+            return None
+        found, _ = links.pick_in_node(node, accept, climb=True)
+        return found
+
+    def _is(self, component: Component, category: Category) -> bool:
+        checked = self.checked.components.get(id(component))
+        return checked is not None and checked.category is category
+
+    def _check_data_links(self, checked: CheckedComponent) -> None:
+        assert checked.spec is not None
+        for name, (path, loc) in checked.data_links.items():
+            target = links.resolve(path, checked.component)
+            owner = f"{checked.spec.name} {checked.component.label!r}"
+            if target is None or isinstance(target, Node):
+                self.diags.add(
+                    "E213",
+                    loc,
+                    f"{owner}: {name}=@{path.path}{'.' + path.data if path.data else ''} points to nothing",
+                    "a Data link is '@path/to/object.dataName'",
+                )
+                continue
+            source = self.checked.components.get(id(target))
+            data = path.data or name
+            if source is not None and source.spec is not None and source.spec.field(data) is None:
+                self.diags.add(
+                    "E213",
+                    loc,
+                    f"{owner}: {name} links to {source.spec.name} {target.label!r}, "
+                    f"which has no Data {data!r}",
+                )
+
+    # --- states and templates ----------------------------------------------------------------
+    def _check_states_of(self, node: Node) -> None:
+        states = [c for c in node.objects if self._is(c, Category.STATE)]
+        if len(states) > 1:
+            first = states[0]
+            for extra in states[1:]:
+                self.diags.add(
+                    "E211",
+                    extra.loc,
+                    f"node {node.path!r} has two MechanicalObjects: {first.label!r} (line {first.loc.line}) "
+                    f"and {extra.label!r}",
+                    "put each state in its own child node",
+                )
+        for component in node.objects:
+            checked = self.checked.components.get(id(component))
+            if checked is None or checked.spec is None:
+                continue
+            if checked.category in (
+                Category.MAPPING,
+                Category.MULTI_MAPPING,
+                Category.INTERACTION_FORCEFIELD,
+            ):
+                continue
+            if not (checked.category.acts_on_state or checked.category is Category.COLLISION_MODEL):  # type: ignore[union-attr]
+                continue
+            first, second = checked.links.get("object1"), checked.links.get("object2")
+            if first is not None or second is not None:
+                # Acts between the two states it links (e.g. BilateralLagrangianConstraint); when both
+                # are one state (MeshSpringForceField's default "@./" twice), it acts on that state.
+                if first is second and isinstance(first, Component) and self._is(first, Category.STATE):
+                    checked.state = first
+                continue
+            explicit = checked.links.get("mstate")
+            state = explicit if isinstance(explicit, Component) else None
+            if state is None:
+                state, _ = links.pick_in_node(node, lambda c: self._is(c, Category.STATE), climb=True)
+            if state is None:
+                self.diags.add(
+                    "E212",
+                    component.loc,
+                    f"{checked.spec.name} {component.label!r} has no MechanicalObject to act on "
+                    f"(none in node {node.path!r} or its ancestors)",
+                    "add a <MechanicalObject/> to the node",
+                )
+                continue
+            checked.state = state
+
+    def _parse_template(self, checked: CheckedComponent) -> list[str] | None:
+        """The written template's parts, canonicalised; reports unknown spellings."""
+        text = checked.component.get("template")
+        if text is None:
+            return None
+        parts = []
+        for part in split_template(text):
+            if part in MATRIX_TEMPLATE_ALIASES:
+                parts.append(MATRIX_TEMPLATE_ALIASES[part])
+                continue
+            canonical = canonical_datatype(part)
+            if canonical is None:
+                parts.append(part)
+                continue
+            name, warns = canonical
+            if warns:
+                self.diags.add(
+                    "W209",
+                    checked.component.attribute_loc("template"),
+                    f"template {part!r} is read as {name!r}",
+                    f'write template="{name}"',
+                )
+            parts.append(name)
+        return parts
+
+    def _resolve_template(self, checked: CheckedComponent) -> None:
+        spec = checked.spec
+        assert spec is not None
+        written = self._parse_template(checked)
+        loc = checked.component.attribute_loc("template")
+        owner = f"{spec.name} {checked.component.label!r}"
+        if spec.category in (Category.MAPPING, Category.MULTI_MAPPING):
+            checked.template = ",".join(written) if written else None
+            return  # checked with the mapping's input and output
+        inferred: str | None = None
+        if checked.state is not None:
+            inferred = self.checked.of(checked.state).template
+        elif spec.category is Category.INTERACTION_FORCEFIELD:
+            ends = [checked.links.get(r) for r in ("object1", "object2")]
+            if not any(ends):
+                ends = [self._node_state(checked.component.node)]
+            types = {self.checked.of(e).template for e in ends if isinstance(e, Component)}
+            inferred = next(iter(types)) if len(types) == 1 else None
+        if written:
+            template = ",".join(written)
+            if spec.templates and template not in spec.templates and written[0] not in spec.templates:
+                self.diags.add(
+                    "E208",
+                    loc,
+                    f"{owner}: template {template!r} is not available; {spec.name} accepts "
+                    f"{_fmt_types(spec.templates)}",
+                )
+                checked.template = inferred
+                return
+            if inferred is not None and checked.state is not None and written[0] != inferred:
+                self.diags.add(
+                    "E210",
+                    loc,
+                    f"{owner} has template {written[0]!r} but acts on {checked.state.label!r}, "
+                    f"a {inferred} MechanicalObject",
+                    f'remove template= (it is inferred) or write template="{inferred}"',
+                )
+            checked.template = template
+            return
+        if inferred is not None and spec.templates and inferred not in spec.templates:
+            self.diags.add(
+                "E210",
+                checked.component.loc,
+                f"{owner} cannot act on {inferred} state {checked.state.label if checked.state else ''!r}: "
+                f"it accepts {_fmt_types(spec.templates)}",
+            )
+        checked.template = inferred or spec.default_template
+
+    def _node_state(self, node: Node) -> Component | None:
+        state, _ = links.pick_in_node(node, lambda c: self._is(c, Category.STATE), climb=True)
+        return state
+
+    # --- values ------------------------------------------------------------------------------
+    def value(self, checked: CheckedComponent, name: str, depth: int = 0, *, raw: bool = False) -> Any:
+        """The value a field of a component will have: explicit, linked, from src, computed, default."""
+        assert checked.spec is not None
+        if depth > 32:
+            return None
+        if name in checked.fields:
+            return checked.fields[name]
+        if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
+            name = "position"  # both start as a copy of the transformed positions
+        if checked.category is Category.STATE and name == "position" and not raw:
+            points = self.positions(checked.component)
+            return None if points is None else points.ravel()
+        if name in checked.data_links:
+            path, _ = checked.data_links[name]
+            target = links.resolve(path, checked.component)
+            source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
+            if source is None or source.spec is None:
+                return None
+            return self.value(source, path.data or name, depth + 1)
+        if checked.spec.compute:
+            outputs = self._outputs(checked)
+            if outputs is not None and name in outputs:
+                return outputs[name]
+        if checked.src is not None:
+            source = self.checked.components.get(id(checked.src))
+            if source is not None and source.spec is not None and source.spec.field(name) is not None:
+                return self.value(source, name, depth + 1)
+        if checked.category is Category.TOPOLOGY and name in (*CELL_KINDS, "position"):
+            # A topological mapping writes its output container's cells (Hexa2Tetra, Tetra2Triangle...)
+            # or points (Mesh2Point).
+            for writer in self.checked:
+                if (
+                    writer.category is Category.TOPOLOGICAL_MAPPING
+                    and writer.links.get("output") is checked.component
+                ):
+                    written = self.value(writer, name, depth + 1)
+                    if written is not None and np.size(written):
+                        return written
+        field_spec = checked.spec.field(name)
+        return field_spec.default if field_spec else None
+
+    def _outputs(self, checked: CheckedComponent) -> dict[str, np.ndarray] | None:
+        if checked.outputs is not None:
+            return checked.outputs
+        assert checked.spec is not None
+        evaluator = evaluate.EVALUATORS[checked.spec.compute]
+        checked.outputs = {}  # guards against cycles while evaluating
+        try:
+            checked.outputs = evaluator(_EvalContext(self, checked))
+        except evaluate.UnknownInput:
+            pass  # computed by a generator sofac cannot evaluate (yet): nothing to check against
+        except evaluate.EvaluationError as error:
+            if error.code != "E219":  # missing files are reported by _check_files
+                self.diags.add(
+                    error.code,
+                    checked.component.attribute_loc(self._attribute_name(checked, error.attribute))
+                    if error.attribute
+                    else checked.component.loc,
+                    f"{checked.spec.name} {checked.component.label!r}: {error}",
+                )
+        return checked.outputs
+
+    def positions(self, state: Component) -> np.ndarray | None:
+        """Initial positions of a state, reshaped (n, coord_size), when they can be known statically.
+
+        As SOFA's MechanicalObject::init: the written (or linked) positions, else its topology's,
+        then scaled, rotated and translated (legacy ``dx``/``rx``/``scale`` attributes included).
+        """
+        checked = self.checked.of(state)
+        if "position" in checked.cache:
+            return checked.cache["position"]
+        checked.cache["position"] = None  # guards against link cycles
+        points = self._untransformed_positions(checked)
+        if points is not None and points.shape[1] in (1, 2, 3, 7):
+            points = self._transform_state(checked, points)
+        checked.cache["position"] = points
+        return points
+
+    def _transform_state(self, checked: CheckedComponent, points: np.ndarray) -> np.ndarray:
+        fields = checked.fields
+
+        def triple(name: str, legacy: tuple[str, str, str], default: float) -> np.ndarray:
+            value = np.asarray(fields.get(name, (default,) * 3), dtype=float)
+            for axis, key in enumerate(legacy):
+                if key in fields:
+                    value[axis] = float(fields[key])
+            return value
+
+        scale = triple("scale3d", ("sx", "sy", "sz"), 1.0) * float(fields.get("scale", 1.0))
+        rotation = triple("rotation", ("rx", "ry", "rz"), 0.0)
+        translation = triple("translation", ("dx", "dy", "dz"), 0.0)
+        if (scale == 1).all() and not rotation.any() and not translation.any():
+            return points
+        if points.shape[1] == 7:  # Rigid3d: move the frames' origins, turn their orientations
+            moved = points.copy()
+            moved[:, :3] = meshes.apply_transform(points[:, :3], translation, rotation, scale)
+            if rotation.any():
+                turn = meshes.euler_to_quaternion(rotation)
+                moved[:, 3:] = [meshes.quaternion_multiply(turn, q) for q in points[:, 3:]]
+            return moved
+        return meshes.apply_transform(points, translation, rotation, scale)
+
+    def _untransformed_positions(self, checked: CheckedComponent) -> np.ndarray | None:
+        state = checked.component
+        datatype = checked.datatype or DATATYPES["Vec3d"]
+        value = self.value(checked, "position", raw=True)
+        velocity = self.value(checked, "velocity", raw=True)
+        # MechanicalObject::init also takes its topology's points when it holds one position and at
+        # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
+        # size > 1 resized it at parse time (Vec3 states only: other widths would need converting).
+        single = (
+            datatype.coord_size == 3
+            and np.size(value) == 3
+            and np.size(velocity) <= datatype.deriv_size
+            and int(checked.fields.get("size", 0)) <= 1
+        )
+        if value is None or np.size(value) == 0 or single:
+            topology, _ = links.pick_in_node(
+                state.node, lambda c: self._is(c, Category.TOPOLOGY), climb=False
+            )
+            points = self.value(self.checked.of(topology), "position") if topology is not None else None
+            if points is not None and np.size(points):
+                value = points
+        if value is None or np.size(value) == 0:
+            count = int(checked.fields.get("size", 0))
+            if not count:
+                return None
+            rest = np.zeros((count, datatype.coord_size))
+            if datatype.coord_size == 7:
+                rest[:, 6] = 1.0  # identity orientations
+            return rest
+        value = np.asarray(value, dtype=float)
+        width = self._linked_width(checked, "position")
+        if width is not None and width != datatype.coord_size and value.size % width == 0:
+            # A link between position types of different widths (a grid's Vec3d points into Rigid3d
+            # frames): SOFA's genericCopyValueFrom copies element by element, the first
+            # min(widths) values of each, the rest keeping the default coordinate.
+            points = value.reshape(-1, width)
+            copied = min(width, datatype.coord_size)
+            rest = np.zeros((len(points), datatype.coord_size))
+            if datatype.coord_size == 7:
+                rest[:, 6] = 1.0  # identity orientations
+            rest[:, :copied] = points[:, :copied]
+            return rest
+        if value.size % datatype.coord_size:
+            return None
+        return value.reshape(-1, datatype.coord_size)
+
+    def _linked_width(self, checked: CheckedComponent, name: str) -> int | None:
+        """Numbers per element of the positions a field links to: a state's coordinate size, or 3
+        for a topology's points (None when not linked or not known)."""
+        if name in checked.fields or name not in checked.data_links:
+            return None
+        path, _ = checked.data_links[name]
+        target = links.resolve(path, checked.component)
+        source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
+        if source is None or (path.data or name) != "position":
+            return None
+        if source.category is Category.STATE:
+            return (source.datatype or DATATYPES["Vec3d"]).coord_size
+        return 3 if source.category is Category.TOPOLOGY else None
+
+    def state_size(self, state: Component) -> int | None:
+        points = self.positions(state)
+        if points is not None:
+            return len(points)
+        size = self.checked.of(state).fields.get("size")
+        return int(size) if size else None
+
+    # --- counts, required values ---------------------------------------------------------------
+    def _check_counts(self, checked: CheckedComponent) -> None:
+        assert checked.spec is not None
+        datatype = checked.datatype
+        if datatype is None:
+            return
+        for name, value in checked.fields.items():
+            field_spec = checked.spec.field(name)
+            assert field_spec is not None
+            problem = field_spec.type.check_count(value, datatype)
+            if problem and not (
+                isinstance(field_spec.type, Coords)
+                and field_spec.type.allow_single
+                and value.size == datatype.deriv_size
+            ):
+                per_dof = (
+                    datatype.deriv_size if getattr(field_spec.type, "deriv", False) else datatype.coord_size
+                )
+                self.diags.add(
+                    "E205",
+                    checked.component.attribute_loc(self._attribute_name(checked, name)),
+                    f"{checked.spec.name} {checked.component.label!r}: {name}: {problem}",
+                    f"give {datatype.name} values: {per_dof} numbers per DOF",
+                )
+
+    @staticmethod
+    def _attribute_name(checked: CheckedComponent, field_name: str) -> str:
+        assert checked.spec is not None
+        for attribute in checked.component.attributes:
+            spec = checked.spec.field(attribute)
+            if spec is not None and spec.name == field_name:
+                return attribute
+        return field_name
+
+    def _check_required(self, checked: CheckedComponent) -> None:
+        assert checked.spec is not None
+        for field_spec in checked.spec.fields:
+            if not field_spec.required:
+                continue
+            if field_spec.name in checked.fields or field_spec.name in checked.data_links:
+                continue
+            if checked.src is not None:
+                continue
+            self.diags.add(
+                "E226",
+                checked.component.loc,
+                f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}",
+                field_spec.doc,
+            )
+
+    # --- mappings ----------------------------------------------------------------------------
+    def _check_mappings(self) -> None:
+        edges: dict[int, list[tuple[Component, CheckedComponent]]] = {}
+        for checked in self.checked:
+            if checked.category is not Category.MAPPING:
+                continue
+            spec = checked.spec
+            assert spec is not None
+            component = checked.component
+            owner = f"{spec.name} {component.label!r}"
+            source = checked.links.get("input")
+            target = checked.links.get("output")
+            if not isinstance(source, Component):
+                written = component.get("input")
+                if written is None or "input" not in checked.links:
+                    self.diags.add(
+                        "E215",
+                        component.attribute_loc("input"),
+                        f"{owner}: input {written or '@../'!r} reaches no mechanical state",
+                        'point input= at the parent state, e.g. input="@../dofs"',
+                    )
+                continue
+            if not isinstance(target, Component):
+                self.diags.add(
+                    "E216",
+                    component.attribute_loc("output"),
+                    f"{owner}: output {component.get('output') or '@./'!r} is not a state or visual model",
+                )
+                continue
+            if target.node is not component.node:
+                self.diags.add(
+                    "E216",
+                    component.attribute_loc("output"),
+                    f"{owner}: output {target.label!r} is in node {target.node.path!r}, not in the mapping's "
+                    f"node {component.node.path!r}",
+                    "put the mapping in the node of its output",
+                )
+            in_type = self.checked.of(source).template
+            out_type = self.checked.of(target).template or "Vec3d"
+            actual = f"{in_type},{out_type}"
+            written = self._parse_template(checked)
+            if written and len(written) == 2 and ",".join(written) != actual:
+                self.diags.add(
+                    "E210",
+                    component.attribute_loc("template"),
+                    f"{owner} has template {','.join(written)!r} but maps {source.label!r} ({in_type}) "
+                    f"to {target.label!r} ({out_type})",
+                )
+            if spec.templates and actual not in spec.templates:
+                inputs = sorted({t.split(",")[0] for t in spec.templates})
+                self.diags.add(
+                    "E214",
+                    component.loc,
+                    f"{owner} cannot map {in_type} {source.label!r} to {out_type} {target.label!r}: "
+                    f"it supports {_fmt_types(spec.templates)}",
+                    f"{spec.name} needs an input of type {' or '.join(inputs)}",
+                )
+            checked.template = actual
+            edges.setdefault(id(source), []).append((target, checked))
+        self._check_mapping_cycles(edges)
+
+    def _check_mapping_cycles(self, edges: dict[int, list[tuple[Component, CheckedComponent]]]) -> None:
+        reported: set[int] = set()
+        for start in list(edges):
+            # Iterative DFS from each mapped state looking for a path back to itself.
+            stack = [(start, [])]  # (state id, mappings used)
+            seen: set[int] = set()
+            while stack:
+                current, used = stack.pop()
+                for target, mapping in edges.get(current, ()):
+                    if id(target) == start and id(mapping.component) not in reported:
+                        reported.update(id(m.component) for m in [*used, mapping])
+                        chain = " -> ".join(m.component.label for m in [*used, mapping])
+                        self.diags.add(
+                            "E217",
+                            mapping.component.loc,
+                            f"mappings form a cycle: {chain}",
+                            "a state cannot be computed from itself; remove one of these mappings",
+                        )
+                    elif id(target) not in seen:
+                        seen.add(id(target))
+                        stack.append((id(target), [*used, mapping]))
+
+    # --- solvers -----------------------------------------------------------------------------
+    def _check_solvers(self) -> None:
+        for checked in self.checked:
+            spec = checked.spec
+            if spec is None:
+                continue
+            if spec.category is Category.ODE_SOLVER and spec.needs_linear_solver:
+                node = checked.component.node
+                explicit = checked.links.get("linearSolver")
+                found = explicit if explicit is not None else self._linear_solver_below(node)
+                if found is None:
+                    self.diags.add(
+                        "E221",
+                        checked.component.loc,
+                        f"{spec.name} {checked.component.label!r} is implicit but node {node.path!r} has no "
+                        "linear solver in it or below it",
+                        'add e.g. <CGLinearSolver iterations="25" tolerance="1e-9" threshold="1e-9"/> '
+                        "next to it",
+                    )
+            if spec.category is Category.STATE:
+                self._check_state_integrated(checked)
+            if spec.name == "VariationalSymplecticSolver":
+                component = checked.component
+                if checked.fields.get("saveEnergyInFile") and not checked.fields.get("file"):
+                    self.diags.add(
+                        "W225",
+                        component.attribute_loc("saveEnergyInFile"),
+                        f"{spec.name} {component.label!r}: saveEnergyInFile=true without a file: SOFA "
+                        "writes the energies nowhere",
+                        'name the CSV file with file="energies.csv"',
+                    )
+
+    def _linear_solver_below(self, node: Node) -> Component | None:
+        for descendant in node.walk():
+            for component in descendant.objects:
+                if self._is(component, Category.LINEAR_SOLVER):
+                    return component
+        return None
+
+    def _check_state_integrated(self, checked: CheckedComponent) -> None:
+        state = checked.component
+        if self.checked.mapping_of(state) is not None or self.checked.solver_of(state.node) is not None:
+            return
+        dynamic = [
+            other
+            for other in self.checked
+            if other.state is state and other.category in (Category.MASS, Category.FORCEFIELD)
+        ]
+        if dynamic:
+            names = ", ".join(f"{d.spec.name} {d.component.label!r}" for d in dynamic[:3])  # type: ignore[union-attr]
+            self.diags.add(
+                "W220",
+                state.loc,
+                f"MechanicalObject {state.label!r} has {names} acting on it but no ODE solver above it: "
+                "it would never move",
+                "add an ODE solver (e.g. <EulerImplicitSolver/> with a linear solver) "
+                "to this node or an ancestor",
+            )
+
+    # --- rigid inertia -----------------------------------------------------------------------
+    def _check_rigid_inertia(self, checked: CheckedComponent) -> None:
+        """W230: an anisotropic inertia on a Rigid3d body that can rotate.
+
+        SOFA's UniformMass<Rigid3d> applies the inertia matrix as given, in world axes: it is not
+        turned with the body (R I R^T) and the gyroscopic term w x (I w) is left out. This is exact
+        only for an isotropic inertia (a multiple of the identity) or a body that never rotates.
+        """
+        state = checked.state
+        if state is None or checked.template != "Rigid3d" or not self._is(state, Category.STATE):
+            return
+        vertex = self.value(checked, "vertexMass")
+        values = np.asarray(vertex if vertex is not None else (), dtype=float).ravel()
+        if values.size != 11 or not np.isfinite(values).all():
+            return  # the default inertia (identity), or a count error reported elsewhere
+        inertia = values[2:].reshape(3, 3)
+        if np.allclose(inertia, inertia[0, 0] * np.eye(3), rtol=1e-9, atol=0.0):
+            return
+        if self.checked.solver_of(state.node) is None:
+            return  # never integrated: W220 says so when it matters
+        size = self.state_size(state)
+        if size is not None and self._fixed_dofs(state) >= set(range(size)):
+            return
+        why = self._rotation_cause(state)
+        if why is None:
+            return
+        owner = f"UniformMass {checked.component.label!r}"
+        principal = np.linalg.eigvalsh((inertia + inertia.T) / 2)
+        self.diags.add(
+            "W230",
+            checked.component.attribute_loc(self._attribute_name(checked, "vertexMass")),
+            f"{owner}: the inertia of {state.label!r} is anisotropic (principal values per unit mass "
+            f"{', '.join(f'{v:.4g}' for v in principal)}) and the body can rotate ({why}); SOFA (and "
+            "sofac, to match it) applies the inertia in world axes, without turning it with the body and "
+            "without the gyroscopic term w x Iw, so a spinning anisotropic body moves wrongly",
+            "results match SOFA, not rigid-body mechanics: where the body turns far from its initial "
+            "orientation, use an isotropic inertia (a multiple of the identity) or check the motion "
+            "against an exact rigid-body model",
+        )
+
+    def _fixed_dofs(self, state: Component) -> set[int]:
+        """The DOFs of ``state`` that a FixedProjectiveConstraint holds."""
+        fixed: set[int] = set()
+        for other in self.checked:
+            if other.state is not state or other.spec is None or other.spec.kernel != "fixed":
+                continue
+            if self.value(other, "fixAll"):
+                return set(range(self.state_size(state) or 0))
+            indices = self.value(other, "indices")
+            if indices is not None:
+                fixed.update(int(i) for i in np.ravel(indices))
+        return fixed
+
+    def _rotation_cause(self, state: Component) -> str | None:
+        """Why a rigid state can rotate: an initial spin, or something that can apply a torque."""
+        velocity = self.value(self.checked.of(state), "velocity")
+        if velocity is not None and np.size(velocity) and np.size(velocity) % 6 == 0:
+            spins = np.asarray(velocity, dtype=float).reshape(-1, 6)[:, 3:]
+            if np.any(spins != 0):
+                return "it starts with an angular velocity"
+        acting = (
+            Category.FORCEFIELD,
+            Category.INTERACTION_FORCEFIELD,
+            Category.LAGRANGIAN_CONSTRAINT,
+            Category.COLLISION_MODEL,
+        )
+        for other in self.checked:
+            if other.spec is None:
+                continue
+            label = f"{other.spec.name} {other.component.label!r}"
+            if other.category in acting and (
+                other.state is state or state in (other.links.get("object1"), other.links.get("object2"))
+            ):
+                return f"{label} acts on it"
+            if other.category in (Category.MAPPING, Category.MULTI_MAPPING):
+                inputs = [other.links.get("input"), *other.link_lists.get("input", ())]
+                output = other.links.get("output")
+                outputs = [output, *other.link_lists.get("output", ())]
+                if any(i is state for i in inputs) and any(
+                    isinstance(o, Component) and self._is(o, Category.STATE) for o in outputs
+                ):
+                    return f"{label} maps it to a mechanical state whose forces give it torques"
+        return None
+
+    # --- indices -----------------------------------------------------------------------------
+    def _check_indices(self, checked: CheckedComponent) -> None:
+        spec = checked.spec
+        assert spec is not None
+        for field_spec in spec.fields:
+            if field_spec.indexes is None and not isinstance(field_spec.type, Springs):
+                continue
+            if field_spec.name not in checked.fields and field_spec.name not in checked.data_links:
+                continue
+            value = self.value(checked, field_spec.name)
+            if value is None or np.size(value) == 0:
+                continue
+            if field_spec.name == "rigidIndexPerPoint" and np.size(value) != self._mapped_points(checked):
+                continue  # SOFA ignores it then (and uses `index` for every point)
+            attribute = self._attribute_name(checked, field_spec.name)
+            loc = checked.component.attribute_loc(attribute)
+            owner = f"{spec.name} {checked.component.label!r}"
+            if isinstance(field_spec.type, Springs):
+                springs = np.asarray(value).reshape(-1, 5)
+                for column, role in ((0, "object1"), (1, "object2")):
+                    state = self._indexed_state(checked, role)
+                    self._report_range(
+                        owner, field_spec.name, loc, springs[:, column].astype(np.int64), state
+                    )
+            else:
+                state = self._indexed_state(checked, field_spec.indexes or "state")
+                self._report_range(owner, field_spec.name, loc, np.asarray(value, dtype=np.int64), state)
+
+    def _mapped_points(self, checked: CheckedComponent) -> int | None:
+        """How many points a mapping maps: its output's positions (state or visual model), if known."""
+        output = checked.links.get("output")
+        if not isinstance(output, Component):
+            return None
+        target = self.checked.components.get(id(output))
+        if target is None or target.spec is None or target.spec.field("position") is None:
+            return None
+        if target.category is Category.STATE:
+            return self.state_size(output)
+        value = self.value(target, "position")
+        width = (target.datatype or DATATYPES["Vec3d"]).coord_size
+        if value is None or np.size(value) == 0 or np.size(value) % width:
+            return None
+        return int(np.size(value)) // width
+
+    def _indexed_state(self, checked: CheckedComponent, role: str) -> Component | None:
+        if role == "state":
+            return checked.state
+        target = checked.links.get(role)
+        if target is None and role in ("object1", "object2"):
+            return self._node_state(checked.component.node)
+        return target if isinstance(target, Component) else None
+
+    def _report_range(
+        self, owner: str, name: str, loc: SourceLoc, indices: np.ndarray, state: Component | None
+    ) -> None:
+        if state is None or not self._is(state, Category.STATE) or indices.size == 0:
+            return
+        size = self.state_size(state)
+        if size is None:
+            return
+        bad = indices[(indices < 0) | (indices >= size)]
+        if bad.size:
+            self.diags.add(
+                "E218",
+                loc,
+                f"{owner}: {name} contains index {int(bad[0])}, but {state.label!r} has {size} DOFs "
+                f"(valid: 0..{size - 1}){f'; {bad.size} indices are out of range' if bad.size > 1 else ''}",
+            )
+
+    # --- files -------------------------------------------------------------------------------
+    def _check_files(self, checked: CheckedComponent) -> None:
+        from sofac.registry.fields import FileName
+
+        spec = checked.spec
+        assert spec is not None
+        for name, value in checked.fields.items():
+            field_spec = spec.field(name)
+            if field_spec is None or not isinstance(field_spec.type, FileName) or not value:
+                continue
+            if field_spec.type.output:
+                continue
+            self.file_of(checked, name, report=True, unused=self._unused_loader(checked))
+        if spec.compute:
+            self._outputs(checked)
+
+    def _unused_loader(self, checked: CheckedComponent) -> bool:
+        """A loader whose outputs no component reads (SOFA loads such scenes, logging an error)."""
+        if checked.category is not Category.LOADER:
+            return False
+        if self._referenced is None:
+            self._referenced = set()
+            for other in self.checked:
+                self._referenced.update(id(t) for t in other.links.values())
+                self._referenced.update(id(t) for ts in other.link_lists.values() for t in ts)
+                if other.src is not None:
+                    self._referenced.add(id(other.src))
+                for path, _ in other.data_links.values():
+                    target = links.resolve(path, other.component)
+                    if target is not None:
+                        self._referenced.add(id(target))
+        return id(checked.component) not in self._referenced
+
+    def file_of(
+        self, checked: CheckedComponent, name: str, *, report: bool = False, unused: bool = False
+    ) -> Path | None:
+        from sofac.front import parse
+
+        value = checked.fields.get(name)
+        if not value:
+            return None
+        component = checked.component
+        base = Path(component.loc.file).parent
+        path = parse.resolve_data_file(str(value), base, self.scene)
+        if path is None and report:
+            attribute = self._attribute_name(checked, name)
+            roots = ", ".join(str(r) for r in self.scene.data_roots) or str(base)
+            self.diags.add(
+                "W229" if unused else "E219",
+                component.attribute_loc(attribute),
+                f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
+                f"file {value!r} not found (searched {base} and the data roots: {roots})"
+                + ("; nothing reads this loader's outputs" if unused else ""),
+                "fix the path, or add the folder holding it with --data-path",
+            )
+        return path
+
+    # --- plugins -----------------------------------------------------------------------------
+    def _check_plugins(self) -> None:
+        known = {spec.module for spec in registry.all_components().values() if spec.module}
+        prefixes = {".".join(m.split(".")[:i]) for m in known for i in range(1, m.count(".") + 2)}
+        for checked in self.checked:
+            spec = checked.spec
+            if spec is None or spec.name != "RequiredPlugin":
+                continue
+            names = [*checked.fields.get("pluginName", ())]
+            if not names and checked.component.name:
+                names = [checked.component.name]
+            for plugin in names:
+                if plugin in prefixes:
+                    continue
+                self.diags.add(
+                    "W224",
+                    checked.component.loc,
+                    f"RequiredPlugin names {plugin!r}, which provides none of the components sofac knows",
+                    "old module names (SofaBaseMechanics...) were replaced by Sofa.Component.* "
+                    "in SOFA v22.06",
+                )
+
+
+class _EvalContext:
+    """The view of one component that evaluators get (see evaluate.Context)."""
+
+    def __init__(self, checker: _Checker, checked: CheckedComponent) -> None:
+        self.checker = checker
+        self.checked = checked
+
+    def value(self, name: str) -> Any:
+        return self.checker.value(self.checked, name)
+
+    def is_set(self, name: str) -> bool:
+        return name in self.checked.fields or name in self.checked.data_links
+
+    def file(self, name: str) -> Path | None:
+        return self.checker.file_of(self.checked, name)
+
+    def linked(self, link: str, name: str) -> Any:
+        target = self.checked.links.get(link)
+        if not isinstance(target, Component):
+            return None
+        linked = self.checker.checked.of(target)
+        return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
+
+    def input_positions(self) -> np.ndarray | None:
+        if self.is_set("position"):
+            value = self.value("position")
+            if value is None:
+                return None
+            datatype = self.checked.datatype or DATATYPES["Vec3d"]
+            return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
+        state = self.checked.state or self.checker._node_state(self.checked.component.node)
+        if state is None:
+            return None
+        points = self.checker.positions(state)
+        if points is None:
+            raise evaluate.UnknownInput(f"the positions of {state.label!r} are only known at run time")
+        return points
+
+
+def check_scene(scene: Scene, diagnostics: Diagnostics, *, allow_unsupported: bool = False) -> CheckedScene:
+    """Check a parsed scene; problems are appended to ``diagnostics``."""
+    started = time.perf_counter()
+    diagnostics.downgrade_unsupported = allow_unsupported
+    checked = _Checker(scene, diagnostics).run()
+    checked.check_seconds = time.perf_counter() - started
+    return checked
+
+
+def check_file(
+    path: str | Path, *, data_roots: Sequence[Path] = (), allow_unsupported: bool = False
+) -> tuple[CheckedScene | None, Diagnostics]:
+    """Parse and check one scene file; never raises for scene problems (they are diagnostics)."""
+    from sofac.front import parse
+
+    diagnostics = Diagnostics()
+    diagnostics.downgrade_unsupported = allow_unsupported
+    try:
+        scene = parse.parse_scene(path, diagnostics, data_roots=data_roots)
+    except SceneError:
+        return None, diagnostics
+    return check_scene(scene, diagnostics, allow_unsupported=allow_unsupported), diagnostics

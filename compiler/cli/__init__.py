@@ -1,0 +1,1 @@
+"""The ``sofac`` command line: argument parsing (main), the commands, report formats, inspect."""

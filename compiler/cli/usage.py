@@ -1,0 +1,41 @@
+"""What every ``sofac`` command shares: exit codes, usage errors, and scene/sofac errors turned
+into messages (never tracebacks)."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Iterator
+
+from sofac.diagnostics import SceneError, Severity, SofacError
+
+EXIT_OK = 0
+EXIT_ERRORS = 1
+EXIT_USAGE = 2
+EXIT_INTERNAL = 3
+EXIT_INTERRUPTED = 130
+
+
+class UsageError(Exception):
+    """The command line asks for something impossible (reported as E002, exit code 2)."""
+
+
+class Failed(Exception):
+    """A command failed and has said why on standard error (exit code 1)."""
+
+
+@contextlib.contextmanager
+def reported() -> Iterator[None]:
+    """Turn sofac errors into messages on stderr, then raise Failed (the caller returns 1)."""
+    from sofac.cli.report import format_diagnostic
+
+    try:
+        yield
+    except SceneError as error:
+        for diag in error.diagnostics:
+            if diag.severity >= Severity.WARNING:
+                print(format_diagnostic(diag), file=sys.stderr)
+        raise Failed from None
+    except SofacError as error:
+        print(f"sofac: error: {error}", file=sys.stderr)
+        raise Failed from None

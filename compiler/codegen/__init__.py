@@ -1,0 +1,1 @@
+"""Code generation: Plan -> C++ source. The only stage that writes C++ text."""

@@ -1,0 +1,160 @@
+"""The one driver of the stages: parse → check → plan → generate → build → load.
+
+Every tool (the command line, :func:`sofac.load`, accuracy, sweeps, regress, render) goes through
+these functions, so a scene is checked, planned and compiled the same way whatever asks for it, and
+a scene with errors always stops at the same place: a :class:`SceneError` carrying every diagnostic.
+The stages themselves import nothing from here: data flows one way.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from sofac.diagnostics import Diagnostics, SceneError
+
+if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
+    from sofac.check.checker import CheckedScene
+    from sofac.front.model import Scene
+    from sofac.load.loader import Compiled, Simulation
+    from sofac.plan.planner import Plan
+
+
+def _stop_on_errors(checked: CheckedScene | None, diagnostics: Diagnostics) -> CheckedScene:
+    if checked is None or diagnostics.has_errors():
+        raise SceneError(diagnostics.sorted())
+    return checked
+
+
+def check_file(path: str | Path, *, data_roots: Sequence[Path] = ()) -> tuple[CheckedScene, Diagnostics]:
+    """Parse and check a scene file; raises SceneError if it has errors."""
+    from sofac.check.checker import check_file as check
+
+    checked, diagnostics = check(path, data_roots=data_roots)
+    return _stop_on_errors(checked, diagnostics), diagnostics
+
+
+def check_model(scene: Scene) -> tuple[CheckedScene, Diagnostics]:
+    """Check a scene model built or edited in Python; raises SceneError if it has errors."""
+    from sofac.check.checker import check_scene
+
+    diagnostics = Diagnostics()
+    checked = check_scene(scene, diagnostics)
+    return _stop_on_errors(checked, diagnostics), diagnostics
+
+
+def plan_checked(
+    checked: CheckedScene,
+    diagnostics: Diagnostics | None = None,
+    *,
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
+) -> Plan:
+    from sofac.plan.planner import plan_scene
+
+    return plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+
+
+def plan_file(path: str | Path, *, data_roots: Sequence[Path] = (), threads: int = 1) -> Plan:
+    checked, diagnostics = check_file(path, data_roots=data_roots)
+    return plan_checked(checked, diagnostics, threads=threads)
+
+
+def generate(scene_plan: Plan) -> str:
+    """The C++ source of a plan."""
+    from sofac.codegen.cpp import generate_source
+
+    return generate_source(scene_plan)
+
+
+def compile_checked(
+    checked: CheckedScene,
+    diagnostics: Diagnostics | None = None,
+    *,
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
+) -> Compiled:
+    """Plan, generate and build a checked scene (the build may come from the cache)."""
+    from sofac.build import compiler as build
+    from sofac.load.loader import Compiled
+    from sofac.load.runspec import run_spec
+
+    scene_plan = plan_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+    source = generate(scene_plan)
+    direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
+    numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
+    built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
+    return Compiled(
+        run_spec(scene_plan),
+        built,
+        scene_plan=scene_plan,
+        source=source,
+        checked=checked,
+        rebuild=_rebuild,
+    )
+
+
+def _rebuild(checked: CheckedScene, *, prune: bool, rigid_model: str, threads: int) -> Compiled:
+    return compile_checked(checked, prune=prune, rigid_model=rigid_model, threads=threads)
+
+
+def compile_scene(
+    path: str | Path,
+    *,
+    data_roots: Sequence[Path] = (),
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
+) -> Compiled:
+    """Check, plan, generate and build a scene file (the build may come from the cache)."""
+    checked, diagnostics = check_file(path, data_roots=data_roots)
+    return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+
+
+def compile_model(scene: Scene, **options: Any) -> Compiled:
+    """Check, plan, generate and build a scene model built or edited in Python."""
+    checked, diagnostics = check_model(scene)
+    return compile_checked(checked, diagnostics, **options)
+
+
+def load(
+    path: str | Path,
+    *,
+    dt: float | None = None,
+    data_roots: Sequence[Path] = (),
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
+) -> Simulation:
+    """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
+    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
+
+    A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
+    record (load/warm.py) without being compiled again."""
+    from sofac.load import warm
+    from sofac.load.loader import Compiled
+
+    started = time.perf_counter()
+    options: dict[str, Any] = {
+        "data_roots": tuple(data_roots),
+        "prune": prune,
+        "rigid_model": rigid_model,
+        "threads": threads,
+    }
+    record = warm.lookup(path, **options)
+    if record is not None:
+        compiled = Compiled(
+            record.spec, record.built, recompute=lambda: compile_scene(path, **options), rebuild=_rebuild
+        )
+    else:
+        compiled = compile_scene(path, **options)
+        warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
+    sim = compiled.instantiate()
+    sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
+    if dt is not None:
+        sim.dt = dt
+    return sim

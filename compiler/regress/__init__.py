@@ -1,0 +1,1 @@
+"""SOFA's regression suite (suite) and its state files (states)."""
