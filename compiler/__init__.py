@@ -7,9 +7,9 @@ The pipeline, one package per stage, data flowing one way (docs/architecture.md)
     plan/     CheckedScene -> Plan: typed data (buffers, groups, the calls of each step)
     codegen/  Plan -> C++ source (templates/*.j2 arrange calls to the runtime/sofac kernels)
     build/    C++ -> shared library, in a content-addressed cache
-    load/     library -> Simulation (numpy views of the native state)
+    simulation/ library -> Simulation (numpy views of the native state)
 
-pipeline.py drives them; the tools beside them (accuracy/, render/, sweep/, regress/, cli/) use it.
+pipeline.py drives them; the tools beside them (accuracy/, render/, sweeps/, regress/, cli/) use it.
 """
 
 from __future__ import annotations
@@ -32,11 +32,11 @@ __all__ = [
 _LAZY = {
     "SceneError": "diagnostics",
     "SofacError": "diagnostics",
-    "ContactNotCompiled": "load.loader",
-    "Simulation": "load.loader",
-    "SimulationDiverged": "load.loader",
+    "ContactNotCompiled": "simulation.loader",
+    "Simulation": "simulation.loader",
+    "SimulationDiverged": "simulation.loader",
     "load": "pipeline",
-    "sweep": "sweep.runner",
+    "sweep": "sweeps.runner",
 }
 
 

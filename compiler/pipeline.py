@@ -18,8 +18,8 @@ from sofac.diagnostics import Diagnostics, SceneError
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
     from sofac.check.checker import CheckedScene
     from sofac.front.model import Scene
-    from sofac.load.loader import Compiled, Simulation
     from sofac.plan.planner import Plan
+    from sofac.simulation.loader import Compiled, Simulation
 
 
 def _stop_on_errors(checked: CheckedScene | None, diagnostics: Diagnostics) -> CheckedScene:
@@ -80,8 +80,8 @@ def compile_checked(
 ) -> Compiled:
     """Plan, generate and build a checked scene (the build may come from the cache)."""
     from sofac.build import compiler as build
-    from sofac.load.loader import Compiled
-    from sofac.load.runspec import run_spec
+    from sofac.simulation.loader import Compiled
+    from sofac.simulation.runspec import run_spec
 
     scene_plan = plan_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
     source = generate(scene_plan)
@@ -134,9 +134,9 @@ def load(
     element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
-    record (load/warm.py) without being compiled again."""
-    from sofac.load import warm
-    from sofac.load.loader import Compiled
+    record (simulation/warm.py) without being compiled again."""
+    from sofac.simulation import warm
+    from sofac.simulation.loader import Compiled
 
     started = time.perf_counter()
     options: dict[str, Any] = {

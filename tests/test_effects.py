@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 import sofac
-from sofac.load.loader import PrunedEffectError
 from sofac.pipeline import compile_scene
+from sofac.simulation.loader import PrunedEffectError
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -268,7 +268,7 @@ def test_a_mapped_state_something_acts_on_is_computed_every_step(tmp_path: Path)
 
 def test_states_read_on_demand_are_what_writestate_and_sweeps_record(tmp_path: Path) -> None:
     from sofac.regress.states import export_states
-    from sofac.sweep.runner import sweep
+    from sofac.sweeps.runner import sweep
 
     inside = SKIN.format(below=TIP.format(tip=""))
     lazy = compile_scene(springs(tmp_path, "lazy.scn", inside)).instantiate()

@@ -169,7 +169,7 @@ def test_zero_velocity_damping_is_compiled_out(tmp_path: Path) -> None:
     effects = format_effects(compile_scene(path).plan)
     assert "/n/damper.dampingCoefficient" in effects and "no damping force computed" in effects
     sim = sofac.load(path)
-    with pytest.raises(sofac.load.loader.PrunedEffectError, match="prune=False"):
+    with pytest.raises(sofac.simulation.loader.PrunedEffectError, match="prune=False"):
         sim.param("/n/damper.dampingCoefficient")
     kept = sofac.load(path, prune=False)
     kept.param("/n/damper.dampingCoefficient")[0] = 4.0
@@ -339,7 +339,7 @@ def test_linear_velocity_on_some_coordinates_and_after_its_end(tmp_path: Path) -
 
 
 def test_a_parameter_read_only_at_init_needs_a_reset() -> None:
-    from sofac.load.loader import ParameterNeedsReset
+    from sofac.simulation.loader import ParameterNeedsReset
 
     beam = Path(__file__).resolve().parents[1] / "scenes" / "beam.scn"
     sim = sofac.load(beam)

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sofac.front.meshes import quaternion_multiply
-from sofac.load.loader import Compiled, Simulation
 from sofac.pipeline import compile_scene
+from sofac.simulation.loader import Compiled, Simulation
 
 DT = 1e-3
 ROOT = '<Node name="root" gravity="{gravity}" dt="{dt}"><DefaultAnimationLoop/>{solver}\n{body}</Node>\n'

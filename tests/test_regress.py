@@ -401,7 +401,7 @@ def test_cli_exit_codes(
 
 def test_cli_defaults_point_at_the_shared_folder(monkeypatch: pytest.MonkeyPatch, shared_dir: Path) -> None:
     monkeypatch.delenv("SOFAC_SHARED", raising=False)
-    assert regress.repository_root() == Path(cli.__file__).resolve().parents[1]
+    assert regress.repository_root() == Path(cli.__file__).resolve().parents[2]
     assert regress.shared_root() == regress.repository_root().parent / "shared"
     monkeypatch.setenv("SOFAC_SHARED", str(shared_dir))
     assert regress.default_list() == shared_dir / "reference" / "sofa-regression" / "scenes.regression-tests"

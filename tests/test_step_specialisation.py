@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import sofac
 from sofac.build import compiler as build
-from sofac.load.loader import PrunedEffectError
 from sofac.pipeline import compile_scene
+from sofac.simulation.loader import PrunedEffectError
 
 CLOTH = """<Node name="root" gravity="0 -9.81 0" dt="{dt}"><DefaultAnimationLoop/>
   <Node name="cloth">{solver}

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 import sofac
 from sofac.cli.main import main
-from sofac.sweep import runner as sweeps
-from sofac.sweep.runner import SweepError
+from sofac.sweeps import runner as sweeps
+from sofac.sweeps.runner import SweepError
 
 pytest.importorskip("distributed")
 xr = pytest.importorskip("xarray")

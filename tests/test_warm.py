@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from sofac.load import warm
 from sofac.resources import bundled_scene
+from sofac.simulation import warm
 
 STATE = "/Liver/dofs"
 

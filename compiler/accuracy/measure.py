@@ -52,9 +52,9 @@ import numpy as np
 from sofac import registry
 from sofac.diagnostics import Diagnostics, SceneError, SofacError
 from sofac.front.model import Component, Node, Scene
-from sofac.load.loader import Compiled, Simulation, SimulationDiverged
 from sofac.pipeline import compile_checked
 from sofac.progress import Progress
+from sofac.simulation.loader import Compiled, Simulation, SimulationDiverged
 
 __all__ = [
     "DEFAULT_SOLVERS",

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, reported
 
 if TYPE_CHECKING:
-    from sofac.load.loader import Compiled, SimulationDiverged
+    from sofac.simulation.loader import Compiled, SimulationDiverged
 
 def _scene(args: argparse.Namespace) -> Path:
     path = Path(args.scene)
@@ -96,7 +96,7 @@ def cmd_effects(args: argparse.Namespace) -> int:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from sofac.load.loader import SimulationDiverged
+    from sofac.simulation.loader import SimulationDiverged
 
     if args.steps < 0:
         raise UsageError("--steps must be >= 0")

@@ -338,7 +338,7 @@ def build_parser() -> argparse.ArgumentParser:
     from sofac.render.cli import register as register_render
 
     register_render(commands, _EPILOG)
-    from sofac.sweep.cli import register as register_sweep
+    from sofac.sweeps.cli import register as register_sweep
 
     register_sweep(commands, _EPILOG)
 

@@ -321,11 +321,8 @@ def spatial_size(template: str, coord_size: int) -> int:
 
 
 def _default_loader(path: Path) -> Simulation:
-    import sofac
+    from sofac.pipeline import load
 
-    load = getattr(sofac, "load", None)
-    if load is None:
-        raise SofacError("this sofac has no sofac.load yet (the compiler core is not installed)")
     return load(path)
 
 

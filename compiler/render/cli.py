@@ -181,9 +181,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     progress_on = not args.no_progress
     try:
         with reported():
-            from sofac.load.loader import SimulationDiverged
             from sofac.pipeline import load
             from sofac.render import picture as render
+            from sofac.simulation.loader import SimulationDiverged
 
             try:
                 render.check_show(show)

@@ -10,8 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from sofac.load.loader import Compiled, Simulation
 from sofac.pipeline import compile_scene
+from sofac.simulation.loader import Compiled, Simulation
 
 ROOT = '<Node name="root" gravity="{gravity}" dt="{dt}"><DefaultAnimationLoop/>{body}</Node>'
 NO_GRAVITY = "0 0 0"

@@ -32,8 +32,8 @@ import numpy as np
 from sofac import __version__
 from sofac.build import compiler as build
 from sofac.front.datafiles import default_data_roots
-from sofac.load.runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 from sofac.resources import resource_dir
+from sofac.simulation.runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
 FORMAT = 1
 # Environment variables that change what a scene compiles to (see build.py and datafiles.py).

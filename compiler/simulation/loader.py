@@ -20,7 +20,7 @@ from typing import IO, TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 from sofac.build import compiler as build
 from sofac.diagnostics import SofacError
-from sofac.load.runspec import RunSpec
+from sofac.simulation.runspec import RunSpec
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
     from sofac.plan import planner as plan

@@ -1,4 +1,4 @@
-"""``sofac sweep``: one scene run for many parameter sets on Dask (see :mod:`sofac.sweep.runner`).
+"""``sofac sweep``: one scene run for many parameter sets on Dask (see :mod:`sofac.sweeps.runner`).
 
 Kept apart from the sweep itself so that building the parser imports nothing heavy.
 """
@@ -13,7 +13,7 @@ from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, reported
 
 
 def cmd_sweep(args: argparse.Namespace) -> int:
-    from sofac.sweep import runner as sweep
+    from sofac.sweeps import runner as sweep
 
     path = Path(args.scene)
     if not path.is_file():

@@ -290,7 +290,7 @@ def scene_fingerprint(compiled: Any) -> str:
 
 def run_one(job: Job, values: Sequence[float]) -> dict[str, Any]:
     """Run one parameter set. Never raises: failures come back as ``status``/``message``."""
-    from sofac.load.loader import SimulationDiverged
+    from sofac.simulation.loader import SimulationDiverged
 
     started = time.perf_counter()
     samples = job.sample_steps()
