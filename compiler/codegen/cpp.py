@@ -1,7 +1,9 @@
-"""Generate stage: render a plan as C++17 source from the Jinja2 templates in ``templates/``.
+"""Code generation: a plan as C++17 source, the only place where C++ text is made.
 
-The template only arranges kernel calls that the plan prepared; identifiers come from the plan's
-counters and comments are reduced to printable ASCII, so no scene text can change the code.
+The plan's calls (``sofac.plan.ir``) are spelled out here, with their slots bound to the vectors of
+each place; the Jinja2 template (``templates/scene.cpp.j2``) only arranges them. Identifiers come
+from the plan's counters and comments are reduced to printable ASCII, so no scene text can change
+the code.
 """
 
 from __future__ import annotations
@@ -12,7 +14,28 @@ from typing import Any
 
 import jinja2
 from sofac import __version__
-from sofac.plan.planner import Buffer, Group, MappingOp, Plan, Projection, StatePlan, origin_of
+from sofac.plan.ir import (
+    CHILD,
+    OFFSET,
+    PARENT,
+    VECTOR,
+    Aggregate,
+    Arg,
+    Buffer,
+    Call,
+    Constant,
+    Count,
+    Element,
+    Env,
+    Function,
+    Note,
+    Offset,
+    Slot,
+    Statement,
+    TemplateArg,
+    bind,
+)
+from sofac.plan.planner import Group, MappingOp, Op, Plan, Projection, StatePlan, origin_of
 from sofac.resources import resource_dir
 
 
@@ -26,6 +49,87 @@ def _ptr(buffer: Buffer) -> str:
 
 def _size(buffer: Buffer) -> str:
     return f"Index(S.{buffer.ident}.size())"
+
+
+# How the step's scope names the values of ir.Env, and the runtime's layout constants.
+_ENV = {
+    Env.ASSEMBLER: "A",
+    Env.KFACT: "kfact",
+    Env.MFACT: "mfact",
+    Env.BFACT: "bfact",
+    Env.FIXED: "D.fixed",
+    Env.TIME: "S.time",
+    Env.KINETIC: "kinetic",
+    Env.POTENTIAL: "potential",
+    Env.KINETIC_OUT: "&kinetic",
+    Env.POTENTIAL_OUT: "&potential",
+    Env.NONE: "nullptr",
+}
+_CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
+
+
+def cpp_type(datatype: str) -> str:
+    """The runtime's C++ type of a DataType (runtime/sofac/types.h)."""
+    return f"sofac::{datatype}"
+
+
+def _template(arg: TemplateArg) -> str:
+    if isinstance(arg, bool):
+        return "true" if arg else "false"
+    if isinstance(arg, Constant):
+        return _CONSTANTS[arg]
+    if isinstance(arg, int):
+        return str(arg)
+    return cpp_type(arg)
+
+
+def _templates(args: tuple[TemplateArg, ...]) -> str:
+    return f"<{', '.join(_template(a) for a in args)}>" if args else ""
+
+
+def _argument(arg: Arg) -> str:
+    if isinstance(arg, Buffer):
+        return _ptr(arg)
+    if isinstance(arg, Count):
+        return f"Index(S.{arg.buffer.ident}.size() / {arg.per})" if arg.per != 1 else _size(arg.buffer)
+    if isinstance(arg, Element):
+        return f"S.{arg.buffer.ident}[{arg.index}]"
+    if isinstance(arg, Offset):
+        return f"sofac::Assembler::kMapped + {arg.value}" if arg.mapped else str(arg.value)
+    if isinstance(arg, Function):
+        return f"sofac::{arg.name}"
+    if isinstance(arg, Aggregate):
+        fields = ", ".join(_argument(f) for f in arg.fields)
+        return f"sofac::{arg.type}{_templates(arg.templates)}{{{fields}}}"
+    if isinstance(arg, Env):
+        return _ENV[arg]
+    if isinstance(arg, bool):
+        return "true" if arg else "false"
+    if isinstance(arg, (int, float)):
+        return repr(arg)
+    raise TypeError(f"an unbound {arg!r} reached code generation")
+
+
+def statement(item: Statement) -> str:
+    """One C++ statement (or comment line) of the step."""
+    if isinstance(item, Note):
+        return f"// {_comment(item.text)}"
+    text = f"sofac::{item.kernel}{_templates(item.templates)}({', '.join(_argument(a) for a in item.args)});"
+    if item.into is not None:
+        text = f"{_ENV[item.into]} += {text}"
+    if item.while_recording:
+        text = f"if (A.recording()) {text}"
+    return text
+
+
+def _bound(item: Call, values: dict[Slot, Arg]) -> str:
+    return statement(bind(item, values))
+
+
+class _OpView:
+    def __init__(self, op: Op) -> None:
+        self.origin = op.origin
+        self.code = [statement(s) for s in op.calls]
 
 
 def _bytecode_cache() -> jinja2.BytecodeCache | None:
@@ -63,7 +167,7 @@ class _StateView:
         self.size = state.size
         self.width = state.datatype.deriv_size
         self.coord_width = state.datatype.coord_size
-        self.cpp_type = state.cpp_type
+        self.cpp_type = cpp_type(state.datatype.name)
         self.rigid = state.datatype.rigid
         self.stages = state.stages
         self.path_comment = _comment(state.path)
@@ -72,14 +176,25 @@ class _StateView:
 class _MappingView:
     def __init__(self, mapping: MappingOp) -> None:
         self.origin = mapping.origin
-        self.apply = mapping.apply
+        self.apply = [statement(c) for c in mapping.apply]
         parent, child = mapping.parent, mapping.child
-        self.jacobian_dx = mapping.jacobian(parent.dx, child.dx) if parent.dx and child.dx else ""
-        transpose = mapping.transpose
-        self.transpose_f = transpose(parent.f, child.f) if transpose else ""
-        self.transpose_df = transpose(parent.df, child.df) if transpose and parent.df and child.df else ""
-        geometric = mapping.geometric
-        self.geometric_df = geometric(parent.dx, parent.df) if geometric and parent.dx and parent.df else ""
+        transpose, geometric = mapping.transpose, mapping.geometric
+        dx = parent.dx is not None and child.dx is not None
+        df = parent.df is not None and child.df is not None
+        self.jacobian_dx = _bound(mapping.jacobian, _mapping_slots(mapping, "dx")) if dx else ""
+        self.transpose_f = _bound(transpose, _mapping_slots(mapping, "f")) if transpose else ""
+        self.transpose_df = _bound(transpose, _mapping_slots(mapping, "df")) if transpose and df else ""
+        fixed = {Slot("parent", vector="dx"): parent.dx, Slot("parent", vector="df"): parent.df}
+        usable = geometric is not None and parent.dx is not None and parent.df is not None
+        self.geometric_df = _bound(geometric, fixed) if usable else ""  # type: ignore[arg-type]
+
+
+def _mapping_slots(mapping: MappingOp, vector: str) -> dict[Slot, Arg]:
+    """A mapping's slots bound to its states' vectors of one kind (v, dx, f or df)."""
+    slots: dict[Slot, Arg] = {PARENT: getattr(mapping.parent, vector), CHILD: getattr(mapping.child, vector)}
+    for index, other in enumerate(mapping.inputs, start=1):
+        slots[Slot("parent", input=index)] = getattr(other, vector)
+    return slots
 
 
 class _ProjectionView:
@@ -87,12 +202,13 @@ class _ProjectionView:
         state = projection.state
         self.origin = projection.origin
         self.velocity = projection.velocity
-        self.on_v = (projection.project_velocity or projection.project)(state.v)
-        self.on_x = projection.position(state.x) if projection.position else ""
-        self.on_acc = projection.project(state.acc) if state.acc else ""
-        self.on_f = projection.project(state.f)
-        self.on_df = projection.project(state.df) if state.df else ""
-        self.on_r = projection.project(state.stages["r"]) if "r" in state.stages else ""
+        project = projection.project
+        self.on_v = _bound(projection.project_velocity or project, {VECTOR: state.v})
+        self.on_x = _bound(projection.position, {VECTOR: state.x}) if projection.position else ""
+        self.on_acc = _bound(project, {VECTOR: state.acc}) if state.acc else ""
+        self.on_f = _bound(project, {VECTOR: state.f})
+        self.on_df = _bound(project, {VECTOR: state.df}) if state.df else ""
+        self.on_r = _bound(project, {VECTOR: state.stages["r"]}) if "r" in state.stages else ""
 
 
 class _GroupView:
@@ -118,7 +234,13 @@ class _GroupView:
         self.linear_origin = origin_of(group.linear_solver) if group.linear_solver is not None else ""
         inert = group.inert_preconditioner
         self.inert_origin = origin_of(inert) if inert is not None else ""
-        self.marks = [p.mark(group.offset(p.state) or 0) for p in group.projections if p.mark and self.matrix]
+        self.marks = [
+            _bound(p.mark, {OFFSET: Offset(group.offset(p.state) or 0)})
+            for p in group.projections
+            if p.mark and self.matrix
+        ]
+        for phase in ("forces", "accelerations", "mass_dx", "stiffness_dx", "energy", "init", "assemble"):
+            setattr(self, phase, [_OpView(op) for op in getattr(group, phase)])
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"

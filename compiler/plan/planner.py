@@ -25,12 +25,34 @@ from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
 from sofac.geometry.fem_topology import CELL_KINDS
+from sofac.plan.ir import (
+    CHILD,
+    COMPILED_DATATYPES,
+    INPUT_OFFSET,
+    OFFSET,
+    PARENT,
+    VECTOR,
+    Aggregate,
+    Buffer,
+    Call,
+    Constant,
+    Count,
+    Element,
+    Env,
+    Function,
+    Note,
+    Offset,
+    Slot,
+    Statement,
+    bind,
+    buffers_of,
+    call,
+    kernel,
+    recorded_once,
+)
 from sofac.registry import Category
 from sofac.registry.components.common import GRAPH_SCATTERED
 from sofac.registry.datatypes import DATATYPES, DataType
-
-# C++ DataTypes names in runtime/sofac/types.h, by canonical template.
-CPP_TYPES = {name: name for name in ("Vec1d", "Vec2d", "Vec3d", "Vec6d", "Rigid3d", "Rigid2d")}
 
 # Categories whose components run inside the step and therefore need a lowering.
 _STEP_CATEGORIES = frozenset(
@@ -51,56 +73,47 @@ _STEP_CATEGORIES = frozenset(
 
 
 @dataclass
-class Buffer:
-    """An array the compiled instance owns, initialised from ``initial`` at creation."""
-
-    ident: str  # C++ member name
-    key: str  # name seen from Python: "<component path>.<field>"
-    kind: str  # "f64" or "i64"
-    initial: np.ndarray
-    columns: int = 1  # row width of its numpy view
-    role: str = "data"  # "state" (restored by reset), "param" (tunable), "data", "scratch"
-
-
-@dataclass
 class Op:
-    """C++ statements of one component's part of the step, with where it comes from."""
+    """One component's part of a phase of the step: its calls, and where it comes from."""
 
     origin: str  # "TypeName 'path' (file:line)"
-    code: list[str]
+    calls: list[Statement]
 
 
 @dataclass
 class MappingOp:
-    """A mechanical mapping: how x and v go down, and J / Jᵀ for any pair of vectors."""
+    """A mechanical mapping: how x and v go down, and J / Jᵀ for any pair of vectors (calls with
+    the PARENT and CHILD slots, bound to the vectors of the kind being mapped)."""
 
     origin: str
     parent: StatePlan
     child: StatePlan
-    apply: list[str]  # x and v of the child from the parent's
-    jacobian: Callable[[Buffer, Buffer], str]  # (parent vector, child vector) -> child = J parent
-    transpose: Callable[[Buffer, Buffer], str] | None  # parent += Jᵀ child; None: mapForces="0"
-    # Non-linear mappings: (parent dx, parent df) -> parent df += kfact dJᵀ/dx(child force) dx.
-    geometric: Callable[[Buffer, Buffer], str] | None = None
-    # Assembled systems: (child's first index, parent's first index) -> the code giving J's rows to
-    # the assembler (Assembler::kMapped); None: a mapping whose J is not assembled yet.
-    assembly: Callable[[str, str], str] | None = None
+    apply: list[Call]  # x and v of the child from the parent's
+    jacobian: Call  # child = J parent
+    transpose: Call | None  # parent += Jᵀ child; None: mapForces="0"
+    # Non-linear mappings: parent df += kfact dJᵀ/dx(child force) parent dx.
+    geometric: Call | None = None
+    # Assembled systems: J's rows for the assembler, at OFFSET (the child's first row past
+    # Assembler::kMapped) from INPUT_OFFSET (the parent's); None: J is not assembled yet.
+    assembly: list[Call] | None = None
+    inputs: tuple[StatePlan, ...] = ()  # a multi-mapping's other parents (Slot("parent", input=1)...)
 
 
 @dataclass
 class Projection:
-    """A projective constraint: zeroes the constrained part of a derivative-shaped vector."""
+    """A projective constraint: zeroes the constrained part of a derivative-shaped vector (calls
+    with the VECTOR slot)."""
 
     origin: str
     state: StatePlan
-    project: Callable[[Buffer], str]
+    project: Call
     velocity: bool = False  # also projects the velocity after the update
-    # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (state offset -> code).
-    mark: Callable[[int], str] | None = None
+    # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (at OFFSET).
+    mark: Call | None = None
     # projectPosition: coordinates moved onto the constraint after each step and at init.
-    position: Callable[[Buffer], str] | None = None
+    position: Call | None = None
     # projectVelocity, when it is not ``project`` (an imposed velocity rather than a filter).
-    project_velocity: Callable[[Buffer], str] | None = None
+    project_velocity: Call | None = None
 
 
 @dataclass
@@ -121,10 +134,6 @@ class StatePlan:
     mass: Any = None  # (Buffer, stride) of the mass acting on it, if any
     # Runge-Kutta stage vectors (x0, v0 and, for RK4, the sums dx, dv), only where a scheme needs them.
     stages: dict[str, Buffer] = field(default_factory=dict)
-
-    @property
-    def cpp_type(self) -> str:
-        return "sofac::" + CPP_TYPES[self.datatype.name]
 
     @property
     def path(self) -> str:
@@ -203,16 +212,16 @@ class Group:
             start += other.size * other.datatype.deriv_size
         return None
 
-    def assembly_offset(self, state: StatePlan, checked: CheckedComponent) -> str:
+    def assembly_offset(self, state: StatePlan, checked: CheckedComponent) -> Offset:
         """Where a state's DOFs start for the assembler: an independent state's offset, or, for a
         mapped one, indices past Assembler::kMapped that J routes to the independent DOFs."""
         offset = self.offset(state)
         if offset is not None:
-            return str(offset)
+            return Offset(offset)
         if id(state) not in self.routed:
             start = sum(s.size * s.datatype.deriv_size for s, _, _ in self.routed.values())
             self.routed[id(state)] = (state, start, checked)
-        return f"sofac::Assembler::kMapped + {self.routed[id(state)][1]}"
+        return Offset(self.routed[id(state)][1], mapped=True)
 
     @property
     def system_size(self) -> int:
@@ -377,19 +386,17 @@ class _Planner:
     def _init_only(self, groups: list[Group]) -> frozenset[str]:
         """The parameters the init code reads and no per-step code does."""
 
-        def code(kinds: tuple[str, ...]) -> str:
-            return "\n".join(
-                line for g in groups for kind in kinds for op in getattr(g, kind) for line in op.code
+        def touched(kinds: tuple[str, ...]) -> set[str]:
+            return buffers_of(
+                [c for g in groups for kind in kinds for op in getattr(g, kind) for c in op.calls]
             )
 
-        init = code(("init",))
-        step = code(("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy"))
+        init = touched(("init",))
+        step = touched(("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy"))
         return frozenset(
             buffer.key
             for buffer in self.buffers
-            if buffer.role == "param"
-            and re.search(rf"S\.{buffer.ident}\b", init)
-            and not re.search(rf"S\.{buffer.ident}\b", step)
+            if buffer.role == "param" and buffer.ident in init and buffer.ident not in step
         )
 
     def _effects(self, groups: list[Group]) -> list[tuple[str, str, str]]:
@@ -522,7 +529,7 @@ class _Planner:
     def _plan_state(self, checked: CheckedComponent) -> None:
         component = checked.component
         datatype = checked.datatype or DATATYPES["Vec3d"]
-        if datatype.name not in CPP_TYPES:
+        if datatype.name not in COMPILED_DATATYPES:
             self.unsupported(checked, f"template {datatype.name} is not compiled yet")
             return
         positions = self.checked.positions(component)
@@ -728,18 +735,23 @@ class _Planner:
                         "assembled yet",
                     )
                     continue
-                parent = group.assembly_offset(mapping.parent, checked)
-                code = mapping.assembly(f"sofac::Assembler::kMapped + {start}", parent)
-                rows.append((start, f"// J: {mapping.origin}"))
-                rows.append((start, code))
+                slots = {
+                    OFFSET: Offset(start, mapped=True),
+                    INPUT_OFFSET: group.assembly_offset(mapping.parent, checked),
+                }
+                rows.append(
+                    (start, [Note(f"J: {mapping.origin}"), *(bind(c, slots) for c in mapping.assembly)])
+                )
         rows.sort(key=lambda row: row[0])  # the assembler takes J's rows in order
-        group.assemble[:0] = [Op("mappings' Jacobians, rows in order", [line for _, line in rows])]
+        group.assemble[:0] = [
+            Op("mappings' Jacobians, rows in order", [s for _, block in rows for s in block])
+        ]
 
     def _leave_unread_out(self, groups: list[Group]) -> None:
         """Moves the mapped states nothing in the step reads, and their mappings, out of the step.
 
         Read from the lowered plan itself: a mapped state is read when a projection constrains it,
-        when code of a step (forces, masses, products, assembly, energy, init) names one of its
+        when a call of a step (forces, masses, products, assembly, energy, init) takes one of its
         vectors, or when it is an input of the mapping of a read state. Anything else (a collision
         model's points when no contact can happen, a mapped node kept for output) only costs time:
         its mapping runs when Python reads the state instead, with the same numbers, since mapping
@@ -751,17 +763,12 @@ class _Planner:
                     if vector is not None:
                         owners[vector.ident] = state
 
-        def states_named(lines: list[str]) -> set[int]:
-            return {
-                id(owners[ident])
-                for line in lines
-                for ident in re.findall(r"\bS\.(\w+)", line)
-                if ident in owners
-            }
+        def states_named(statements: list[Call] | list[Statement]) -> set[int]:
+            return {id(owners[ident]) for ident in buffers_of(statements) if ident in owners}
 
         kinds = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy", "init")
-        code = [line for g in groups for kind in kinds for op in getattr(g, kind) for line in op.code]
-        read = states_named(code) | {id(p.state) for g in groups for p in g.projections}
+        calls = [c for g in groups for kind in kinds for op in getattr(g, kind) for c in op.calls]
+        read = states_named(calls) | {id(p.state) for g in groups for p in g.projections}
         if self.guard is not None:  # the contact guard reads its models' positions before each step
             read |= {id(state) for _, state in self.guard.models}
         mappings = [m for g in groups for m in g.mappings]
@@ -1193,18 +1200,7 @@ def _subtree(node: Any) -> list[Any]:
 Lowering = Callable[[_Planner, CheckedComponent, dict[int, Group]], None]
 
 
-def _ptr(buffer: Buffer) -> str:
-    return f"S.{buffer.ident}.data()"
-
-
-def _call(function: str, *arguments: Any) -> str:
-    """A kernel call statement; buffers become pointers to their data."""
-    text = ", ".join(_ptr(a) if isinstance(a, Buffer) else str(a) for a in arguments)
-    return f"sofac::{function}({text});"
-
-
-def _count(buffer: Buffer, per: int = 1) -> str:
-    return f"Index(S.{buffer.ident}.size() / {per})" if per != 1 else f"Index(S.{buffer.ident}.size())"
+_call = call
 
 
 def _target(
@@ -1423,8 +1419,8 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
     vertex = planner.buffer(component, "vertexMass", data.vertex_mass, role="param")
     edges = planner.buffer(component, "edges", data.edges, "i64", columns=2)
     edge_mass = planner.buffer(component, "edgeMass", data.edge_mass, role="param")
-    coefficient = repr(float(data.lumping_coefficient)) if lumping else "1.0"
-    lumped_factor = repr(float(data.lumping_coefficient))
+    coefficient = float(data.lumping_coefficient) if lumping else 1.0
+    lumped_factor = float(data.lumping_coefficient)
     origin = origin_of(component)
     g = planner.gravity
     planner.add_gravity(
@@ -1435,24 +1431,31 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
         checked,
         group,
         state,
-        lambda offset: _call(
+        _call(
             "assemble_mesh_matrix_mass",
-            "A",
-            offset,
+            Env.ASSEMBLER,
+            OFFSET,
             vertex,
             n,
             edges,
             edge_mass,
-            _count(edge_mass) if not lumping else 0,
+            Count(edge_mass) if not lumping else 0,
             coefficient,
-            "mfact",
+            Env.MFACT,
             width,
         ),
     )
     if group.scheme == "implicit":
         if lumping:
             code = _call(
-                "mesh_matrix_mass_multiply_lumped", state.df, state.dx, vertex, n, coefficient, "mfact", width
+                "mesh_matrix_mass_multiply_lumped",
+                state.df,
+                state.dx,
+                vertex,
+                n,
+                coefficient,
+                Env.MFACT,
+                width,
             )
         else:
             code = _call(
@@ -1463,8 +1466,8 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
                 n,
                 edges,
                 edge_mass,
-                _count(edge_mass),
-                "mfact",
+                Count(edge_mass),
+                Env.MFACT,
                 width,
             )
         group.mass_dx.append(Op(origin, [code]))
@@ -1489,21 +1492,28 @@ def _lower_mesh_matrix_mass(planner: _Planner, checked: CheckedComponent, owner:
         Op(
             origin,
             [
-                "kinetic += "
-                + _call(
+                _call(
                     "mesh_matrix_mass_kinetic_energy",
                     state.v,
                     vertex,
                     n,
                     edges,
                     edge_mass,
-                    _count(edge_mass),
-                    "true" if lumping else "false",
+                    Count(edge_mass),
+                    bool(lumping),
                     coefficient,
                     width,
+                    into=Env.KINETIC,
                 ),
-                "potential += "
-                + _call(f"gravity_potential<{state.cpp_type}>", state.x, n, vertex, g, lumped_factor),
+                _call(
+                    kernel("gravity_potential", state.datatype.name),
+                    state.x,
+                    n,
+                    vertex,
+                    g,
+                    lumped_factor,
+                    into=Env.POTENTIAL,
+                ),
             ],
         )
     )
@@ -1560,8 +1570,11 @@ def _split_argument(planner: _Planner, component: Component, cells: np.ndarray, 
         for name, data in (("split_bounds", bounds), ("split_slots", slot_of), ("split_nodes", slot_node))
     ]
     deferred = planner.buffer(component, "split_deferred", np.zeros(3 * slot_node.size), role="scratch")
-    fields = [_ptr(parts[0]), str(planner.threads), _ptr(parts[1]), _ptr(parts[2]), str(slot_node.size)]
-    return [f"sofac::ElementSplit{{{', '.join([*fields, _ptr(deferred)])}}}"]
+    return [
+        Aggregate(
+            "ElementSplit", (parts[0], planner.threads, parts[1], parts[2], int(slot_node.size), deferred)
+        )
+    ]
 
 
 def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -1627,9 +1640,9 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                     count,
                     state.rest,
                     young_buffer,
-                    _count(young_buffer),
+                    Count(young_buffer),
                     poisson_buffer,
-                    _count(poisson_buffer),
+                    Count(poisson_buffer),
                     method,
                     data,
                     *([coefficient_buffer] if coefficient_buffer is not None else []),
@@ -1648,7 +1661,10 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         return
     if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
         group.energy.append(
-            Op(origin, ["potential += " + _call(f"{prefix}_energy", elements, count, state.x, data, method)])
+            Op(
+                origin,
+                [_call(f"{prefix}_energy", elements, count, state.x, data, method, into=Env.POTENTIAL)],
+            )
         )
     if group.scheme == "implicit":
         group.stiffness_dx.append(
@@ -1661,7 +1677,7 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
                         count,
                         state.dx,
                         state.df,
-                        "kfact",
+                        Env.KFACT,
                         data,
                         method,
                         *split,
@@ -1671,16 +1687,16 @@ def _lower_fem(planner: _Planner, checked: CheckedComponent, owner: dict[int, Gr
         )
         # Tetrahedra: element matrices a block of TETRA_LANES at once, one per vector lane (fem.h).
         if prefix in ("tetra_fem", "tetracorot_fem"):
-            assembler = "assemble_elements<4, sofac::TETRA_LANES>"
-            matrices = f"sofac::{prefix}_element_matrices"
+            assembler = kernel("assemble_elements", 4, Constant.TETRA_LANES)
+            matrices = Function(f"{prefix}_element_matrices")
         else:
-            assembler, matrices = f"assemble_elements<{corners}>", f"sofac::{prefix}_element_matrix"
+            assembler, matrices = kernel("assemble_elements", corners), Function(f"{prefix}_element_matrix")
         _assemble(
             planner,
             checked,
             group,
             state,
-            lambda offset: _call(assembler, "A", elements, count, data, method, offset, "kfact", matrices),
+            _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
         )
 
 
@@ -1750,21 +1766,19 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
     maps_forces = planner.value(component, "mapForces") is not False
     geometric = None
     if mode and maps_forces:
-
-        def geometric(dx: Buffer, df: Buffer) -> str:
-            return _call(
-                "distance_mapping_djt",
-                df,
-                dx,
-                child.f,
-                edge_buffer,
-                count,
-                direction,
-                inverse,
-                kind,
-                mode,
-                "kfact",
-            )
+        geometric = _call(
+            "distance_mapping_djt",
+            Slot("parent", vector="df"),
+            Slot("parent", vector="dx"),
+            child.f,
+            edge_buffer,
+            count,
+            direction,
+            inverse,
+            kind,
+            mode,
+            Env.KFACT,
+        )
 
     group.mappings.append(
         MappingOp(
@@ -1785,8 +1799,8 @@ def _lower_distance_mapping(planner: _Planner, checked: CheckedComponent, owner:
                 ),
                 _call("distance_mapping_j", parent.v, child.v, edge_buffer, count, direction),
             ],
-            lambda up, down: _call("distance_mapping_j", up, down, edge_buffer, count, direction),
-            (lambda up, down: _call("distance_mapping_jt", up, down, edge_buffer, count, direction))
+            _call("distance_mapping_j", PARENT, CHILD, edge_buffer, count, direction),
+            _call("distance_mapping_jt", PARENT, CHILD, edge_buffer, count, direction)
             if maps_forces
             else None,
             geometric,
@@ -1869,13 +1883,13 @@ def _lower_triangular_bending_springs(
         )
     )
     group.energy.append(
-        Op(origin, ["potential += " + _call("triangular_bending_energy", springs, values, count, state.x)])
+        Op(origin, [_call("triangular_bending_energy", springs, values, count, state.x, into=Env.POTENTIAL)])
     )
     if group.scheme == "implicit":
         group.stiffness_dx.append(
             Op(
                 origin,
-                [_call("triangular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, "kfact")],
+                [_call("triangular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, Env.KFACT)],
             )
         )
         _assemble(
@@ -1883,7 +1897,7 @@ def _lower_triangular_bending_springs(
             checked,
             group,
             state,
-            lambda offset: _call("assemble_triangular_bending", "A", offset, springs, count, dfdx, "kfact"),
+            _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
         )
 
 
@@ -2004,8 +2018,8 @@ def _lower_interaction_ellipsoid(
                     index,
                     ellipsoids,
                     count,
-                    repr(stiffness),
-                    repr(damping),
+                    float(stiffness),
+                    float(damping),
                     contacts,
                     quaternion,
                 )
@@ -2029,7 +2043,7 @@ def _lower_interaction_ellipsoid(
                         points.size,
                         contacts,
                         quaternion,
-                        "kfact",
+                        Env.KFACT,
                     )
                 ],
             )
@@ -2073,7 +2087,7 @@ def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner:
     scalars = state.size * state.datatype.deriv_size
     origin = origin_of(component)
     group.forces.append(
-        Op(origin, [_call("velocity_damping_force", state.f, state.v, scalars, f"S.{coefficient.ident}[0]")])
+        Op(origin, [_call("velocity_damping_force", state.f, state.v, scalars, Element(coefficient))])
     )
     if planner.value(component, "implicit") and group.scheme == "implicit":
         if group.assembled:
@@ -2088,8 +2102,8 @@ def _lower_velocity_damping(planner: _Planner, checked: CheckedComponent, owner:
                         state.df,
                         state.dx,
                         scalars,
-                        f"S.{coefficient.ident}[0]",
-                        "bfact",
+                        Element(coefficient),
+                        Env.BFACT,
                     )
                 ],
             )
@@ -2188,13 +2202,9 @@ def _lower_distance_multi_mapping(
         )
     )
 
-    def jt(up: Buffer, down: Buffer) -> str:
-        other = second.f if up is first.f else second.df
-        return _call("distance_multi_jt", up, other, down, *table, direction)
-
-    def j(up: Buffer, down: Buffer) -> str:
-        other = second.v if up is first.v else second.dx
-        return _call("distance_multi_j", up, other, down, *table, direction)
+    # The second input's vector of the same kind: Slot("parent", input=1).
+    jt = _call("distance_multi_jt", PARENT, Slot("parent", input=1), CHILD, *table, direction)
+    j = _call("distance_multi_j", PARENT, Slot("parent", input=1), CHILD, *table, direction)
 
     maps_forces = planner.value(component, "mapForces") is not False
     group.mappings.append(
@@ -2214,10 +2224,11 @@ def _lower_distance_multi_mapping(
                     direction,
                     inverse,
                 ),
-                j(first.v, child.v),
+                _call("distance_multi_j", first.v, second.v, child.v, *table, direction),
             ],
             j,
             jt if maps_forces else None,
+            inputs=(second,),
         )
     )
 
@@ -2244,7 +2255,7 @@ def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dic
     poisson_buffer = planner.buffer(
         component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
     )
-    material = (young_buffer, _count(young_buffer), poisson_buffer, _count(poisson_buffer))
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
     data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")
     origin = origin_of(component)
     group.init.append(
@@ -2264,25 +2275,32 @@ def _lower_trifem_optim(planner: _Planner, checked: CheckedComponent, owner: dic
                         count,
                         state.dx,
                         state.df,
-                        "kfact",
+                        Env.KFACT,
                         data,
                         *material,
                     )
                 ],
             )
         )
-        matrix = (
-            "[&](const double* d, Index e, int, double* o) { sofac::trifem_optim_element_matrix(d, e, "
-            f"{_ptr(young_buffer)}, {_count(young_buffer)}, {_ptr(poisson_buffer)}, "
-            f"{_count(poisson_buffer)}, o); }}"
+        matrix = Aggregate(
+            "TrifemOptimElementMatrix",
+            (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer)),
         )
         _assemble(
             planner,
             checked,
             group,
             state,
-            lambda offset: _call(
-                "assemble_elements<3>", "A", elements, count, data, 1, offset, "kfact", matrix
+            _call(
+                kernel("assemble_elements", 3),
+                Env.ASSEMBLER,
+                elements,
+                count,
+                data,
+                1,
+                OFFSET,
+                Env.KFACT,
+                matrix,
             ),
         )
 
@@ -2318,17 +2336,17 @@ def _lower_bending_springs(planner: _Planner, checked: CheckedComponent, owner: 
     )
     origin = origin_of(component)
     group.forces.append(Op(origin, [_call("bending_springs_add_force", *table, state.x, state.f)]))
-    group.energy.append(Op(origin, ["potential += " + _call("bending_springs_energy", *table, state.x)]))
+    group.energy.append(Op(origin, [_call("bending_springs_energy", *table, state.x, into=Env.POTENTIAL)]))
     if group.scheme == "implicit":
         group.stiffness_dx.append(
-            Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, "kfact")])
+            Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, Env.KFACT)])
         )
         _assemble(
             planner,
             checked,
             group,
             state,
-            lambda offset: _call("assemble_bending_springs", "A", offset, *table, "kfact"),
+            _call("assemble_bending_springs", Env.ASSEMBLER, OFFSET, *table, Env.KFACT),
         )
 
 
@@ -2388,7 +2406,7 @@ def _lower_hexa_mass(
                     rows,
                     cols,
                     state.size,
-                    "true" if lumped else "false",
+                    bool(lumped),
                     values,
                     particle,
                     *([coefficients] if coefficients is not None else []),
@@ -2398,21 +2416,29 @@ def _lower_hexa_mass(
     )
     planner.add_gravity(
         group,
-        Op(origin, [_call("mass_gravity<sofac::Vec3d>", state.f, state.size, particle, 1, planner.gravity)]),
+        Op(
+            origin,
+            [_call(kernel("mass_gravity", "Vec3d"), state.f, state.size, particle, 1, planner.gravity)],
+        ),
     )
     if group.scheme == "implicit":
-        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, Env.MFACT)]))
     _assemble(
-        planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
+        planner, checked, group, state, _call("assemble_fem_mass", Env.ASSEMBLER, OFFSET, *csr, Env.MFACT)
     )
     group.energy.append(
         Op(
             origin,
             [
-                "kinetic += " + _call("fem_mass_kinetic_energy", state.v, *csr),
-                "potential += "
-                + _call(
-                    "gravity_potential<sofac::Vec3d>", state.x, state.size, particle, planner.gravity, 1.0
+                _call("fem_mass_kinetic_energy", state.v, *csr, into=Env.KINETIC),
+                _call(
+                    kernel("gravity_potential", "Vec3d"),
+                    state.x,
+                    state.size,
+                    particle,
+                    planner.gravity,
+                    1.0,
+                    into=Env.POTENTIAL,
                 ),
             ],
         )
@@ -2424,25 +2450,26 @@ def _add_mass(
     planner: _Planner, checked: CheckedComponent, state: StatePlan, group: Group, buffer: Buffer, stride: int
 ) -> None:
     origin = origin_of(checked.component)
-    t, n = state.cpp_type, state.size
+    t, n = state.datatype.name, state.size
     stride_value = stride if stride else 0
     planner.add_gravity(
-        group, Op(origin, [_call(f"mass_gravity<{t}>", state.f, n, buffer, stride_value, planner.gravity)])
+        group,
+        Op(origin, [_call(kernel("mass_gravity", t), state.f, n, buffer, stride_value, planner.gravity)]),
     )
     group.energy.append(
         Op(
             origin,
             [
                 _call(
-                    f"mass_energy<{t}>",
+                    kernel("mass_energy", t),
                     state.x,
                     state.v,
                     n,
                     buffer,
                     stride_value,
                     planner.gravity,
-                    "&kinetic",
-                    "&potential",
+                    Env.KINETIC_OUT,
+                    Env.POTENTIAL_OUT,
                 )
             ],
         )
@@ -2452,13 +2479,16 @@ def _add_mass(
         checked,
         group,
         state,
-        lambda offset: _call(f"assemble_mass<{t}>", "A", offset, n, buffer, stride_value, "mfact"),
+        _call(kernel("assemble_mass", t), Env.ASSEMBLER, OFFSET, n, buffer, stride_value, Env.MFACT),
     )
     if group.scheme == "implicit":
         if planner.rigid_model == "exact" and state.datatype.name == "Rigid3d":
             planner.unsupported(checked, "the exact rigid model is compiled for explicit solvers only")
         group.mass_dx.append(
-            Op(origin, [_call(f"mass_multiply<{t}>", state.df, state.dx, n, buffer, stride_value, "mfact")])
+            Op(
+                origin,
+                [_call(kernel("mass_multiply", t), state.df, state.dx, n, buffer, stride_value, Env.MFACT)],
+            )
         )
     elif state.acc is not None:
         state.mass = (buffer, stride_value)
@@ -2471,7 +2501,10 @@ def _add_mass(
             )
         else:
             group.accelerations.append(
-                Op(origin, [_call(f"mass_acceleration<{t}>", state.acc, state.f, n, buffer, stride_value)])
+                Op(
+                    origin,
+                    [_call(kernel("mass_acceleration", t), state.acc, state.f, n, buffer, stride_value)],
+                )
             )
 
 
@@ -2529,11 +2562,8 @@ def _add_springs(
         component, "elongationOnly", _flags(planner, component, "elongationOnly", count, False), "i64"
     )
     enabled = planner.buffer(component, "enabled", _flags(planner, component, "enabled", count, True), "i64")
-    table = (
-        f"sofac::Springs{{{_ptr(a)}, {_ptr(b)}, {_ptr(ks)}, {_ptr(kd)}, {_ptr(rest)}, {_ptr(elongation)}, "
-        f"{_ptr(enabled)}, {count}}}"
-    )
-    types = f"{first.cpp_type}, {second.cpp_type}"
+    table = Aggregate("Springs", (a, b, ks, kd, rest, elongation, enabled, count))
+    types = (first.datatype.name, second.datatype.name)
     # Specialised at compile time: no damping term when every damping is exactly zero (a pruned
     # effect: setting a damping later needs prune=False), no flag tests when no spring is disabled
     # or elongation-only (the flags are not tunable).
@@ -2541,23 +2571,39 @@ def _add_springs(
     if not damped and count:
         planner.pruned.setdefault(kd.key, "every spring's damping is zero: no damping term computed")
     flagged = bool(np.any(elongation.initial)) or not bool(np.all(enabled.initial))
-    variant = f"{types}, {'true' if damped else 'false'}, {'true' if flagged else 'false'}"
+    variant = (*types, damped, flagged)
     origin = origin_of(component)
-    jacobians = "nullptr"
+    jacobians: Buffer | Env = Env.NONE
     if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
         blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
-        jacobians = _ptr(blocks)
+        jacobians = blocks
         if group.direct or group.assembled_cg:
             offset1, offset2 = group.assembly_offset(first, checked), group.assembly_offset(second, checked)
-            code = f"sofac::assemble_springs<{types}>(A, {table}, {jacobians}, {offset1}, {offset2}, kfact);"
+            code = _call(
+                kernel("assemble_springs", *types),
+                Env.ASSEMBLER,
+                table,
+                jacobians,
+                offset1,
+                offset2,
+                Env.KFACT,
+            )
             group.assemble.append(Op(origin, [code]))
         group.stiffness_dx.append(
             Op(
                 origin,
                 [
-                    f"sofac::spring_dforces<{types}>({table}, {jacobians}, "
-                    f"{_ptr(first.dx)}, {_ptr(first.df)}, {_ptr(second.dx)}, {_ptr(second.df)}, kfact);"
+                    _call(
+                        kernel("spring_dforces", *types),
+                        table,
+                        jacobians,
+                        first.dx,
+                        first.df,
+                        second.dx,
+                        second.df,
+                        Env.KFACT,
+                    )
                 ],
             )
         )
@@ -2565,16 +2611,24 @@ def _add_springs(
         Op(
             origin,
             [
-                f"sofac::spring_forces<{variant}>({table}, "
-                f"{_ptr(first.x)}, {_ptr(first.v)}, {_ptr(first.f)}, "
-                f"{_ptr(second.x)}, {_ptr(second.v)}, {_ptr(second.f)}, {jacobians});"
+                _call(
+                    kernel("spring_forces", *variant),
+                    table,
+                    first.x,
+                    first.v,
+                    first.f,
+                    second.x,
+                    second.v,
+                    second.f,
+                    jacobians,
+                )
             ],
         )
     )
     group.energy.append(
         Op(
             origin,
-            [f"potential += sofac::spring_energy<{types}>({table}, {_ptr(first.x)}, {_ptr(second.x)});"],
+            [_call(kernel("spring_energy", *types), table, first.x, second.x, into=Env.POTENTIAL)],
         )
     )
 
@@ -2595,13 +2649,14 @@ def _matrix_free_hint(group: Group) -> str:
 
 
 def _assemble(
-    planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Callable[[str], str]
+    planner: _Planner, checked: CheckedComponent, group: Group, state: StatePlan, code: Call
 ) -> None:
-    """An assembled solver's share of a component: its blocks of A, at the state's offset (through the
-    mappings' J for a mapped state)."""
+    """An assembled solver's share of a component: its blocks of A, at the state's offset (the
+    call's OFFSET; through the mappings' J for a mapped state)."""
     if not group.assembled:
         return
-    group.assemble.append(Op(origin_of(checked.component), [code(group.assembly_offset(state, checked))]))
+    offset = group.assembly_offset(state, checked)
+    group.assemble.append(Op(origin_of(checked.component), [bind(code, {OFFSET: offset})]))
 
 
 def _lower_springs(planner: _Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -2796,7 +2851,15 @@ def _lower_constant_force(planner: _Planner, checked: CheckedComponent, owner: d
     group.forces.append(
         Op(
             origin_of(component),
-            [_call(f"constant_forces<{state.cpp_type}>", state.f, index_buffer, force_buffer, len(indices))],
+            [
+                _call(
+                    kernel("constant_forces", state.datatype.name),
+                    state.f,
+                    index_buffer,
+                    force_buffer,
+                    len(indices),
+                )
+            ],
         )
     )
 
@@ -2818,29 +2881,29 @@ def _lower_rest_shape(planner: _Planner, checked: CheckedComponent, owner: dict[
     index_buffer = planner.buffer(component, "points", indices, "i64")
     k_buffer = planner.buffer(component, "stiffness", stiffness, role="param")
     origin = origin_of(component)
-    arguments = f"{_ptr(index_buffer)}, {_ptr(k_buffer)}, {stiffness.size}, {len(indices)}"
-    t = state.cpp_type
+    arguments = (index_buffer, k_buffer, int(stiffness.size), len(indices))
+    t = state.datatype.name
     group.forces.append(
         Op(
             origin,
-            [_call(f"rest_shape_forces<{t}>", state.f, state.x, state.rest, arguments)],
+            [_call(kernel("rest_shape_forces", t), state.f, state.x, state.rest, *arguments)],
         )
     )
     if group.scheme == "implicit":
         group.stiffness_dx.append(
-            Op(origin, [_call(f"rest_shape_dforces<{t}>", state.df, state.dx, arguments, "kfact")])
+            Op(origin, [_call(kernel("rest_shape_dforces", t), state.df, state.dx, *arguments, Env.KFACT)])
         )
         _assemble(
             planner,
             checked,
             group,
             state,
-            lambda offset: _call(f"assemble_rest_shape<{t}>", "A", offset, arguments, "kfact"),
+            _call(kernel("assemble_rest_shape", t), Env.ASSEMBLER, OFFSET, *arguments, Env.KFACT),
         )
     group.energy.append(
         Op(
             origin,
-            ["potential += " + _call(f"rest_shape_energy<{t}>", state.x, state.rest, arguments)],
+            [_call(kernel("rest_shape_energy", t), state.x, state.rest, *arguments, into=Env.POTENTIAL)],
         )
     )
 
@@ -2870,14 +2933,14 @@ def _lower_fixed(planner: _Planner, checked: CheckedComponent, owner: dict[int, 
         return
     state, group = found
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
-    t = state.cpp_type
+    t = state.datatype.name
     group.projections.append(
         Projection(
             origin_of(checked.component),
             state,
-            lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
+            _call(kernel("project_fixed", t), VECTOR, indices, Count(indices)),
             bool(planner.value(checked.component, "activate_projectVelocity")),
-            lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices)),
+            _call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices)),
         )
     )
 
@@ -2895,7 +2958,7 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
         flags[: given.size] = given
     indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
     mask = planner.buffer(checked.component, "fixedDirections", flags, "i64")
-    t = state.cpp_type
+    t = state.datatype.name
     velocity = planner.value(checked.component, "projectVelocity") or planner.value(
         checked.component, "activate_projectVelocity"
     )
@@ -2903,9 +2966,9 @@ def _lower_partial_fixed(planner: _Planner, checked: CheckedComponent, owner: di
         Projection(
             origin_of(checked.component),
             state,
-            lambda vector: _call(f"project_partial<{t}>", vector, indices, _count(indices), mask),
+            _call(kernel("project_partial", t), VECTOR, indices, Count(indices), mask),
             bool(velocity),
-            lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices), mask),
+            _call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices), mask),
         )
     )
 
@@ -2960,17 +3023,15 @@ def _lower_line_or_plane(planner: _Planner, checked: CheckedComponent, owner: di
     block_buffer = planner.buffer(component, "projection", block)
     origin_buffer = planner.buffer(component, "origin", origin)
     direction_buffer = planner.buffer(component, "direction" if line else "normal", direction)
-    t = state.cpp_type
+    t = state.datatype.name
     onto = "project_onto_line" if line else "project_onto_plane"
     group.projections.append(
         Projection(
             origin_of(component),
             state,
-            lambda vector: _call(f"project_block<{t}>", vector, indices, _count(indices), block_buffer),
+            _call(kernel("project_block", t), VECTOR, indices, Count(indices), block_buffer),
             velocity=True,
-            position=lambda x: _call(
-                f"{onto}<{t}>", x, indices, _count(indices), origin_buffer, direction_buffer
-            ),
+            position=_call(kernel(onto, t), VECTOR, indices, Count(indices), origin_buffer, direction_buffer),
         )
     )
 
@@ -2989,15 +3050,15 @@ def _lower_point_constraint(planner: _Planner, checked: CheckedComponent, owner:
         flat = np.asarray(given, dtype=float).ravel()[: target.size]
         target[: flat.size] = flat
     target_buffer = planner.buffer(component, "point", target)
-    t = state.cpp_type
+    t = state.datatype.name
     group.projections.append(
         Projection(
             origin_of(component),
             state,
-            lambda vector: _call(f"project_fixed<{t}>", vector, indices, _count(indices)),
+            _call(kernel("project_fixed", t), VECTOR, indices, Count(indices)),
             velocity=True,
-            mark=lambda offset: _call(f"mark_fixed<{t}>", "D.fixed", offset, indices, _count(indices)),
-            position=lambda x: _call(f"project_onto_point<{t}>", x, indices, _count(indices), target_buffer),
+            mark=_call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices)),
+            position=_call(kernel("project_onto_point", t), VECTOR, indices, Count(indices), target_buffer),
         )
     )
 
@@ -3037,31 +3098,28 @@ def _lower_linear_velocity(planner: _Planner, checked: CheckedComponent, owner: 
     time_buffer = planner.buffer(component, "keyTimes", times)
     velocity_buffer = planner.buffer(component, "velocities", velocities, columns=width)
     coordinate_buffer = planner.buffer(component, "coordinates", coordinates, "i64")
-    t = state.cpp_type
-    after_end = "true" if planner.value(component, "continueAfterEnd") else "false"
-    keyed = (
-        f"sofac::KeyedVelocity<{t}>{{{_ptr(memory)}, {_ptr(time_buffer)}, {_ptr(velocity_buffer)}, "
-        f"{len(times)}, {after_end}}}"
-    )
-    selected = (indices, _count(indices))
-    chosen = (coordinate_buffer, _count(coordinate_buffer))
+    t = state.datatype.name
+    after_end = bool(planner.value(component, "continueAfterEnd"))
+    keyed = Aggregate("KeyedVelocity", (memory, time_buffer, velocity_buffer, len(times), after_end), (t,))
+    selected = (indices, Count(indices))
+    chosen = (coordinate_buffer, Count(coordinate_buffer))
     group.projections.append(
         Projection(
             origin_of(component),
             state,
-            lambda vector: _call(f"keyed_velocity_response<{t}>", keyed, vector, *selected, "S.time"),
+            _call(kernel("keyed_velocity_response", t), keyed, VECTOR, *selected, Env.TIME),
             velocity=True,
-            position=lambda x: _call(
-                f"keyed_velocity_position<{t}>",
+            position=_call(
+                kernel("keyed_velocity_position", t),
                 keyed,
-                x,
+                VECTOR,
                 *selected,
                 *chosen,
-                "S.time",
-                f"S.{planner.dt.ident}[0]",
+                Env.TIME,
+                Element(planner.dt),
             ),
-            project_velocity=lambda v: _call(
-                f"keyed_velocity_velocity<{t}>", keyed, v, *selected, *chosen, "S.time"
+            project_velocity=_call(
+                kernel("keyed_velocity_velocity", t), keyed, VECTOR, *selected, *chosen, Env.TIME
             ),
         )
     )
@@ -3086,7 +3144,7 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
     first, last = (int(v) for v in planner.value(component, "localRange"))
     begin = first if first >= 0 else 0
     end = last + 1 if last >= 0 and last + 1 < state.size else state.size
-    bilateral = "true" if planner.value(component, "bilateral") else "false"
+    bilateral = bool(planner.value(component, "bilateral"))
     contact = planner.buffer(component, "contacts", np.zeros(state.size), "i64", role="scratch")
     normal_buffer = planner.buffer(component, "normal", normal, role="param")
     parameters = {
@@ -3094,13 +3152,13 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
         for name in ("d", "stiffness", "damping", "maxForce")
     }
     origin = origin_of(component)
-    t = state.cpp_type
+    t = state.datatype.name
     group.forces.append(
         Op(
             origin,
             [
                 _call(
-                    f"plane_forces<{t}>",
+                    kernel("plane_forces", t),
                     state.f,
                     state.x,
                     state.v,
@@ -3124,13 +3182,13 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
                 origin,
                 [
                     _call(
-                        f"plane_dforces<{t}>",
+                        kernel("plane_dforces", t),
                         state.df,
                         state.dx,
                         contact,
                         normal_buffer,
                         stiffness,
-                        "kfact",
+                        Env.KFACT,
                         begin,
                         end,
                     )
@@ -3141,9 +3199,8 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
         Op(
             origin,
             [
-                "potential += "
-                + _call(
-                    f"plane_energy<{t}>",
+                _call(
+                    kernel("plane_energy", t),
                     state.x,
                     normal_buffer,
                     parameters["d"],
@@ -3151,6 +3208,7 @@ def _lower_plane_force(planner: _Planner, checked: CheckedComponent, owner: dict
                     bilateral,
                     begin,
                     end,
+                    into=Env.POTENTIAL,
                 )
             ],
         )
@@ -3196,7 +3254,7 @@ def _lower_triangle_pressure(planner: _Planner, checked: CheckedComponent, owner
             origin_of(component),
             [
                 _call(
-                    f"triangle_pressure<{state.cpp_type}>",
+                    kernel("triangle_pressure", state.datatype.name),
                     state.f,
                     corner_buffer,
                     area_buffer,
@@ -3274,14 +3332,12 @@ def _lower_rigid_mapping(planner: _Planner, checked: CheckedComponent, owner: di
                 _call(f"{prefix}_apply", parent.x, child.x, local_buffer, frame_buffer, offset, n),
                 _call(f"{prefix}_apply_j", parent.v, child.v, frame_buffer, offset, n),
             ],
-            lambda up, down: _call(f"{prefix}_apply_j", up, down, frame_buffer, offset, n),
-            (lambda up, down: _call(f"{prefix}_apply_jt", up, down, frame_buffer, offset, n))
-            if maps_forces
-            else None,
+            _call(f"{prefix}_apply_j", PARENT, CHILD, frame_buffer, offset, n),
+            _call(f"{prefix}_apply_jt", PARENT, CHILD, frame_buffer, offset, n) if maps_forces else None,
             # J depends on the rotated offsets of this step's apply: refilled every assembly.
-            assembly=lambda first, input_first: _call(
-                f"{prefix}_jacobian", "A", first, input_first, frame_buffer, offset, n
-            ),
+            assembly=[
+                _call(f"{prefix}_jacobian", Env.ASSEMBLER, OFFSET, INPUT_OFFSET, frame_buffer, offset, n)
+            ],
         )
     )
 
@@ -3329,7 +3385,7 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
         planner.unsupported(checked, f"it maps {indices.size} DOFs onto a state of {child.size}")
         return
     buffer = planner.buffer(component, "indices", indices, "i64")
-    t, n = parent.cpp_type, indices.size
+    t, n = parent.datatype.name, indices.size
     coord, deriv = parent.datatype.coord_size, parent.datatype.deriv_size
     origin = origin_of(component)
     maps_forces = planner.value(component, "mapForces") is not False
@@ -3339,15 +3395,17 @@ def _lower_subset_mapping(planner: _Planner, checked: CheckedComponent, owner: d
             parent,
             child,
             [
-                _call(f"subset_apply<{t}>", parent.x, child.x, buffer, n, coord),
-                _call(f"subset_apply<{t}>", parent.v, child.v, buffer, n, deriv),
+                _call(kernel("subset_apply", t), parent.x, child.x, buffer, n, coord),
+                _call(kernel("subset_apply", t), parent.v, child.v, buffer, n, deriv),
             ],
-            lambda up, down: _call(f"subset_apply<{t}>", up, down, buffer, n, deriv),
-            (lambda up, down: _call(f"subset_apply_jt<{t}>", up, down, buffer, n)) if maps_forces else None,
-            assembly=lambda first, input_first: (
-                "if (A.recording()) "  # a constant selection: once
-                + _call(f"subset_jacobian<{t}>", "A", first, input_first, buffer, n)
-            ),
+            _call(kernel("subset_apply", t), PARENT, CHILD, buffer, n, deriv),
+            _call(kernel("subset_apply_jt", t), PARENT, CHILD, buffer, n) if maps_forces else None,
+            # a constant selection: recorded once
+            assembly=[
+                recorded_once(
+                    _call(kernel("subset_jacobian", t), Env.ASSEMBLER, OFFSET, INPUT_OFFSET, buffer, n)
+                )
+            ],
         )
     )
 
@@ -3406,7 +3464,7 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
     weight_buffer = planner.buffer(component, "weights", weights, columns=k)
     maps_forces = planner.value(component, "mapForces") is not False
 
-    def jacobian(up: Buffer, down: Buffer) -> str:
+    def jacobian(up: Buffer | Slot, down: Buffer | Slot) -> Call:
         return _call("linear_map_apply", up, down, index_buffer, weight_buffer, n, k, 3)
 
     group.mappings.append(
@@ -3415,14 +3473,26 @@ def _lower_barycentric_mapping(planner: _Planner, checked: CheckedComponent, own
             parent,
             child,
             [jacobian(parent.x, child.x), jacobian(parent.v, child.v)],
-            jacobian,
-            (lambda up, down: _call("linear_map_apply_jt", up, down, index_buffer, weight_buffer, n, k, 3))
+            jacobian(PARENT, CHILD),
+            _call("linear_map_apply_jt", PARENT, CHILD, index_buffer, weight_buffer, n, k, 3)
             if maps_forces
             else None,
-            assembly=lambda first, input_first: (
-                "if (A.recording()) "  # constant weights: once
-                + _call("linear_jacobian", "A", first, input_first, index_buffer, weight_buffer, n, k, 3)
-            ),
+            # constant weights: recorded once
+            assembly=[
+                recorded_once(
+                    _call(
+                        "linear_jacobian",
+                        Env.ASSEMBLER,
+                        OFFSET,
+                        INPUT_OFFSET,
+                        index_buffer,
+                        weight_buffer,
+                        n,
+                        k,
+                        3,
+                    )
+                )
+            ],
         )
     )
 
@@ -3502,23 +3572,23 @@ def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict
     n = corners
     init = [
         _call(
-            f"element_fem_stiffness_init<{n}>",
+            kernel("element_fem_stiffness_init", n),
             elements,
             count,
             state.rest,
             young_buffer,
-            _count(young_buffer),
+            Count(young_buffer),
             poisson_buffer,
-            _count(poisson_buffer),
+            Count(poisson_buffer),
             stiffness,
         )
     ]
     rotations = None
     if corotational:
         rotations = planner.buffer(component, "rotations", np.zeros(count * 18), columns=18, role="scratch")
-        init.append(_call(f"element_corot_init<{n}>", elements, count, state.rest, method, rotations))
+        init.append(_call(kernel("element_corot_init", n), elements, count, state.rest, method, rotations))
         force = _call(
-            f"element_corot_add_force<{n}>",
+            kernel("element_corot_add_force", n),
             elements,
             count,
             state.x,
@@ -3530,7 +3600,7 @@ def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict
         )
     else:
         force = _call(
-            f"element_linear_add_force<{n}>", elements, count, state.x, state.rest, stiffness, state.f
+            kernel("element_linear_add_force", n), elements, count, state.x, state.rest, stiffness, state.f
         )
     group.init.append(Op(origin, init))
     group.forces.append(Op(origin, [force]))
@@ -3538,18 +3608,18 @@ def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict
         return
     if rotations is not None:
         dforce = _call(
-            f"element_corot_add_dforce<{n}>",
+            kernel("element_corot_add_dforce", n),
             elements,
             count,
             state.dx,
             state.df,
-            "kfact",
+            Env.KFACT,
             stiffness,
             rotations,
         )
     else:
         dforce = _call(
-            f"element_linear_add_dforce<{n}>", elements, count, state.dx, state.df, "kfact", stiffness
+            kernel("element_linear_add_dforce", n), elements, count, state.dx, state.df, Env.KFACT, stiffness
         )
     group.stiffness_dx.append(Op(origin, [dforce]))
     _assemble(
@@ -3557,15 +3627,15 @@ def _lower_element_fem(planner: _Planner, checked: CheckedComponent, owner: dict
         checked,
         group,
         state,
-        lambda offset: _call(
-            f"element_fem_assemble<{n}>",
-            "A",
+        _call(
+            kernel("element_fem_assemble", n),
+            Env.ASSEMBLER,
             elements,
             count,
             stiffness,
-            _ptr(rotations) if rotations is not None else "nullptr",
-            offset,
-            "kfact",
+            rotations if rotations is not None else Env.NONE,
+            OFFSET,
+            Env.KFACT,
         ),
     )
 
@@ -3620,12 +3690,12 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
             origin,
             [
                 _call(
-                    f"fem_mass_init<{n}>",
+                    kernel("fem_mass_init", n),
                     elements,
                     count,
                     state.rest,
                     density,
-                    _count(density),
+                    Count(density),
                     *csr[:2],
                     state.size,
                     values,
@@ -3635,16 +3705,16 @@ def _lower_fem_mass(planner: _Planner, checked: CheckedComponent, owner: dict[in
     )
     planner.add_gravity(group, Op(origin, [_call("fem_mass_gravity", state.f, *csr, planner.gravity)]))
     if group.scheme == "implicit":
-        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, "mfact")]))
+        group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, Env.MFACT)]))
     _assemble(
-        planner, checked, group, state, lambda offset: _call("assemble_fem_mass", "A", offset, *csr, "mfact")
+        planner, checked, group, state, _call("assemble_fem_mass", Env.ASSEMBLER, OFFSET, *csr, Env.MFACT)
     )
     group.energy.append(
         Op(
             origin,
             [
-                "kinetic += " + _call("fem_mass_kinetic_energy", state.v, *csr),
-                "potential += " + _call("fem_mass_potential_energy", state.x, *csr, planner.gravity),
+                _call("fem_mass_kinetic_energy", state.v, *csr, into=Env.KINETIC),
+                _call("fem_mass_potential_energy", state.x, *csr, planner.gravity, into=Env.POTENTIAL),
             ],
         )
     )

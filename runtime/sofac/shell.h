@@ -455,4 +455,16 @@ inline void trifem_add_dforce(const Index* tri, Index n, const double* dx, doubl
     }
 }
 
+// trifem_optim_element_matrix as assemble_elements calls it: the materials bound, per element.
+struct TrifemOptimElementMatrix {
+    const double* young;
+    Index n_young;
+    const double* poisson;
+    Index n_poisson;
+
+    void operator()(const double* data, Index e, int /*method*/, double* out) const {
+        trifem_optim_element_matrix(data, e, young, n_young, poisson, n_poisson, out);
+    }
+};
+
 }  // namespace sofac
