@@ -95,6 +95,21 @@ def cmd_effects(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_plan_json(args: argparse.Namespace) -> int:
+    import json
+
+    from sofac import pipeline
+    from sofac.plan.ir import as_json
+
+    try:
+        with reported():
+            scene_plan = pipeline.plan_file(_scene(args))
+    except Failed:
+        return EXIT_ERRORS
+    print(json.dumps(as_json(scene_plan), indent=1, allow_nan=False))
+    return EXIT_OK
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from sofac.simulation.loader import SimulationDiverged
 

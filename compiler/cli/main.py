@@ -163,6 +163,10 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
         from sofac.cli.commands import cmd_effects
 
         return cmd_effects(args)
+    if args.plan_json and args.scene is not None:
+        from sofac.cli.commands import cmd_plan_json
+
+        return cmd_plan_json(args)
     if args.scene is None:
         raise UsageError("inspect needs a SCENE file (or --components)")
     path = Path(args.scene)
@@ -286,6 +290,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     inspect.add_argument(
         "--schedule", action="store_true", help="print the compiled step's plan: groups, states, kernel calls"
+    )
+    inspect.add_argument(
+        "--plan-json", action="store_true", help="print the plan (typed data: buffers, groups, calls) as JSON"
     )
     inspect.set_defaults(handler=_cmd_inspect)
 

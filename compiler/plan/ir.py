@@ -213,7 +213,20 @@ def buffers_of(statements: Iterator[Statement] | list[Statement]) -> set[str]:
 
 
 def as_json(value: Any) -> Any:
-    """A plan value as JSON-ready data: buffers by identifier and key, arrays by shape."""
+    """A plan value as JSON-ready data: buffers by identifier and key, arrays by shape, scene
+    components by type and path, DataTypes by name."""
+    from sofac.check.checker import CheckedComponent
+    from sofac.front.model import Component, Node
+    from sofac.registry.datatypes import DataType
+
+    if isinstance(value, CheckedComponent):
+        value = value.component
+    if isinstance(value, Component):
+        return {"component": value.type_name, "path": value.path, "line": value.loc.line}
+    if isinstance(value, Node):
+        return {"node": value.path}
+    if isinstance(value, DataType):
+        return value.name
     if isinstance(value, Buffer):
         return {"buffer": value.ident, "key": value.key, "kind": value.kind, "role": value.role}
     if isinstance(value, enum.Enum):

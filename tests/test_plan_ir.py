@@ -1,0 +1,165 @@
+"""The plan is data: no C++ text and no callables anywhere in it, and it dumps as JSON
+(``sofac inspect --plan-json``). Code generation alone spells calls out."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from sofac import pipeline
+from sofac.check.checker import CheckedComponent
+from sofac.cli.main import main
+from sofac.codegen.cpp import statement
+from sofac.front.model import Component, Node
+from sofac.plan.ir import (
+    CHILD,
+    PARENT,
+    Aggregate,
+    Buffer,
+    Count,
+    Env,
+    Offset,
+    as_json,
+    bind,
+    buffers_of,
+    call,
+    kernel,
+    recorded_once,
+)
+from sofac.registry.datatypes import DataType
+
+REPO = Path(__file__).resolve().parents[1]
+BUNDLED = sorted((REPO / "scenes").glob("*.scn"))
+# Corpus scenes that between them lower mappings (rigid, barycentric, subset, distance, multi),
+# projections of every kind, springs, FEM, masses, direct solvers and assembled systems.
+CORPUS = [
+    "Demos/mixedPendulum.scn",
+    "Demos/simpleSphere.scn",
+    "Demos/simpleBoundaryConditions.scn",
+    "Benchmark/Analysis/Pendulum.scn",
+    "Component/Mapping/NonLinear/DistanceMapping.scn",
+    "Component/Mapping/NonLinear/DistanceMultiMapping.scn",
+    "Component/Mapping/NonLinear/SquareDistanceMapping.scn",
+    "Component/MechanicalLoad/InteractionEllipsoidForceField.scn",
+    "Component/LinearSolver/Direct/FEMBAR_SparseLDLSolver.scn",
+    "Component/LinearSystem/CompositeLinearSystem.scn",
+    "Component/Mass/MeshMatrixMass.scn",
+]
+
+# What C++ looks like in a string: scopes, member access on the instance, statements, lambdas.
+CPP = re.compile(r"sofac::|\bS\.\w|;|\bdata\(\)|\[&\]|->|\bIndex\(|\bA\.recording")
+
+
+def _plans(corpus_dir: Path | None) -> list[tuple[str, Any]]:
+    paths = list(BUNDLED)
+    if corpus_dir is not None:
+        paths += [corpus_dir / name for name in CORPUS if (corpus_dir / name).is_file()]
+    return [(p.name, pipeline.plan_file(p)) for p in paths]
+
+
+@pytest.fixture(scope="module")
+def plans(request: pytest.FixtureRequest) -> list[tuple[str, Any]]:
+    from conftest import find_shared
+
+    shared = find_shared()
+    return _plans(shared / "corpus" / "sofa" if shared else None)
+
+
+def _walk(value: Any, seen: set[int], where: str) -> list[str]:
+    """Paths of the callables and C++-looking strings inside a plan value."""
+    scene = (Component, Node, CheckedComponent, DataType)  # references into the checked scene
+    if id(value) in seen or isinstance(value, (*scene, np.ndarray, enum.Enum, type)):
+        return []
+    seen.add(id(value))
+    if isinstance(value, str):
+        return [f"{where}: {value!r}"] if CPP.search(value) else []
+    if callable(value):
+        return [f"{where}: callable {value!r}"]
+    if dataclasses.is_dataclass(value):
+        return [
+            bad
+            for f in dataclasses.fields(value)
+            for bad in _walk(getattr(value, f.name), seen, f"{where}.{f.name}")
+        ]
+    if isinstance(value, dict):
+        return [bad for k, v in value.items() for bad in _walk(v, seen, f"{where}[{k!r}]")]
+    if isinstance(value, (list, tuple, set, frozenset)):
+        return [bad for i, v in enumerate(value) for bad in _walk(v, seen, f"{where}[{i}]")]
+    return []
+
+
+def test_the_plan_holds_no_cpp_and_no_callables(plans: list[tuple[str, Any]]) -> None:
+    assert len(plans) >= len(BUNDLED)
+    for name, plan in plans:
+        assert _walk(plan, set(), name) == []
+        dump = json.dumps(as_json(plan))
+        assert not CPP.search(dump), (name, CPP.search(dump))
+
+
+def test_every_call_of_a_plan_generates(plans: list[tuple[str, Any]]) -> None:
+    """Calls become statements naming their kernel; the C++ is all in code generation."""
+    for name, plan in plans:
+        calls = [
+            c for g in plan.groups for phase in (g.forces, g.energy, g.init) for op in phase for c in op.calls
+        ]
+        assert calls, name
+        for item in calls:
+            text = statement(item)
+            assert text.startswith(("sofac::", "kinetic += sofac::", "potential += sofac::")), text
+            assert f"::{item.kernel}" in text and text.endswith(";")
+
+
+def test_plan_json_from_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(REPO / "scenes" / "liver.scn"), "--plan-json"]) == 0
+    plan = json.loads(capsys.readouterr().out)
+    assert plan["type"] == "Plan" and plan["dt"]["key"] == "/.dt"
+    (group,) = plan["groups"]
+    kernels = {c["kernel"] for op in group["forces"] for c in op["calls"]}
+    assert {"tetra_fem_add_force", "mass_gravity"} <= kernels
+    fem = next(op for op in group["forces"] if "TetrahedronFEMForceField" in op["origin"])
+    (force,) = fem["calls"]
+    assert force["args"][2] == {
+        "buffer": group["states"][0]["x"]["buffer"],
+        "key": "/Liver/dofs.position",
+        "kind": "f64",
+        "role": "state",
+    }
+
+
+def _buffer(ident: str) -> Buffer:
+    return Buffer(ident, f"/x.{ident}", "f64", np.zeros(3))
+
+
+def test_calls_are_spelled_out_only_by_codegen() -> None:
+    x, y, table = _buffer("b1_x"), _buffer("b2_y"), _buffer("b3_t")
+    springs = Aggregate("Springs", (table, Count(table, 2), 4))
+    item = call(kernel("spring_forces", "Vec3d", "Rigid3d", True, False), springs, x, y, Env.NONE)
+    assert buffers_of([item]) == {"b1_x", "b2_y", "b3_t"}
+    assert statement(item) == (
+        "sofac::spring_forces<sofac::Vec3d, sofac::Rigid3d, true, false>("
+        "sofac::Springs{S.b3_t.data(), Index(S.b3_t.size() / 2), 4}, S.b1_x.data(), S.b2_y.data(), nullptr);"
+    )
+    energy = call("spring_energy", x, np.float64(0.5), np.int64(3), into=Env.POTENTIAL)
+    assert statement(energy) == "potential += sofac::spring_energy(S.b1_x.data(), 0.5, 3);"
+    mapping = call("rigid_apply_j", PARENT, CHILD, table, 7)
+    with pytest.raises(TypeError, match="unbound"):
+        statement(mapping)
+    assert (
+        statement(bind(mapping, {PARENT: x, CHILD: y}))
+        == "sofac::rigid_apply_j(S.b1_x.data(), S.b2_y.data(), S.b3_t.data(), 7);"
+    )
+    rows = recorded_once(call("subset_jacobian", Env.ASSEMBLER, Offset(6, mapped=True), Offset(0), table))
+    assert statement(rows) == (
+        "if (A.recording()) sofac::subset_jacobian(A, sofac::Assembler::kMapped + 6, 0, S.b3_t.data());"
+    )
+
+
+def test_cpp_text_is_refused_as_an_argument() -> None:
+    with pytest.raises(TypeError, match="not a plan argument"):
+        call("mass_gravity", "S.b1_x.data()")
