@@ -10,7 +10,8 @@ import sofac
 from sofac.check import checker as check
 from sofac.codegen import cpp as generate
 from sofac.plan import planner as plan
-from sofac.plan.planner import MIN_ELEMENTS_PER_THREAD, element_split
+from sofac.plan.ir import call
+from sofac.plan.planner import MIN_ELEMENTS_PER_THREAD, Op, element_split, independent_groups
 
 BEAM = """
     <Node name="{name}">
@@ -86,18 +87,19 @@ def test_independent_groups_step_in_parallel(tmp_path: Path) -> None:
     assert "#pragma omp parallel for schedule(dynamic, 1) num_threads(2)" in source
     assert "case 1: step_g1(S, dt); break;" in source
     serial = generate.generate_source(plan.plan_scene(checked, diagnostics))
-    assert generate.independent_groups(serial, threaded)
+    assert threaded.parallel_groups
     assert "#pragma omp" not in serial
-    # A buffer of group 0 used in group 1's section makes them dependent.
-    state = threaded.groups[0].states[0].x.ident
-    marker = "// ---- group g1:"
-    shared = serial.replace(marker, f"{marker}\n// S.{state}", 1)
-    assert not generate.independent_groups(shared, threaded)
+    # A call of group 1 on a buffer of group 0 makes them dependent.
+    shared = {threaded.dt.ident, threaded.gravity.ident}
+    assert independent_groups(threaded.groups, shared)
+    first, second = threaded.groups
+    second.forces.append(Op("test", [call("fill", first.states[0].x, 0.0)]))
+    assert not independent_groups(threaded.groups, shared)
     # One group: nothing to run side by side.
     one = _scene(tmp_path, "one.scn", [TETRA])
     checked, diagnostics = check.check_file(one)
     single = plan.plan_scene(checked, diagnostics, threads=2)
-    assert not generate.independent_groups(generate.generate_source(single), single)
+    assert not single.parallel_groups
 
 
 def test_small_loops_stay_serial(tmp_path: Path) -> None:

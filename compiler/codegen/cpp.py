@@ -253,58 +253,24 @@ class _GroupView:
 
 def generate_source(plan: Plan) -> str:
     """The C++ source of a plan's step (deterministic: same plan, same text). Compiled for
-    threads, groups that share no buffer step in parallel (see independent_groups)."""
+    threads, groups that share no buffer step in parallel (Plan.parallel_groups)."""
     template = _environment().get_template("scene.cpp.j2")
     buffers: list[dict[str, Any]] = [
         {"ident": b.ident, "kind": b.kind, "comment": _comment(f"{b.key} ({b.role})")} for b in plan.buffers
     ]
 
-    def source(parallel_groups: bool) -> str:
-        return template.render(
-            version=__version__,
-            scene_file=_comment(plan.scene_file),
-            buffers=buffers,
-            groups=[_GroupView(g) for g in plan.groups],
-            any_direct=any(g.direct or g.preconditioner for g in plan.groups),
-            on_read=any(g.on_read for g in plan.groups),
-            any_assembled_cg=any(g.assembled_cg for g in plan.groups),
-            dt=plan.dt,
-            threads=plan.threads,
-            guard=plan.contact_guard,
-            parallel_groups=parallel_groups,
-            ptr=_ptr,
-            size=_size,
-        )
-
-    serial = source(False)
-    if plan.threads > 1 and independent_groups(serial, plan):
-        return source(True)
-    return serial
-
-
-def independent_groups(serial_source: str, plan: Plan) -> bool:
-    """Whether the plan has several groups and no two of them touch a common member of the
-    instance, except the parameters every group reads (dt, gravity). Read from the generated
-    code itself: each group's section (its propagate/forces/.../step functions) names every
-    buffer and solver its step uses."""
-    if len(plan.groups) < 2:
-        return False
-    shared = {plan.dt.ident, plan.gravity.ident}
-    starts = [serial_source.index(_group_marker(g)) for g in plan.groups]
-    end = serial_source.index(_SECTIONS_END)
-    used: set[str] = set()
-    for start, stop in zip(starts, [*starts[1:], end], strict=True):
-        members = set(re.findall(r"\bS\.(\w+)", serial_source[start:stop])) - shared
-        if members & used:
-            return False
-        used |= members
-    return True
-
-
-# The generated source: each group's functions start at its marker; the last group's end where
-# the whole-scene functions begin.
-_SECTIONS_END = "double total_energy("
-
-
-def _group_marker(group: Any) -> str:
-    return f"// ---- group {group.ident}:"
+    return template.render(
+        version=__version__,
+        scene_file=_comment(plan.scene_file),
+        buffers=buffers,
+        groups=[_GroupView(g) for g in plan.groups],
+        any_direct=any(g.direct or g.preconditioner for g in plan.groups),
+        on_read=any(g.on_read for g in plan.groups),
+        any_assembled_cg=any(g.assembled_cg for g in plan.groups),
+        dt=plan.dt,
+        threads=plan.threads,
+        guard=plan.contact_guard,
+        parallel_groups=plan.parallel_groups,
+        ptr=_ptr,
+        size=_size,
+    )

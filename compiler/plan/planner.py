@@ -14,6 +14,7 @@ number and array is a buffer handed to the instance when it is created.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Callable
@@ -269,12 +270,54 @@ class Plan:
     threads: int = 1
     rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
     contact_guard: ContactGuard | None = None
+    # Compiled for threads, with groups that share no buffer: they step side by side.
+    parallel_groups: bool = False
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:
             if buffer.key == key:
                 return buffer
         raise KeyError(key)
+
+
+def group_buffers(group: Group) -> set[str]:
+    """The identifiers of every buffer a group's step touches: its states' vectors, its solver's
+    parameters, and the buffers of its calls."""
+    found: set[str] = set()
+    seen: set[int] = set()
+
+    def visit(value: Any) -> None:
+        if id(value) in seen or isinstance(value, (Component, CheckedComponent, DataType, np.ndarray, str)):
+            return
+        seen.add(id(value))
+        if isinstance(value, Buffer):
+            found.add(value.ident)
+        elif dataclasses.is_dataclass(value):
+            for item in dataclasses.fields(value):
+                visit(getattr(value, item.name))
+        elif isinstance(value, dict):
+            for item in value.values():
+                visit(item)
+        elif isinstance(value, (list, tuple)):
+            for item in value:
+                visit(item)
+
+    visit(group)
+    return found
+
+
+def independent_groups(groups: list[Group], shared: set[str]) -> bool:
+    """Whether there are several groups and no two of them touch a common buffer, except the
+    ``shared`` parameters every group reads (dt, gravity)."""
+    if len(groups) < 2:
+        return False
+    used: set[str] = set()
+    for group in groups:
+        touched = group_buffers(group) - shared
+        if touched & used:
+            return False
+        used |= touched
+    return True
 
 
 def origin_of(component: Component) -> str:
@@ -381,6 +424,8 @@ class _Planner:
             threads=self.threads,
             rigid_model=self.rigid_model,
             contact_guard=self.guard,
+            parallel_groups=self.threads > 1
+            and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
         )
 
     def _init_only(self, groups: list[Group]) -> frozenset[str]:
