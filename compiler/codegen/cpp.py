@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import re
+from pathlib import Path
 from typing import Any
 
 import jinja2
@@ -259,7 +260,7 @@ def generate_source(plan: Plan) -> str:
         {"ident": b.ident, "kind": b.kind, "comment": _comment(f"{b.key} ({b.role})")} for b in plan.buffers
     ]
 
-    return template.render(
+    source = template.render(
         version=__version__,
         scene_file=_comment(plan.scene_file),
         buffers=buffers,
@@ -274,3 +275,9 @@ def generate_source(plan: Plan) -> str:
         ptr=_ptr,
         size=_size,
     )
+    # Comments name scene files relative to the scene's folder: a moved scene keeps its source,
+    # and so its cache entry. (Nothing else in the source comes from a path.)
+    scene = Path(plan.scene_file)
+    for folder in sorted({str(scene.resolve().parent), str(scene.parent)} - {"."}, key=len, reverse=True):
+        source = source.replace(folder + "/", "")
+    return source

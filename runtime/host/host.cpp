@@ -49,7 +49,8 @@ struct Library {
         step = reinterpret_cast<Step>(symbol("sofac_step"));
         energy = reinterpret_cast<Energy>(symbol("sofac_energy"));
         init = reinterpret_cast<Init>(symbol("sofac_init"));
-        update_mapped = reinterpret_cast<UpdateMapped>(symbol("sofac_update_mapped"));
+        // Only scenes whose step leaves mapped states out have it (they are mapped when read).
+        update_mapped = reinterpret_cast<UpdateMapped>(dlsym(handle, "sofac_update_mapped"));
     }
     // Libraries stay loaded until the process ends: numpy views may outlive every Python handle.
     Library(const Library&) = delete;
@@ -113,7 +114,10 @@ PYBIND11_MODULE(_sofac_host, m) {
                  return self.library->step(self.state, steps);
              })
         .def("init", [](Instance& self) { self.library->init(self.state); })
-        .def("update_mapped", [](Instance& self) { self.library->update_mapped(self.state); })
+        .def("update_mapped",
+             [](Instance& self) {
+                 if (self.library->update_mapped) self.library->update_mapped(self.state);
+             })
         .def_property(
             "time", [](Instance& self) { return *self.library->time(self.state); },
             [](Instance& self, double t) { *self.library->time(self.state) = t; })
