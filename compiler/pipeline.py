@@ -18,7 +18,7 @@ from sofac.diagnostics import Diagnostics, SceneError
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
     from sofac.check.checker import CheckedScene
     from sofac.front.model import Scene
-    from sofac.plan.planner import Plan
+    from sofac.plan.ir import Plan
     from sofac.simulation.loader import Compiled, Simulation
 
 

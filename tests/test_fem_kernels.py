@@ -19,7 +19,7 @@ from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
 from sofac.geometry.fem_topology import hexahedra_from_grid, tetrahedra_from_grid, tetrahedra_from_hexahedra
-from sofac.plan.planner import TETRA_LANES
+from sofac.plan.lower.common import TETRA_LANES
 
 SHIM = r"""
 #include "sofac/fem.h"

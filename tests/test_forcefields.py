@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from sofac.pipeline import compile_scene
-from sofac.plan.planner import format_schedule
+from sofac.plan.report import format_schedule
 
 DT = 1e-3
 MESH_SPRINGS = """\

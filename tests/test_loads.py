@@ -11,7 +11,7 @@ import pytest
 import sofac
 from sofac.diagnostics import SceneError
 from sofac.pipeline import compile_scene
-from sofac.plan.planner import format_effects
+from sofac.plan.report import format_effects
 
 H = 0.01
 GRAVITY = np.array([0.0, -10.0, 0.0])

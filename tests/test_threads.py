@@ -10,8 +10,8 @@ import sofac
 from sofac.check import checker as check
 from sofac.codegen import cpp as generate
 from sofac.plan import planner as plan
-from sofac.plan.ir import call
-from sofac.plan.planner import MIN_ELEMENTS_PER_THREAD, Op, element_split, independent_groups
+from sofac.plan.ir import Op, call, independent_groups
+from sofac.plan.lower.common import MIN_ELEMENTS_PER_THREAD, element_split
 
 BEAM = """
     <Node name="{name}">

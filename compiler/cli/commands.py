@@ -66,7 +66,7 @@ def cmd_emit(args: argparse.Namespace) -> int:
 
 def cmd_schedule(args: argparse.Namespace) -> int:
     from sofac import pipeline
-    from sofac.plan.planner import format_schedule
+    from sofac.plan.report import format_schedule
 
     try:
         with reported():
@@ -80,7 +80,7 @@ def cmd_effects(args: argparse.Namespace) -> int:
     import json
 
     from sofac import pipeline
-    from sofac.plan.planner import format_effects
+    from sofac.plan.report import format_effects
 
     try:
         with reported():

@@ -29,14 +29,20 @@ from sofac.plan.ir import (
     Element,
     Env,
     Function,
+    Group,
+    MappingOp,
     Note,
     Offset,
+    Op,
+    Plan,
+    Projection,
     Slot,
     Statement,
+    StatePlan,
     TemplateArg,
     bind,
+    origin_of,
 )
-from sofac.plan.planner import Group, MappingOp, Op, Plan, Projection, StatePlan, origin_of
 from sofac.resources import resource_dir
 
 

@@ -23,7 +23,7 @@ from sofac.diagnostics import SofacError
 from sofac.simulation.runspec import RunSpec
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
-    from sofac.plan import planner as plan
+    from sofac.plan import ir as plan
 
 _host: ModuleType | None = None
 

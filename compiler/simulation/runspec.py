@@ -14,7 +14,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from sofac.front.model import Component
-    from sofac.plan.planner import Plan
+    from sofac.plan.ir import Plan
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ class RunSpec:
 
 def run_spec(scene_plan: Plan) -> RunSpec:
     """The run-time part of a plan."""
-    from sofac.plan.planner import origin_of
+    from sofac.plan.ir import origin_of
 
     index = {id(b): i for i, b in enumerate(scene_plan.buffers)}
     solvers = tuple(

@@ -1,0 +1,350 @@
+"""Lowerings of the FEM force fields: tetrahedra, hexahedra, triangles (plain and optimised) and
+the element FEM of other cells.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.plan.ir import (
+    OFFSET,
+    Aggregate,
+    Constant,
+    Count,
+    Env,
+    Function,
+    Group,
+    Op,
+    kernel,
+    origin_of,
+)
+from sofac.plan.lower.common import (
+    _FEM_METHODS,
+    TETRA_LANES,
+    _assemble,
+    _call,
+    _element_target,
+    _sparse_grid_coefficients,
+    _split_argument,
+    _split_hexahedra,
+    _target,
+    _topology_cells,
+    _triangle_target,
+    _written_float,
+)
+from sofac.plan.lower.masses import lower_hexa_mass
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+
+# (kernel prefix, element kind, corners, data size per element by method)
+_FEM_KINDS = {
+    "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
+    "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
+    "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
+    "trifem": ("trifem", "triangles", 3, {1: 35}),
+}
+
+
+def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    assert checked.spec is not None
+    prefix, kind, corners, sizes = _FEM_KINDS[checked.spec.kernel]
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
+        return
+    method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), 1)
+    if prefix == "trifem" and (method != 1 or group.assembled):
+        planner.unsupported(
+            checked, "TriangularFEMForceField is compiled for method large with the matrix-free CG only"
+        )
+        return
+    if prefix != "tetra_fem" and method == 3:
+        method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
+    if prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0:
+        planner.unsupported(checked, "plasticity (plasticMaxThreshold > 0) is not compiled yet")
+        return
+    if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
+        planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
+        return
+    # HexahedronFEMForceField(AndMass) applies a SparseGridTopology's cell coefficients (below)
+    topology = _topology_cells(planner, checked, sparse_grid_ok=prefix == "hexa_fem") or {}
+    cells = topology.get(kind)
+    if (cells is None or not cells.size) and prefix == "tetra_fem":
+        cells = _split_hexahedra(topology)
+    if cells is None or not cells.size:
+        planner.unsupported(checked, f"it needs {kind} known at compile time")
+        return
+    count = cells.size // corners
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, kind, cells, "i64", columns=corners)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+    )
+    padded = -(-count // TETRA_LANES) * TETRA_LANES if kind == "tetrahedra" else count
+    data = planner.buffer(component, "elements", np.zeros(padded * sizes[method]), role="scratch")
+    coefficients = _sparse_grid_coefficients(planner, checked) if prefix == "hexa_fem" else None
+    if coefficients is not None and len(coefficients) != count:
+        planner.unsupported(checked, "its SparseGridTopology's cell coefficients do not match its hexahedra")
+        return
+    coefficient_buffer = (
+        planner.buffer(component, "stiffnessCoefs", coefficients) if coefficients is not None else None
+    )
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    f"{prefix}_init",
+                    elements,
+                    count,
+                    state.rest,
+                    young_buffer,
+                    Count(young_buffer),
+                    poisson_buffer,
+                    Count(poisson_buffer),
+                    method,
+                    data,
+                    *([coefficient_buffer] if coefficient_buffer is not None else []),
+                )
+            ],
+        )
+    )
+    split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
+    group.forces.append(
+        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)])
+    )
+    and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
+    if and_mass and not lower_hexa_mass(
+        planner, checked, state, group, elements, count, data, method, coefficient_buffer
+    ):
+        return
+    if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
+        group.energy.append(
+            Op(
+                origin,
+                [_call(f"{prefix}_energy", elements, count, state.x, data, method, into=Env.POTENTIAL)],
+            )
+        )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        f"{prefix}_add_dforce",
+                        elements,
+                        count,
+                        state.dx,
+                        state.df,
+                        Env.KFACT,
+                        data,
+                        method,
+                        *split,
+                    )
+                ],
+            )
+        )
+        # Tetrahedra: element matrices a block of TETRA_LANES at once, one per vector lane (fem.h).
+        if prefix in ("tetra_fem", "tetracorot_fem"):
+            assembler = kernel("assemble_elements", 4, Constant.TETRA_LANES)
+            matrices = Function(f"{prefix}_element_matrices")
+        else:
+            assembler, matrices = kernel("assemble_elements", corners), Function(f"{prefix}_element_matrix")
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
+        )
+
+
+def lower_trifem_optim(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TriangularFEMForceFieldOptim: corotational membrane triangles ("large" only, as SOFA)."""
+    found = _triangle_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group, topology = found
+    component = checked.component
+    rest_scale = _written_float(planner, component, "restScale")
+    if rest_scale is not None and rest_scale != 1.0:
+        planner.unsupported(checked, "restScale other than 1 is not compiled yet")
+        return
+    cells = topology["triangles"]
+    count = cells.size // 3
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, "triangles", cells, "i64", columns=3)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+    )
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(origin, [_call("trifem_optim_init", elements, count, state.rest, *material, 1, data)])
+    )
+    group.forces.append(
+        Op(origin, [_call("trifem_optim_add_force", elements, count, state.x, state.f, data, *material)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "trifem_optim_add_dforce",
+                        elements,
+                        count,
+                        state.dx,
+                        state.df,
+                        Env.KFACT,
+                        data,
+                        *material,
+                    )
+                ],
+            )
+        )
+        matrix = Aggregate(
+            "TrifemOptimElementMatrix",
+            (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer)),
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call(
+                kernel("assemble_elements", 3),
+                Env.ASSEMBLER,
+                elements,
+                count,
+                data,
+                1,
+                OFFSET,
+                Env.KFACT,
+                matrix,
+            ),
+        )
+
+
+def lower_element_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """CorotationalFEMForceField and LinearSmallStrainFEMForceField on tetrahedra or hexahedra."""
+    from sofac.geometry import element_fem
+
+    found = _element_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group, (element, corners, cells) = found
+    component = checked.component
+    if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
+        return
+    corotational = checked.spec is not None and checked.spec.role == "corotational"
+    method = 0
+    if corotational:
+        name = planner.value(component, "rotationMethod")
+        code = element_fem.rotation_method(name, element)
+        if code is None:
+            planner.unsupported(checked, f"rotationMethod {name!r} does not exist for {element}")
+            return
+        method = code
+    count, size = cells.size // corners, 3 * corners
+    young = planner.value(component, "youngModulus")
+    poisson = planner.value(component, "poissonRatio")
+    elements = planner.buffer(component, element_fem.ELEMENTS[element][1], cells, "i64", columns=corners)
+    young_buffer = planner.buffer(
+        component, "youngModulus", np.atleast_1d(young if young is not None else []), role="param"
+    )
+    poisson_buffer = planner.buffer(
+        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else []), role="param"
+    )
+    stiffness = planner.buffer(
+        component, "elementStiffness", np.zeros(count * size * size), columns=size * size, role="scratch"
+    )
+    origin = origin_of(component)
+    n = corners
+    init = [
+        _call(
+            kernel("element_fem_stiffness_init", n),
+            elements,
+            count,
+            state.rest,
+            young_buffer,
+            Count(young_buffer),
+            poisson_buffer,
+            Count(poisson_buffer),
+            stiffness,
+        )
+    ]
+    rotations = None
+    if corotational:
+        rotations = planner.buffer(component, "rotations", np.zeros(count * 18), columns=18, role="scratch")
+        init.append(_call(kernel("element_corot_init", n), elements, count, state.rest, method, rotations))
+        force = _call(
+            kernel("element_corot_add_force", n),
+            elements,
+            count,
+            state.x,
+            state.rest,
+            stiffness,
+            method,
+            rotations,
+            state.f,
+        )
+    else:
+        force = _call(
+            kernel("element_linear_add_force", n), elements, count, state.x, state.rest, stiffness, state.f
+        )
+    group.init.append(Op(origin, init))
+    group.forces.append(Op(origin, [force]))
+    if group.scheme != "implicit":
+        return
+    if rotations is not None:
+        dforce = _call(
+            kernel("element_corot_add_dforce", n),
+            elements,
+            count,
+            state.dx,
+            state.df,
+            Env.KFACT,
+            stiffness,
+            rotations,
+        )
+    else:
+        dforce = _call(
+            kernel("element_linear_add_dforce", n), elements, count, state.dx, state.df, Env.KFACT, stiffness
+        )
+    group.stiffness_dx.append(Op(origin, [dforce]))
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        _call(
+            kernel("element_fem_assemble", n),
+            Env.ASSEMBLER,
+            elements,
+            count,
+            stiffness,
+            rotations if rotations is not None else Env.NONE,
+            OFFSET,
+            Env.KFACT,
+        ),
+    )

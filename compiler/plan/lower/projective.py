@@ -1,0 +1,213 @@
+"""Lowerings of the projective constraints: fixed, partially fixed, line or plane, point, and
+keyed velocities.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.plan.ir import (
+    OFFSET,
+    VECTOR,
+    Aggregate,
+    Count,
+    Element,
+    Env,
+    Group,
+    Projection,
+    kernel,
+    origin_of,
+)
+from sofac.plan.lower.common import (
+    _call,
+    _fixed_indices,
+    _indices,
+    _matrix_free_hint,
+    _matrix_solver,
+    _projected_target,
+    _unit_vector,
+)
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+
+def lower_fixed(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
+    t = state.datatype.name
+    group.projections.append(
+        Projection(
+            origin_of(checked.component),
+            state,
+            _call(kernel("project_fixed", t), VECTOR, indices, Count(indices)),
+            bool(planner.value(checked.component, "activate_projectVelocity")),
+            _call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices)),
+        )
+    )
+
+
+def lower_partial_fixed(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    width = state.datatype.deriv_size
+    directions = planner.value(checked.component, "fixedDirections")
+    flags = np.zeros(width, dtype=np.int64)
+    if directions is not None:
+        given = np.asarray(directions, dtype=bool).ravel()[:width]
+        flags[: given.size] = given
+    indices = planner.buffer(checked.component, "indices", _fixed_indices(planner, checked, state), "i64")
+    mask = planner.buffer(checked.component, "fixedDirections", flags, "i64")
+    t = state.datatype.name
+    velocity = planner.value(checked.component, "projectVelocity") or planner.value(
+        checked.component, "activate_projectVelocity"
+    )
+    group.projections.append(
+        Projection(
+            origin_of(checked.component),
+            state,
+            _call(kernel("project_partial", t), VECTOR, indices, Count(indices), mask),
+            bool(velocity),
+            _call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices), mask),
+        )
+    )
+
+
+def lower_line_or_plane(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """Line- and PlaneProjectiveConstraint: responses and velocities through the block n n^T (line)
+    or I - n n^T (plane) of the listed points; positions onto the line / plane after each step."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if group.assembled:
+        planner.unsupported(
+            checked,
+            f"with {_matrix_solver(group)} (SOFA does not project the assembled matrix for it either); "
+            f"{_matrix_free_hint(group)}",
+        )
+        return
+    line = checked.spec is not None and checked.spec.role == "line"
+    width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
+    direction = _unit_vector(
+        planner, component, "direction" if line else "normal", width, 0 if line else None
+    )
+    outer = np.array([[float(a) * float(b) for b in direction] for a in direction])
+    block = outer if line else np.eye(width) - outer
+    origin = np.zeros(width)
+    given = planner.value(component, "origin")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[:width]
+        origin[: flat.size] = flat
+    indices = planner.buffer(component, "indices", _indices(planner, checked, "indices", state.size), "i64")
+    block_buffer = planner.buffer(component, "projection", block)
+    origin_buffer = planner.buffer(component, "origin", origin)
+    direction_buffer = planner.buffer(component, "direction" if line else "normal", direction)
+    t = state.datatype.name
+    onto = "project_onto_line" if line else "project_onto_plane"
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            _call(kernel("project_block", t), VECTOR, indices, Count(indices), block_buffer),
+            velocity=True,
+            position=_call(kernel(onto, t), VECTOR, indices, Count(indices), origin_buffer, direction_buffer),
+        )
+    )
+
+
+def lower_point_constraint(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """PointProjectiveConstraint: the listed DOFs (all with fixAll) held at ``point``."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    indices = planner.buffer(component, "indices", _fixed_indices(planner, checked, state), "i64")
+    target = np.zeros(state.datatype.coord_size)
+    given = planner.value(component, "point")
+    if given is not None:
+        flat = np.asarray(given, dtype=float).ravel()[: target.size]
+        target[: flat.size] = flat
+    target_buffer = planner.buffer(component, "point", target)
+    t = state.datatype.name
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            _call(kernel("project_fixed", t), VECTOR, indices, Count(indices)),
+            velocity=True,
+            mark=_call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices)),
+            position=_call(kernel("project_onto_point", t), VECTOR, indices, Count(indices), target_buffer),
+        )
+    )
+
+
+def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """LinearVelocityProjectiveConstraint: the listed DOFs move at a velocity interpolated between key
+    times (SOFA's findKeyTimes at each step's start time), integrated explicitly from their last
+    projected positions; their solver increments are zeroed while it is active."""
+    found = _projected_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.rigid:
+        planner.unsupported(checked, "on rigid DOFs it is not compiled yet (Vec types only)")
+        return
+    if group.assembled:
+        planner.unsupported(
+            checked, f"with {_matrix_solver(group)} it is not compiled yet; {_matrix_free_hint(group)}"
+        )
+        return
+    width, coord = state.datatype.deriv_size, state.datatype.coord_size
+    times = np.asarray(planner.value(component, "keyTimes"), dtype=float).ravel()
+    given = planner.value(component, "velocities")  # SOFA starts the list with one zero velocity
+    velocities = np.asarray(given if given is not None and np.size(given) else np.zeros(width), dtype=float)
+    velocities = velocities.reshape(-1, width)
+    if len(times) != len(velocities):
+        planner.unsupported(checked, f"it has {len(times)} keyTimes but {len(velocities)} velocities")
+        return
+    coordinates = _indices(planner, checked, "coordinates", 0, all_if_empty=False)
+    if len(coordinates) and (coordinates.min() < 0 or coordinates.max() >= width):
+        planner.unsupported(checked, f"its coordinates must be between 0 and {width - 1}")
+        return
+    indices = planner.buffer(component, "indices", _fixed_indices(planner, checked, state), "i64")
+    count = len(indices.initial)
+    memory = planner.buffer(component, "memory", np.zeros(4 + 2 * width + count * coord), role="scratch")
+    time_buffer = planner.buffer(component, "keyTimes", times)
+    velocity_buffer = planner.buffer(component, "velocities", velocities, columns=width)
+    coordinate_buffer = planner.buffer(component, "coordinates", coordinates, "i64")
+    t = state.datatype.name
+    after_end = bool(planner.value(component, "continueAfterEnd"))
+    keyed = Aggregate("KeyedVelocity", (memory, time_buffer, velocity_buffer, len(times), after_end), (t,))
+    selected = (indices, Count(indices))
+    chosen = (coordinate_buffer, Count(coordinate_buffer))
+    group.projections.append(
+        Projection(
+            origin_of(component),
+            state,
+            _call(kernel("keyed_velocity_response", t), keyed, VECTOR, *selected, Env.TIME),
+            velocity=True,
+            position=_call(
+                kernel("keyed_velocity_position", t),
+                keyed,
+                VECTOR,
+                *selected,
+                *chosen,
+                Env.TIME,
+                Element(planner.dt),
+            ),
+            project_velocity=_call(
+                kernel("keyed_velocity_velocity", t), keyed, VECTOR, *selected, *chosen, Env.TIME
+            ),
+        )
+    )

@@ -1,0 +1,369 @@
+"""Lowerings of the spring force fields: springs between states, grid and mesh springs, bending
+springs.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component
+from sofac.plan.ir import (
+    OFFSET,
+    Env,
+    Group,
+    Op,
+    origin_of,
+)
+from sofac.plan.lower.common import (
+    _add_springs,
+    _assemble,
+    _call,
+    _springs_from_fields,
+    _target,
+    _topology_cells,
+    _topology_of,
+    _triangle_target,
+)
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+
+def lower_triangular_bending_springs(
+    planner: Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """TriangularBendingSprings: per edge shared by two triangles, a spring between the two vertices
+    opposite it (m1 in the later triangle, m2 in the first one, as SOFA's applyTriangleCreation),
+    in the topology's edge order; rest length from the rest positions."""
+
+    from sofac.geometry import masses
+
+    found = _triangle_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group, cells = found
+    component = checked.component
+    triangles = cells["triangles"]
+    rest = planner.checked.positions(state.component)
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, triangles=triangles)
+    tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3).tolist()
+    around: dict[tuple[int, int], list[int]] = {}
+    for index, tri in enumerate(tris):
+        for j in range(3):
+            u, v = tri[(j + 1) % 3], tri[(j + 2) % 3]
+            around.setdefault((min(u, v), max(u, v)), []).append(index)
+    ks, kd = float(planner.value(component, "stiffness")), float(planner.value(component, "damping"))
+    points = [tuple(float(v) for v in row[:3]) for row in np.asarray(rest, dtype=float)]
+    pairs: list[tuple[int, int]] = []
+    params: list[tuple[float, float, float]] = []
+    for e1, e2 in np.asarray(edges, dtype=np.int64).reshape(-1, 2).tolist():
+        shell = around.get((min(e1, e2), max(e1, e2)), [])
+        if len(shell) != 2:
+            continue
+        first, later = sorted(shell)
+        m2 = next(v for v in tris[first] if v not in (e1, e2))
+        m1 = next(v for v in tris[later] if v not in (e1, e2))
+        d = [points[m1][k] - points[m2][k] for k in range(3)]
+        pairs.append((m1, m2))
+        params.append((ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+    count = len(pairs)
+    springs = planner.buffer(
+        component, "springs", np.asarray(pairs, dtype=np.int64).reshape(-1), "i64", columns=2
+    )
+    values = planner.buffer(component, "springParams", np.asarray(params, dtype=float).reshape(-1), columns=3)
+    dfdx = planner.buffer(component, "dfdx", np.zeros(9 * count), columns=9, role="scratch")
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [_call("triangular_bending_add_force", springs, values, count, state.x, state.v, state.f, dfdx)],
+        )
+    )
+    group.energy.append(
+        Op(origin, [_call("triangular_bending_energy", springs, values, count, state.x, into=Env.POTENTIAL)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call("triangular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, Env.KFACT)],
+            )
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
+        )
+
+
+def lower_quad_bending_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """QuadBendingSprings: a spring between the opposite corners of two quads sharing an edge
+    (SOFA's registerEdge / addSpring order, each pair once), rest length from the positions."""
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    quads = (_topology_cells(planner, checked) or {}).get("quads")
+    rest = planner.checked.positions(state.component)
+    if quads is None or not quads.size or rest is None:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    stiffness = np.atleast_1d(np.asarray(planner.value(component, "stiffness"), dtype=float))
+    damping = np.atleast_1d(np.asarray(planner.value(component, "damping"), dtype=float))
+    ks, kd = float(stiffness[0]), float(damping[0])
+    low, high = (
+        int(v) for v in np.asarray(planner.value(component, "localRange"), dtype=np.int64).ravel()[:2]
+    )
+    points = [tuple(float(v) for v in row[:3]) for row in np.asarray(rest, dtype=float)]
+    rows = [tuple(float(v) for v in row) for row in _springs_from_fields(planner, checked)]
+    edges: dict[tuple[int, int], tuple[int, int]] = {}
+    springs: set[tuple[int, int]] = set()
+
+    def add(a: int, b: int) -> None:
+        if low >= 0 and a < low and b < low:
+            return
+        if high >= 0 and a > high and b > high:
+            return
+        key = (min(a, b), max(a, b))
+        if key in springs:
+            return
+        springs.add(key)
+        d = [points[a][k] - points[b][k] for k in range(3)]
+        rows.append((a, b, ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+
+    def register(ab: tuple[int, int], cd: tuple[int, int]) -> None:
+        if ab[0] > ab[1]:
+            ab, cd = (ab[1], ab[0]), (cd[1], cd[0])
+        if ab not in edges:
+            edges[ab] = cd
+        else:
+            ef = edges[ab]
+            add(cd[0], ef[0])
+            add(cd[1], ef[1])
+
+    for q in np.asarray(quads, dtype=np.int64).reshape(-1, 4).tolist():
+        register((q[0], q[1]), (q[3], q[2]))
+        register((q[1], q[2]), (q[0], q[3]))
+        register((q[2], q[3]), (q[1], q[0]))
+        register((q[3], q[0]), (q[2], q[1]))
+    _add_springs(planner, checked, np.array(rows, dtype=float).reshape(-1, 5), state, state, group)
+
+
+def lower_bending_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FastTriangularBendingSprings: one linear bending spring per edge between two triangles."""
+    from sofac.geometry import bending, masses
+
+    found = _triangle_target(planner, checked, owner)
+    if found is None:
+        return
+    state, group, cells = found
+    component = checked.component
+    triangles = cells["triangles"]
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, triangles=triangles, quads=cells.get("quads"))
+    stiffness = planner.value(component, "bendingStiffness")
+    min_dist = planner.value(component, "minDistValidity")
+    vid, alpha, lam = bending.bending_springs(
+        planner.checked.positions(state.component),
+        triangles,
+        edges,
+        1.0 if stiffness is None else float(stiffness),
+        1e-6 if min_dist is None else float(min_dist),
+    )
+    count = len(lam)
+    table = (
+        planner.buffer(component, "vid", vid.ravel(), "i64", columns=4),
+        planner.buffer(component, "alpha", alpha.ravel(), columns=4),
+        planner.buffer(component, "lambda", lam),
+        count,
+    )
+    origin = origin_of(component)
+    group.forces.append(Op(origin, [_call("bending_springs_add_force", *table, state.x, state.f)]))
+    group.energy.append(Op(origin, [_call("bending_springs_energy", *table, state.x, into=Env.POTENTIAL)]))
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, Env.KFACT)])
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call("assemble_bending_springs", Env.ASSEMBLER, OFFSET, *table, Env.KFACT),
+        )
+
+
+def lower_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        if not isinstance(target, Component):
+            target = checked.state or planner.checked.resolver._node_state(checked.component.node)
+        ends.append(planner.states.get(id(target)) if target is not None else None)
+    if ends[0] is None or ends[1] is None:
+        planner.unsupported(checked, "a spring force field must join MechanicalObjects")
+        return
+    groups = {id(owner.get(id(e.component))) for e in ends}
+    group = owner.get(id(ends[0].component))
+    if group is None or len(groups) != 1:
+        if group is None and owner.get(id(ends[1].component)) is None:
+            planner.ignored.append((checked.component, "its states have no ODE solver"))
+            return
+        planner.unsupported(checked, "springs between states of different ODE solvers are not compiled yet")
+        return
+    if ends[0].datatype.coord_size not in (1, 2, 3, 7) or ends[1].datatype.coord_size not in (1, 2, 3, 7):
+        planner.unsupported(checked, "springs on this template are not compiled yet")
+        return
+    springs = _springs_from_fields(planner, checked)
+    _add_springs(planner, checked, springs, ends[0], ends[1], group)
+
+
+def lower_grid_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """RegularGridSpringForceField: its own springs, then springs along the grid's edges, face
+    diagonals and cube diagonals, in SOFA's loop order, ks = stiffness / rest length."""
+
+    from sofac.geometry.barycentric import RegularGrid
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    topology = _topology_of(planner, checked)
+    cells = _topology_cells(planner, checked) or {}
+    if topology is None or "resolution" not in cells:
+        planner.unsupported(checked, "it needs a RegularGridTopology in its node")
+        return
+    bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
+    nx, ny, nz = (int(c) for c in cells["resolution"])
+    _, step = RegularGrid((nx, ny, nz), tuple(bounds[:3]), tuple(bounds[3:])).frame()
+    dx, dy, dz = (np.array([step[a] if a == axis else 0.0 for a in range(3)]) for axis in range(3))
+
+    def norm(v: np.ndarray) -> float:
+        return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+    def coefficient(kind: str, name: str) -> float:
+        both = planner.value(component, name.lower())  # `stiffness` / `damping` set all three
+        return float(both if both is not None else planner.value(component, f"{kind}{name}") or 0.0)
+
+    def point(x: int, y: int, z: int) -> int:
+        return x + nx * (y + ny * z)
+
+    rows = [tuple(r) for r in _springs_from_fields(planner, checked)]
+
+    def add(kind: str, pairs: list[tuple[tuple[int, int], float, float | None]]) -> None:
+        ks, kd = coefficient(kind, "Stiffness"), coefficient(kind, "Damping")
+        if ks == 0.0 and kd == 0.0:
+            return
+        for (a, b), length, scale_length in pairs:
+            divisor = scale_length if scale_length is not None else length
+            rows.append((a, b, ks / divisor, kd / divisor, length))
+
+    lines = []
+    for axis, delta, size in (
+        (0, dx, (nx - 1, ny, nz)),
+        (1, dy, (nx, ny - 1, nz)),
+        (2, dz, (nx, ny, nz - 1)),
+    ):
+        length = norm(delta)
+        for z in range(size[2]):
+            for y in range(size[1]):
+                for x in range(size[0]):
+                    offset = [(1, 0, 0), (0, 1, 0), (0, 0, 1)][axis]
+                    lines.append(
+                        ((point(x, y, z), point(x + offset[0], y + offset[1], z + offset[2])), length, None)
+                    )
+    add("lines", lines)
+    quads = []
+    for u, v, size, (o1, o2, o3, o4) in (
+        (dx, dy, (nx - 1, ny - 1, nz), ((0, 0, 0), (1, 1, 0), (1, 0, 0), (0, 1, 0))),
+        (dx, dz, (nx - 1, ny, nz - 1), ((0, 0, 0), (1, 0, 1), (1, 0, 0), (0, 0, 1))),
+        (dy, dz, (nx, ny - 1, nz - 1), ((0, 0, 0), (0, 1, 1), (0, 1, 0), (0, 0, 1))),
+    ):
+        first, second = norm(u + v), norm(u - v)
+        # SOFA divides the second YZ diagonal's stiffness by the first's length (kept as is).
+        second_scale = first if u is dy else None
+        for z in range(size[2]):
+            for y in range(size[1]):
+                for x in range(size[0]):
+                    corner = [(x + o[0], y + o[1], z + o[2]) for o in (o1, o2, o3, o4)]
+                    quads.append(((point(*corner[0]), point(*corner[1])), first, None))
+                    quads.append(((point(*corner[2]), point(*corner[3])), second, second_scale))
+    add("quads", quads)
+    cubes = []
+    diagonals = (
+        ((0, 0, 0), (1, 1, 1), norm(dx + dy + dz)),
+        ((1, 0, 0), (0, 1, 1), norm(-dx + dy + dz)),
+        ((0, 1, 0), (1, 0, 1), norm(dx - dy + dz)),
+        ((0, 0, 1), (1, 1, 0), norm(dx + dy - dz)),
+    )
+    for z in range(nz - 1):
+        for y in range(ny - 1):
+            for x in range(nx - 1):
+                for a, b, length in diagonals:
+                    ends = (point(x + a[0], y + a[1], z + a[2]), point(x + b[0], y + b[1], z + b[2]))
+                    cubes.append((ends, length, None))
+    add("cubes", cubes)
+    springs = np.array(rows, dtype=float).reshape(-1, 5)
+    _add_springs(planner, checked, springs, state, state, group)
+
+
+# MeshSpringForceField: (topology field, corners per element, stiffness/damping prefix), in the
+# order SOFA adds them; a vertex pair gets one spring, from the first element kind that has it.
+_MESH_ELEMENTS = (
+    ("edges", 2, "lines"),
+    ("triangles", 3, "triangles"),
+    ("quads", 4, "quads"),
+    ("tetrahedra", 4, "tetrahedra"),
+    ("hexahedra", 8, "cubes"),
+)
+
+
+def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    topology = checked.links.get("topology")
+    if not isinstance(topology, Component):
+        topology = planner.checked.resolver._singleton(component.node, "topology")
+    rest = planner.checked.positions(state.component)
+    if topology is None or rest is None:
+        planner.unsupported(checked, "it needs a topology whose elements are known at compile time")
+        return
+    both_k, both_d = planner.value(component, "stiffness"), planner.value(component, "damping")
+    seen: set[tuple[int, int]] = set()
+    rows: list[tuple[int, int, float, float, float]] = []
+    for field_name, corners, prefix in _MESH_ELEMENTS:
+        elements = planner.value(topology, field_name)
+        if elements is None or not np.size(elements):
+            continue
+        ks = float(both_k if both_k is not None else planner.value(component, f"{prefix}Stiffness") or 0.0)
+        kd = float(both_d if both_d is not None else planner.value(component, f"{prefix}Damping") or 0.0)
+        if ks == 0.0 and kd == 0.0:  # SOFA skips the kind: its pairs stay free for the next kinds
+            continue
+        # SOFA's order: every corner pair (p, q), p < q (a hexahedron's 28, a SparseGridTopology's
+        # only elements: it derives no edges or quads)
+        pairs = [(p, q) for p in range(corners) for q in range(p + 1, corners)]
+        for element in np.asarray(elements, dtype=np.int64).reshape(-1, corners):
+            for a, b in pairs:
+                i, j = sorted((int(element[a]), int(element[b])))
+                if (i, j) in seen or i == j:
+                    continue
+                seen.add((i, j))
+                length = float(np.linalg.norm(rest[j, :3] - rest[i, :3]))
+                if length > 1e-12:  # SOFA scales by the rest length (per unit length stiffness)
+                    rows.append((i, j, ks / length, kd / length, length))
+    springs = np.array(rows, dtype=float).reshape(-1, 5)
+    _add_springs(planner, checked, springs, state, state, group)

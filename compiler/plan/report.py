@@ -1,0 +1,96 @@
+"""The plan as text for people: its effects and its schedule (``sofac inspect``)."""
+
+from __future__ import annotations
+
+from sofac.plan.ir import (
+    Plan,
+    origin_of,
+)
+
+
+def format_effects(plan: Plan) -> str:
+    """The effects the step contains, and those left out, for ``sofac inspect --effects``."""
+    width = max((len(e) for e, _, _ in plan.effects), default=0)
+    return "\n".join(f"{effect:<{width}}  {origin}: {detail}" for effect, origin, detail in plan.effects)
+
+
+def format_schedule(plan: Plan) -> str:
+    """The plan as text, for ``sofac inspect --schedule``."""
+    lines = [
+        f"scene {plan.scene_file}",
+        f"dt = {plan.dt.initial[0]!r}, gravity = {plan.gravity.initial.tolist()}",
+    ]
+    for group in plan.groups:
+        scheme = {
+            "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
+            "rk2": "RK2 (midpoint)",
+            "rk4": "RK4",
+            "implicit": "static equilibrium (Newton-Raphson)"
+            if group.static
+            else "Newmark"
+            if group.newmark
+            else "variational symplectic (implicit midpoint)"
+            if group.variational
+            else "implicit Euler",
+        }[group.scheme]
+        lines.append(f"solver {origin_of(group.solver)}: {scheme}")
+        lines.append(
+            "  independent states: "
+            + ", ".join(f"{s.path} <{s.datatype.name}> x{s.size}" for s in group.states)
+        )
+        if group.mapped:
+            lines.append(
+                "  mapped states: "
+                + ", ".join(f"{s.path} <{s.datatype.name}> x{s.size}" for s in group.mapped)
+            )
+        sections: list[tuple[str, list[str]]] = [
+            ("propagate x, v down the mappings", [m.origin for m in group.mappings]),
+            ("reset forces, accumulate forces and gravity", [op.origin for op in group.forces]),
+            ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
+        ]
+        if group.scheme == "implicit":
+            if group.static:
+                rhs, system = "b = f, projected", "Newton iterations: solve -K dx = f, x += alpha dx"
+            elif group.newmark:
+                rhs = "b = f + (-rm M + (rk + h) K) v + (...) a, projected"
+                system = "solve ((1 + h gamma rm) M - (h^2 beta + h gamma rk) K) a' = b"
+            elif group.variational:
+                rhs = "Newton iterations: b = f(x + res) - K res + (2/h) p, projected"
+                system = "solve ((4/h^2 + 4 rm/h) M - (1 + 4 rk/h) K) res = b"
+            elif group.first_order:
+                rhs, system = "b = f, projected (firstOrder)", "solve (M - h K) v' = b"
+            else:
+                rhs, system = (
+                    "b = h (f - rm M v + (h + rk) K v), projected",
+                    "solve ((1 + h rm) M - h (h + rk) K) dv = b",
+                )
+            sections += [
+                (f"{rhs}; M dx", [op.origin for op in group.mass_dx]),
+                ("K dx", [op.origin for op in group.stiffness_dx]),
+            ]
+            if group.assembled_cg:
+                block = group.cg_block
+                sections.append(
+                    (
+                        f"assemble mfact M + kfact K (rows of {block}x{block} blocks), projected",
+                        [op.origin for op in group.assemble],
+                    )
+                )
+            on = " on the assembled matrix" if group.assembled_cg else ""
+            sections.append((f"{system} with {origin_of(group.linear_solver)}{on}", []))
+        else:
+            sections.append(("a = M^-1 f", [op.origin for op in group.accelerations]))
+        sections.append(("project constraints", [p.origin for p in group.projections]))
+        for title, origins in sections:
+            lines.append(f"  {title}:")
+            lines.extend(f"    - {origin}" for origin in origins)
+        lines.append("  update x, v; propagate again")
+        if group.on_read:
+            lines.append("  mapped only when read from Python (nothing in the step reads them):")
+            lines.extend(f"    - {m.origin} -> {m.child.path}" for m in group.on_read)
+    idle = [s for s in plan.states if not s.mapped and not any(s in g.states for g in plan.groups)]
+    for state in idle:
+        lines.append(f"not integrated (no ODE solver): {state.path}")
+    for component, why in plan.ignored:
+        lines.append(f"kept out of the step: {origin_of(component)}: {why}")
+    return "\n".join(lines)

@@ -1,0 +1,415 @@
+"""What each ODE solver and linear solver makes of its group: the scheme, the solver's parameters
+as buffers, and the scenes whose solver configuration is refused (E222).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from sofac import registry
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component
+from sofac.plan.ir import (
+    Group,
+)
+from sofac.registry import Category
+from sofac.registry.components.common import GRAPH_SCATTERED
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+
+# StaticSolver's deprecated attributes -> the NewtonRaphsonSolver parameter SOFA's init sets from
+# them, in SOFA's order (both relative tolerances land on relativeEstimateDifferenceThreshold).
+_STATIC_LEGACY_FORWARDS = (
+    ("newton_iterations", "maxNbIterationsNewton"),
+    ("absolute_correction_tolerance_threshold", "absoluteEstimateDifferenceThreshold"),
+    ("relative_correction_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+    ("absolute_residual_tolerance_threshold", "absoluteResidualStoppingThreshold"),
+    ("relative_residual_tolerance_threshold", "relativeEstimateDifferenceThreshold"),
+)
+
+
+# NewtonRaphsonSolver's parameters the static step reads (the maxNb* are counts).
+_NEWTON_PARAMETERS = (
+    "maxNbIterationsNewton",
+    "absoluteResidualStoppingThreshold",
+    "relativeInitialStoppingThreshold",
+    "relativeSuccessiveStoppingThreshold",
+    "absoluteEstimateDifferenceThreshold",
+    "relativeEstimateDifferenceThreshold",
+    "maxNbIterationsLineSearch",
+    "lineSearchCoefficient",
+)
+
+
+def _newton_defaults() -> dict[str, float]:
+    """SOFA's defaults of those parameters, from the registry (the NewtonRaphsonSolver a
+    StaticSolver creates when the scene has none)."""
+    resolution = registry.lookup("NewtonRaphsonSolver")
+    assert resolution is not None
+    fields = {name: resolution.spec.field(name) for name in _NEWTON_PARAMETERS}
+    return {name: float(spec.default) for name, spec in fields.items() if spec is not None}
+
+
+def _subtree(node: Any) -> list[Any]:
+    """A node and its descendants, depth first."""
+    nodes, pending = [], [node]
+    while pending:
+        current = pending.pop(0)
+        nodes.append(current)
+        pending[0:0] = list(current.children)
+    return nodes
+
+
+def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group | None:
+    kernel = solver.spec.kernel if solver.spec else ""
+    scheme = {
+        "euler_explicit": "euler",
+        "runge_kutta2": "rk2",
+        "runge_kutta4": "rk4",
+        "euler_implicit": "implicit",
+        "static": "implicit",
+        "newmark": "implicit",
+        "variational": "implicit",
+    }.get(kernel)
+    if scheme is None:
+        return None  # reported by _screen
+    symplectic = bool(planner.value(solver.component, "symplectic")) if scheme == "euler" else False
+    group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
+    if kernel == "static" and not plan_static(planner, solver, group):
+        return None
+    if kernel == "euler_implicit" and not plan_implicit(planner, solver, group):
+        return None
+    if kernel == "newmark" and not plan_newmark(planner, solver, group):
+        return None
+    if kernel == "variational" and not plan_variational(planner, solver, group):
+        return None
+    if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
+        linear = solver.links.get("linearSolver")
+        if not isinstance(linear, Component):
+            linear = planner.checked.resolver._linear_solver_below(solver.component.node)
+        spec = planner.checked.of(linear).spec if linear is not None else None
+        if spec is not None and spec.kernel == "direct":
+            group.linear_solver, group.assembled = linear, True
+            group.llt = spec.role == "llt"
+    return group
+
+
+def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
+    """SOFA's PCGLinearSolver: warm-started CG, optionally (block) Jacobi, SSOR or Warp
+    preconditioned; with a PrecomputedWarpPreconditioner, no iteration at all (see below)."""
+    component = linear.component
+    group.linear_solver = component
+    preconditioner = linear.links.get("preconditioner")
+    if (
+        isinstance(preconditioner, Component)
+        and planner.value(component, "use_precond") is not False
+        and getattr(planner.checked.of(preconditioner).spec, "kernel", "") == "precomputed_warp"
+    ):
+        if not precomputed_warp_is_inert(planner, planner.checked.of(preconditioner), group):
+            return False
+        group.inert_preconditioner = preconditioner
+        return True
+    group.pcg = {
+        "iterations": planner.buffer(
+            component, "iterations", [int(planner.value(component, "iterations") or 25)], "i64"
+        ),
+        "tolerance": planner.buffer(
+            component, "tolerance", [float(planner.value(component, "tolerance"))], role="param"
+        ),
+    }
+    if isinstance(preconditioner, Component) and planner.value(component, "use_precond") is not False:
+        spec = planner.checked.of(preconditioner).spec
+        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
+        if block == 4 and not warp_is_identity(planner, planner.checked.of(preconditioner), group):
+            return False
+        if block is None:
+            planner.unsupported(
+                planner.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
+            )
+            return False
+        if block == -1:
+            group.ssor_omega = planner.buffer(
+                preconditioner, "omega", [float(planner.value(preconditioner, "omega"))], role="param"
+            )
+        group.preconditioner, group.assembled = block, True
+    return True
+
+
+def precomputed_warp_is_inert(planner: Planner, warp: CheckedComponent, group: Group) -> bool:
+    """PrecomputedWarpPreconditioner as SOFA runs it: it sizes its precomputed inverse from its
+    PrecomputedMatrixSystem's matrix, which nothing assembles (SOFA only allocates it, 0x0), so the
+    inverse is 0x0 (the shared, empty matrix counts as already built: no precomputation) and the
+    rotated product loops over no DOF: its output vector is left as it was. The PCG's first output
+    is a fresh, zero vector, so r.z = 0 ends it before any iteration: dv keeps its start.
+    The configurations where SOFA does something else are refused."""
+    system = warp.links.get("linearSystem")
+    system_spec = planner.checked.of(system).spec if isinstance(system, Component) else None
+    if system_spec is None or system_spec.name != "PrecomputedMatrixSystem":
+        planner.unsupported(warp, "its linearSystem must link a PrecomputedMatrixSystem")
+        return False
+    if planner.value(warp.component, "use_rotations") is False:
+        planner.unsupported(warp, "use_rotations false (SOFA then copies an empty product) is not compiled")
+        return False
+    if planner.value(warp.component, "share_matrix") is False:
+        planner.unsupported(
+            warp, "share_matrix false (SOFA then precomputes from files and solvers) is not compiled"
+        )
+        return False
+    if group.static or group.newmark:
+        planner.unsupported(warp, "it is compiled under an EulerImplicitSolver only")
+        return False
+    return True
+
+
+def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> bool:
+    """WarpPreconditioner as sofac compiles it: its RotationMatrixSystem reassembles the main
+    system every step (assemblingRate 1), which resets the rotations to identity, and its solver
+    is a sparse direct one: the preconditioner is then that solver on this step's matrix."""
+    system = warp.links.get("linearSystem")
+    inner = warp.links.get("linearSolver")
+    if not isinstance(inner, Component):
+        solvers = [
+            c for c in warp.component.node.objects if planner.checked.of(c).category is Category.LINEAR_SOLVER
+        ]
+        inner = next(
+            (c for c in solvers if getattr(planner.checked.of(c).spec, "kernel", "") == "direct"), None
+        )
+    if isinstance(system, Component) and int(planner.value(system, "assemblingRate") or 1) != 1:
+        planner.unsupported(
+            warp,
+            "a RotationMatrixSystem with assemblingRate > 1 (rotated factorisations) is not compiled yet",
+        )
+        return False
+    spec = planner.checked.of(inner).spec if isinstance(inner, Component) else None
+    if spec is None or spec.kernel != "direct":
+        planner.unsupported(warp, "its linearSolver must be a sparse direct solver")
+        return False
+    group.llt = spec.role == "llt"
+    return True
+
+
+def plan_implicit(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """EulerImplicitSolver's parameters and its CG linear solver (matrix-free, as SOFA's)."""
+    component = solver.component
+    group.first_order = bool(planner.value(component, "firstOrder"))
+    group.trapezoidal = bool(planner.value(component, "trapezoidalScheme"))
+    for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+        group.implicit[name] = planner.buffer(
+            component, name, [float(planner.value(component, name) or 0.0)], role="param"
+        )
+    return plan_linear_solver(planner, solver, group)
+
+
+def plan_newmark(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """NewmarkImplicitSolver: Rayleigh damping, vdamping, gamma, beta; the linear solver."""
+    component = solver.component
+    for name in ("rayleighStiffness", "rayleighMass", "vdamping"):
+        group.implicit[name] = planner.buffer(
+            component, name, [float(planner.value(component, name) or 0.0)], role="param"
+        )
+    for name, default in (("gamma", 0.5), ("beta", 0.25)):
+        value = planner.value(component, name)
+        group.newmark[name] = planner.buffer(
+            component, name, [float(default if value is None else value)], role="param"
+        )
+    group.newmark["started"] = planner.buffer(component, "started", [0], "i64", role="scratch")
+    return plan_refactoring_solver(planner, solver, group)
+
+
+def plan_refactoring_solver(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """The linear solver of a scheme whose matrix changes within a step (Newmark, the
+    variational Newton loop): PrecomputedLinearSolver's single factorisation is refused."""
+    if not plan_linear_solver(planner, solver, group):
+        return False
+    if group.factor_once:
+        name = solver.spec.name if solver.spec else solver.component.type_name
+        planner.unsupported(
+            planner.checked.of(group.linear_solver),
+            f"PrecomputedLinearSolver under {name} is not compiled yet",
+        )
+        return False
+    return True
+
+
+def plan_variational(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """VariationalSymplecticSolver (implicit variant): Newton's tolerance and iteration cap,
+    Rayleigh damping, the Hamiltonian outputs and the energy file; then the linear solver."""
+    component = solver.component
+    if planner.value(component, "explicitIntegration"):
+        planner.unsupported(
+            solver,
+            "explicitIntegration=true is not compiled yet (the implicit variant, the default, is)",
+        )
+        return False
+    for name in ("rayleighStiffness", "rayleighMass"):
+        group.implicit[name] = planner.buffer(
+            component, name, [float(planner.value(component, name) or 0.0)], role="param"
+        )
+    error = planner.value(component, "newtonError")
+    steps = planner.value(component, "steps")
+    group.variational = {
+        "newtonError": planner.buffer(
+            component, "newtonError", [0.01 if error is None else float(error)], role="param"
+        ),
+        "steps": planner.buffer(component, "steps", [5 if steps is None else int(steps)], "i64"),
+        "started": planner.buffer(component, "started", [0], "i64", role="scratch"),
+        # m_incrementalPotentialEnergy: the potential at t = 0 plus -2 f.res at each step
+        "incremental": planner.buffer(component, "incrementalPotentialEnergy", [0.0], role="state"),
+        # outputs: hamiltonianEnergy, and the kinetic and potential parts the energy file shows
+        "hamiltonianEnergy": planner.buffer(component, "hamiltonianEnergy", [0.0], role="state"),
+        "energies": planner.buffer(component, "energies", [0.0, 0.0], role="state"),
+    }
+    computed = planner.value(component, "computeHamiltonian")
+    group.hamiltonian = computed is None or bool(computed)
+    incremental = planner.value(component, "useIncrementalPotentialEnergy")
+    group.incremental_potential = incremental is None or bool(incremental)
+    group.energy_file = str(planner.value(component, "file") or "")
+    group.save_energy = bool(planner.value(component, "saveEnergyInFile"))
+    return plan_refactoring_solver(planner, solver, group)
+
+
+def screen_variational(planner: Planner, group: Group, owner: dict[int, Group]) -> None:
+    """What sofac's VariationalSymplecticSolver cannot take: rigid frames (SOFA adds and
+    subtracts their coordinates as vectors, quaternions included), and masses on mapped states
+    (SOFA's momentum M v stops at the mappings: they would have no inertia)."""
+    solver = planner.checked.of(group.solver)
+    for state in group.states:
+        if state.datatype.rigid:
+            planner.unsupported(
+                solver, f"VariationalSymplecticSolver on {state.datatype.name} is not compiled yet"
+            )
+    for checked in planner.checked:
+        spec = checked.spec
+        is_mass = checked.category is Category.MASS or (spec is not None and spec.role == "and_mass")
+        state = planner.state_of(checked) if is_mass else None
+        if state is not None and state.mapped and owner.get(id(state.component)) is group:
+            planner.unsupported(
+                checked,
+                "a mass on a mapped state under VariationalSymplecticSolver is not compiled yet "
+                "(SOFA's momentum M v leaves it out)",
+            )
+
+
+def plan_static(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
+    (its `newtonSolver` link, else the first one in its node or below, else SOFA's defaults with
+    the StaticSolver's deprecated attributes, as SOFA's init forwards them), then the linear solver."""
+    component = solver.component
+    newton = solver.links.get("newtonSolver")
+    if not isinstance(newton, Component):
+        newton = next(
+            (
+                c
+                for node in _subtree(component.node)
+                for c in node.objects
+                if (spec := planner.checked.of(c).spec) is not None and spec.name == "NewtonRaphsonSolver"
+            ),
+            None,
+        )
+    values: dict[str, float] = {}
+    for name, default in _newton_defaults().items():
+        value = planner.value(newton, name) if newton is not None else None
+        values[name] = float(default if value is None else value)
+    if newton is None:
+        for legacy, name in _STATIC_LEGACY_FORWARDS:
+            value = planner.value(component, legacy)
+            if value is not None:
+                values[name] = float(value)
+    owner = newton if newton is not None else component
+    for name, value in values.items():
+        if name.startswith("maxNb"):
+            group.static[name] = planner.buffer(owner, name, [max(int(value), 0)], "i64")
+        else:
+            group.static[name] = planner.buffer(owner, name, [value], role="param")
+    return plan_linear_solver(planner, solver, group)
+
+
+def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """The implicit group's linear solver: CG (matrix-free, as SOFA's), PCG or a direct solver."""
+    component = solver.component
+    linear = solver.links.get("linearSolver")
+    if not isinstance(linear, Component):
+        linear = planner.checked.resolver._linear_solver_below(component.node)
+    checked_linear = planner.checked.of(linear) if linear is not None else None
+    if checked_linear is None or checked_linear.spec is None:
+        return False  # E221, reported by the checker
+    if checked_linear.spec.kernel == "pcg":
+        return plan_pcg(planner, checked_linear, group)
+    if checked_linear.spec.kernel == "minres":
+        group.linear_solver = linear
+        group.minres = {
+            "iterations": planner.buffer(
+                linear, "iterations", [int(planner.value(linear, "iterations") or 25)], "i64"
+            ),
+            "tolerance": planner.buffer(
+                linear, "tolerance", [float(planner.value(linear, "tolerance"))], role="param"
+            ),
+        }
+        return True
+    if checked_linear.spec.kernel not in ("cg", "direct", "precomputed"):
+        planner.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
+        return False
+    group.linear_solver = linear
+    if checked_linear.spec.kernel in ("direct", "precomputed"):
+        if not assembles_everything(planner, checked_linear):
+            return False
+        group.assembled = group.direct = True
+        group.factor_once = checked_linear.spec.kernel == "precomputed"
+        group.llt = checked_linear.spec.role == "llt"
+        return True
+    if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:
+        # SOFA assembles the system matrix and runs CG on it (CRS, sparse or full: the same numbers)
+        group.assembled = group.assembled_cg = True
+    group.cg = {
+        "iterations": planner.buffer(
+            linear, "iterations", [int(planner.value(linear, "iterations") or 25)], "i64"
+        ),
+        "tolerance": planner.buffer(
+            linear, "tolerance", [float(planner.value(linear, "tolerance"))], role="param"
+        ),
+        "threshold": planner.buffer(
+            linear, "threshold", [float(planner.value(linear, "threshold"))], role="param"
+        ),
+        "solves": planner.buffer(linear, "solves", [0], "i64", role="scratch"),
+    }
+    return True
+
+
+def assembles_everything(planner: Planner, linear: CheckedComponent) -> bool:
+    """The linear system a direct solver solves assembles M, K and the damping with the
+    projections and the mapped components, as sofac's assembly does. Through a
+    CompositeLinearSystem, that is its solverLinearSystem (else its first linear system, as
+    SOFA picks); its other systems assemble only for display or output: nothing reads them."""
+    system = linear.links.get("linearSystem")
+    if not isinstance(system, Component):
+        return True  # the default one SOFA creates: a MatrixLinearSystem
+    checked = planner.checked.of(system)
+    if checked.spec is not None and checked.spec.name == "CompositeLinearSystem":
+        chosen = checked.links.get("solverLinearSystem")
+        if not isinstance(chosen, Component):
+            listed = checked.links.get("linearSystems")
+            chosen = next((c for c in listed or () if isinstance(c, Component)), None)
+        if chosen is None:
+            planner.unsupported(checked, "it needs a solverLinearSystem or linearSystems to solve")
+            return False
+        system, checked = chosen, planner.checked.of(chosen)
+    plain = ("MatrixLinearSystem", "ConstantSparsityPatternSystem")
+    if checked.spec is None or checked.spec.name not in plain:
+        return True  # other systems are screened where they are planned
+    flags = (
+        "enableAssembly",
+        "assembleStiffness",
+        "assembleMass",
+        "assembleDamping",
+        "applyProjectiveConstraints",
+        "applyMappedComponents",
+    )
+    off = [name for name in flags if planner.value(system, name) is False]
+    if off:
+        planner.unsupported(
+            checked, f"{', '.join(off)}=false on the system a solver solves is not compiled yet"
+        )
+        return False
+    return True
