@@ -1,4 +1,5 @@
-"""Where sofac's non-Python files are at run time: the C++ runtime, the templates, the bundled scenes.
+"""Where sofac's non-Python files are at run time: the C++ runtime, the templates, the bundled scenes,
+and the cache folder (libraries, compiled templates, warm records).
 
 In the repository they are top-level folders (``runtime/``, ``templates/``, ``scenes/``) next to the
 package folder ``compiler/``. A built wheel carries them inside the package as ``sofac/_runtime``,
@@ -9,7 +10,12 @@ looked up here, the packaged one first; nothing else should hard-code these path
 from __future__ import annotations
 
 import importlib.resources
+import os
 from pathlib import Path
+
+import platformdirs
+
+CACHE_ENV = "SOFAC_CACHE_DIR"
 
 # name -> (folder inside the installed package, folder at the repository root)
 _LOCATIONS = {
@@ -95,3 +101,9 @@ def bundled_scene(name: str) -> Path:
             return path
     known = ", ".join(str(p.relative_to(root)) for p in bundled_scenes()) or "(none)"
     raise FileNotFoundError(f"no bundled scene {name!r}; the bundled scenes are: {known}")
+
+
+def cache_dir() -> Path:
+    """The cache folder: $SOFAC_CACHE_DIR, else the user's cache folder (platformdirs)."""
+    override = os.environ.get(CACHE_ENV)
+    return Path(override) if override else Path(platformdirs.user_cache_dir("sofac"))

@@ -31,9 +31,8 @@ import platformdirs
 
 from sofac import __version__
 from sofac.diagnostics import SofacError
-from sofac.resources import resource_dir
+from sofac.resources import cache_dir, resource_dir
 
-CACHE_ENV = "SOFAC_CACHE_DIR"
 COMPILER_ENV = "CXX"
 # No fused multiply-adds: SOFA's reference results are computed without them (bit-exact CG).
 SCENE_FLAGS = (
@@ -104,12 +103,6 @@ class Built:
     key: str
     cached: bool  # True when taken from the cache
     seconds: float  # compile time (0 for a cache hit)
-
-
-def cache_dir() -> Path:
-    """The cache folder: $SOFAC_CACHE_DIR, else the user's cache folder (platformdirs)."""
-    override = os.environ.get(CACHE_ENV)
-    return Path(override) if override else Path(platformdirs.user_cache_dir("sofac"))
 
 
 def compiler() -> str:

@@ -66,16 +66,33 @@ class CheckedScene:
     scene: Scene
     components: dict[int, CheckedComponent] = field(default_factory=dict)  # by id(component)
     check_seconds: float = 0.0
-    # The checker, kept for the later stages' value look-ups (value(), positions()).
-    resolver: Any = field(default=None, repr=False, compare=False)
+    # The checker, kept for the later stages' look-ups below (values are computed on demand:
+    # a mesh or a grid is evaluated only if a later stage asks for it).
+    resolver: _Checker | None = field(default=None, repr=False, compare=False)
+
+    def _checker(self) -> _Checker:
+        assert self.resolver is not None, "a CheckedScene made by check_scene"
+        return self.resolver
 
     def value(self, component: Component, name: str) -> Any:
         """The value a component's field has: written, linked, from src, computed, or default."""
-        return self.resolver.value(self.of(component), name)
+        return self._checker().value(self.of(component), name)
 
     def positions(self, state: Component) -> np.ndarray | None:
         """A MechanicalObject's initial positions (n, coord_size), as SOFA's init computes them."""
-        return self.resolver.positions(state)
+        return self._checker().positions(state)
+
+    def node_state(self, node: Node) -> Component | None:
+        """The mechanical state of a node, or of its nearest ancestor that has one (SOFA's context)."""
+        return self._checker()._node_state(node)
+
+    def context_singleton(self, node: Node, role: str) -> Component | None:
+        """SOFA's fallback when a link names a node: its (or its ancestors') "state" / "topology"."""
+        return self._checker()._singleton(node, role)
+
+    def linear_solver_below(self, node: Node) -> Component | None:
+        """The first linear solver in a node's subtree (the one its ODE solver uses)."""
+        return self._checker()._linear_solver_below(node)
 
     def of(self, component: Component) -> CheckedComponent:
         return self.components[id(component)]

@@ -43,7 +43,7 @@ from sofac.plan.ir import (
     bind,
     origin_of,
 )
-from sofac.resources import resource_dir
+from sofac.resources import cache_dir, resource_dir
 
 
 def _comment(text: str) -> str:
@@ -140,8 +140,6 @@ class _OpView:
 
 
 def _bytecode_cache() -> jinja2.BytecodeCache | None:
-    from sofac.build.compiler import cache_dir
-
     folder = cache_dir() / "templates"
     try:
         folder.mkdir(parents=True, exist_ok=True)

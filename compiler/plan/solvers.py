@@ -88,7 +88,7 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
     if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
         linear = solver.links.get("linearSolver")
         if not isinstance(linear, Component):
-            linear = planner.checked.resolver._linear_solver_below(solver.component.node)
+            linear = planner.checked.linear_solver_below(solver.component.node)
         spec = planner.checked.of(linear).spec if linear is not None else None
         if spec is not None and spec.kernel == "direct":
             group.linear_solver, group.assembled = linear, True
@@ -331,7 +331,7 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
     component = solver.component
     linear = solver.links.get("linearSolver")
     if not isinstance(linear, Component):
-        linear = planner.checked.resolver._linear_solver_below(component.node)
+        linear = planner.checked.linear_solver_below(component.node)
     checked_linear = planner.checked.of(linear) if linear is not None else None
     if checked_linear is None or checked_linear.spec is None:
         return False  # E221, reported by the checker

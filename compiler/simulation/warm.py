@@ -32,7 +32,7 @@ import numpy as np
 from sofac import __version__
 from sofac.build import compiler as build
 from sofac.front.datafiles import default_data_roots
-from sofac.resources import resource_dir
+from sofac.resources import cache_dir, resource_dir
 from sofac.simulation.runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
 FORMAT = 1
@@ -81,7 +81,7 @@ def _key(path: Path, options: dict[str, Any]) -> str:
 
 
 def _file(key: str) -> Path:
-    return build.cache_dir() / "loads" / key[:2] / f"{key}.npz"
+    return cache_dir() / "loads" / key[:2] / f"{key}.npz"
 
 
 def _sha256(path: Path) -> str | None:

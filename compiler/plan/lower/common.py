@@ -227,7 +227,7 @@ def _mapping_inputs(planner: Planner, checked: CheckedComponent) -> list[Compone
         path = links.parse_link(word)
         target = links.resolve(path, checked.component) if path is not None else None
         if isinstance(target, Node):
-            target = planner.checked.resolver._node_state(target)
+            target = planner.checked.node_state(target)
         if isinstance(target, Component):
             found.append(target)
     return found

@@ -208,7 +208,7 @@ def lower_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     for role in ("object1", "object2"):
         target = checked.links.get(role)
         if not isinstance(target, Component):
-            target = checked.state or planner.checked.resolver._node_state(checked.component.node)
+            target = checked.state or planner.checked.node_state(checked.component.node)
         ends.append(planner.states.get(id(target)) if target is not None else None)
     if ends[0] is None or ends[1] is None:
         planner.unsupported(checked, "a spring force field must join MechanicalObjects")
@@ -337,7 +337,7 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
     component = checked.component
     topology = checked.links.get("topology")
     if not isinstance(topology, Component):
-        topology = planner.checked.resolver._singleton(component.node, "topology")
+        topology = planner.checked.context_singleton(component.node, "topology")
     rest = planner.checked.positions(state.component)
     if topology is None or rest is None:
         planner.unsupported(checked, "it needs a topology whose elements are known at compile time")
