@@ -28,6 +28,7 @@ from sofac.plan.ir import (
     Count,
     Element,
     Env,
+    FemMethod,
     Function,
     Group,
     MappingOp,
@@ -110,6 +111,8 @@ def _argument(arg: Arg) -> str:
         return f"sofac::{arg.type}{_templates(arg.templates)}{{{fields}}}"
     if isinstance(arg, Env):
         return _ENV[arg]
+    if isinstance(arg, FemMethod):
+        return f"sofac::FEM_{arg.name}"
     if isinstance(arg, bool):
         return "true" if arg else "false"
     if isinstance(arg, (int, float)):

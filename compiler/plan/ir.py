@@ -57,6 +57,15 @@ class Env(enum.Enum):
     NONE = "none"  # an absent pointer
 
 
+class FemMethod(enum.IntEnum):
+    """The FEM force fields' ``method`` (small, large, polar, svd), as the runtime names it (fem.h)."""
+
+    SMALL = 0
+    LARGE = 1
+    POLAR = 2
+    SVD = 3
+
+
 class Constant(enum.Enum):
     """Layout constants of the runtime, named rather than copied (their values live in C++)."""
 

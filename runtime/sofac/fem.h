@@ -44,6 +44,9 @@ namespace sofac {
 // Tetrahedra processed at once by the vectorised kernels (see tetra_fem_data_count).
 constexpr int TETRA_LANES = 4;
 
+// The FEM force fields' `method`, as the kernels take it (an int: SOFA's order of the names).
+enum FemMethod : int { FEM_SMALL = 0, FEM_LARGE = 1, FEM_POLAR = 2, FEM_SVD = 3 };
+
 namespace fem_detail {
 
 // Row-major 3x3 matrix and 3-vector with SOFA's evaluation order (no Eigen: Eigen is free to

@@ -378,6 +378,8 @@ inline void local_forces(const double J[18], const double* K, const double D[6],
 }
 }  // namespace shell_detail
 
+constexpr int trifem_data_size(int /*method*/ = 1) { return shell_detail::TRI_FEM_DATA; }
+
 inline void trifem_init(const Index* tri, Index n, const double* rest_x, const double* young, Index n_young,
                         const double* poisson, Index n_poisson, int /*method*/, double* data) {
     using namespace shell_detail;

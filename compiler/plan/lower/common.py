@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
@@ -18,6 +18,7 @@ from sofac.plan.ir import (
     Buffer,
     Call,
     Env,
+    FemMethod,
     Group,
     Op,
     StatePlan,
@@ -38,6 +39,14 @@ Lowering = Callable[["Planner", CheckedComponent, dict[int, Group]], None]
 
 
 _call = call
+
+
+def _default(checked: CheckedComponent, name: str) -> Any:
+    """A field's default, as the registry states it (the one place defaults live)."""
+    assert checked.spec is not None
+    spec = checked.spec.field(name)
+    assert spec is not None, f"{checked.spec.name} has no field {name}"
+    return spec.default
 
 
 def _target(
@@ -141,7 +150,7 @@ def _written_float(planner: Planner, component: Component, name: str) -> float |
     return None if value is None else float(np.asarray(value, dtype=float).ravel()[0])
 
 
-_FEM_METHODS = {"small": 0, "large": 1, "polar": 2, "svd": 3}
+_FEM_METHODS = {m.name.lower(): m for m in FemMethod}
 
 
 # runtime fem.h TETRA_LANES: tetrahedron element data is stored in blocks of this many elements (a

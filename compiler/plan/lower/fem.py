@@ -14,6 +14,7 @@ from sofac.plan.ir import (
     Constant,
     Count,
     Env,
+    FemMethod,
     Function,
     Group,
     Op,
@@ -25,6 +26,7 @@ from sofac.plan.lower.common import (
     TETRA_LANES,
     _assemble,
     _call,
+    _default,
     _element_target,
     _sparse_grid_coefficients,
     _split_argument,
@@ -41,11 +43,18 @@ if TYPE_CHECKING:
 
 
 # (kernel prefix, element kind, corners, data size per element by method)
-_FEM_KINDS = {
+FEM_KINDS = {
     "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
     "trifem": ("trifem", "triangles", 3, {1: 35}),
+}
+# The runtime's data sizes of those kinds, which tests/test_layout.py checks against this table.
+DATA_SIZE_FUNCTIONS = {
+    "tetra_fem": "tetra_fem_data_size",
+    "tetracorot_fem": "tetracorot_fem_data_size",
+    "hexa_fem": "hexa_fem_data_size",
+    "trifem": "trifem_data_size",
 }
 
 
@@ -56,18 +65,18 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     state, group = found
     component = checked.component
     assert checked.spec is not None
-    prefix, kind, corners, sizes = _FEM_KINDS[checked.spec.kernel]
+    prefix, kind, corners, sizes = FEM_KINDS[checked.spec.kernel]
     if state.datatype.name != "Vec3d":
         planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
         return
-    method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), 1)
-    if prefix == "trifem" and (method != 1 or group.assembled):
+    method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), FemMethod.LARGE)
+    if prefix == "trifem" and (method != FemMethod.LARGE or group.assembled):
         planner.unsupported(
             checked, "TriangularFEMForceField is compiled for method large with the matrix-free CG only"
         )
         return
-    if prefix != "tetra_fem" and method == 3:
-        method = 1  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
+    if prefix != "tetra_fem" and method == FemMethod.SVD:
+        method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
     if prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0:
         planner.unsupported(checked, "plasticity (plasticMaxThreshold > 0) is not compiled yet")
         return
@@ -87,10 +96,16 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     poisson = planner.value(component, "poissonRatio")
     elements = planner.buffer(component, kind, cells, "i64", columns=corners)
     young_buffer = planner.buffer(
-        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+        component,
+        "youngModulus",
+        np.atleast_1d(young if young is not None else _default(checked, "youngModulus")),
+        role="param",
     )
     poisson_buffer = planner.buffer(
-        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+        component,
+        "poissonRatio",
+        np.atleast_1d(poisson if poisson is not None else _default(checked, "poissonRatio")),
+        role="param",
     )
     padded = -(-count // TETRA_LANES) * TETRA_LANES if kind == "tetrahedra" else count
     data = planner.buffer(component, "elements", np.zeros(padded * sizes[method]), role="scratch")
@@ -189,10 +204,16 @@ def lower_trifem_optim(planner: Planner, checked: CheckedComponent, owner: dict[
     poisson = planner.value(component, "poissonRatio")
     elements = planner.buffer(component, "triangles", cells, "i64", columns=3)
     young_buffer = planner.buffer(
-        component, "youngModulus", np.atleast_1d(young if young is not None else 5000.0), role="param"
+        component,
+        "youngModulus",
+        np.atleast_1d(young if young is not None else _default(checked, "youngModulus")),
+        role="param",
     )
     poisson_buffer = planner.buffer(
-        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else 0.45), role="param"
+        component,
+        "poissonRatio",
+        np.atleast_1d(poisson if poisson is not None else _default(checked, "poissonRatio")),
+        role="param",
     )
     material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
     data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")

@@ -24,9 +24,7 @@ if TYPE_CHECKING:
     from sofac.plan.planner import Planner
 
 
-def lower_interaction_ellipsoid(
-    planner: Planner, checked: CheckedComponent, owner: dict[int, Group]
-) -> None:
+def lower_interaction_ellipsoid(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """InteractionEllipsoidForceField: ellipsoids carried by a rigid DOF of object2 push the points of
     object1 (object2 is read, not pushed: object2_forces must be false)."""
     component = checked.component

@@ -1,0 +1,50 @@
+"""Facts shared by the planner and the C++ runtime are stated once, in the runtime's headers, and
+checked here: the planner's copies (block size, per-element data sizes, FEM method codes) must be
+what the headers say, so a change on one side cannot silently desynchronise the other."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+from sofac.build import compiler as build
+from sofac.plan.ir import FemMethod
+from sofac.plan.lower.common import TETRA_LANES
+from sofac.plan.lower.fem import DATA_SIZE_FUNCTIONS, FEM_KINDS
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _runtime_values(tmp_path: Path, expressions: list[str]) -> list[int]:
+    body = "\n".join(f'    std::printf("%d\\n", int({e}));' for e in expressions)
+    source = (
+        f'#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\nint main() {{\n{body}\n}}\n'
+    )
+    (tmp_path / "layout.cpp").write_text(source)
+    binary = tmp_path / "layout"
+    includes = ["-I", str(REPO / "runtime"), "-isystem", str(build.eigen_include())]
+    compile_ = [
+        build.compiler(),
+        "-std=c++17",
+        "-Wall",
+        "-Wextra",
+        "-Werror",
+        *includes,
+        str(tmp_path / "layout.cpp"),
+    ]
+    subprocess.run([*compile_, "-o", str(binary)], check=True, capture_output=True, text=True)
+    out = subprocess.run([str(binary)], check=True, capture_output=True, text=True).stdout
+    return [int(line) for line in out.split()]
+
+
+def test_planner_layout_matches_the_runtime(tmp_path: Path) -> None:
+    expressions = ["sofac::TETRA_LANES"]
+    expected = [TETRA_LANES]
+    for method in FemMethod:
+        expressions.append(f"sofac::FEM_{method.name}")
+        expected.append(int(method))
+    for prefix, (_, _, _, sizes) in FEM_KINDS.items():
+        for method, size in sizes.items():
+            expressions.append(f"sofac::{DATA_SIZE_FUNCTIONS[prefix]}({method})")
+            expected.append(size)
+    assert _runtime_values(tmp_path, expressions) == expected
