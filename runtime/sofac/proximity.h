@@ -1,0 +1,684 @@
+// The element tests of SOFA's proximity intersection methods, MinProximityIntersection and
+// NewProximityIntersection, with SOFA's formulas, thresholds, output fields and emission order
+// (docs/collision-runtime.md maps each function to its SOFA source). A test appends 0..n detection
+// outputs to an OutputList and returns how many.
+//
+// Element order is the intersector's (SOFA registers e.g. Triangle-Point, never Point-Triangle):
+// elem1 / point[0] belong to the first model, elem2 / point[1] to the second, and the normal points
+// from point[0] to point[1] unless SOFA says otherwise (noted). value = distance - contact distance.
+//
+// Where SOFA's arithmetic yields NaN (0/0 on a zero-length edge, coincident points or spheres, a
+// triangle of zero area) sofac does not hand a NaN to the response: a zero-length edge projects on
+// its first point (the limit SOFA's formula has for a short edge), a zero distance takes SOFA's own
+// fallback normal (1, 0, 0), and any other output that is not finite is dropped; both events are
+// counted in the OutputList, so the step can report them.
+#pragma once
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "collision.h"
+
+namespace sofac::collide {
+
+struct DetectionOutput {
+    V3 point[2];
+    V3 normal;
+    double value;
+    Index elem1, elem2;
+    Index id;
+};
+
+// Contact outputs of one model pair. reserve() once; a step that needs more keeps working (the
+// vector grows) and counts it in `growths`, which the step reports so the capacity can be raised.
+class OutputList {
+public:
+    void reserve(std::size_t n) { items_.reserve(n); }
+    void clear() { items_.clear(); }
+    std::size_t size() const { return items_.size(); }
+    const DetectionOutput& operator[](std::size_t i) const { return items_[i]; }
+    DetectionOutput& operator[](std::size_t i) { return items_[i]; }
+    const DetectionOutput* data() const { return items_.data(); }
+    void push(const DetectionOutput& o) {
+        if (items_.size() == items_.capacity()) ++growths;
+        items_.push_back(o);
+    }
+    Index growths = 0;
+    Index zero_distances = 0;  // outputs given SOFA's fallback normal (1, 0, 0)
+    Index dropped = 0;         // outputs SOFA would have made of NaN
+
+private:
+    std::vector<DetectionOutput> items_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// The collision models' element data (Vec3d positions, 3 doubles per point).
+
+struct PointModel {
+    const double* x;
+    Index size;
+    double contact_distance;
+    V3 p(Index i) const { return load3(x, 3, i); }
+};
+
+struct LineModel {
+    const double* x;
+    const Index* edges;  // (size, 2)
+    Index size;
+    double contact_distance;
+    V3 p1(Index e) const { return load3(x, 3, edges[2 * e]); }
+    V3 p2(Index e) const { return load3(x, 3, edges[2 * e + 1]); }
+};
+
+struct TriangleModel {
+    const double* x;
+    const Index* triangles;  // (size, 3)
+    const int* flags;        // triangle_flags()
+    const double* normals;   // (size, 3), triangle_normal(); read only with useSurfaceNormals
+    Index size;
+    double contact_distance;
+    V3 p(Index t, int j) const { return load3(x, 3, triangles[3 * t + j]); }
+    Index point(Index t, int j) const { return triangles[3 * t + j]; }
+};
+
+// SphereCollisionModel<Vec3d> (stride 3) or <Rigid3d> (stride 7, the centre is the translation).
+struct SphereModel {
+    const double* x;
+    Index stride;
+    const double* radii;  // listRadius, may be shorter than the model (then `radius` applies)
+    Index n_radii;
+    double radius;
+    Index size;
+    double contact_distance;
+    V3 center(Index i) const { return load3(x, stride, i); }
+    double r(Index i) const { return i < n_radii ? radii[i] : radius; }
+    // TSphere::getContactPointByNormal: the centre for Vec3d spheres, the surface point
+    // centre - n r for rigid ones.
+    V3 contact_point(Index i, const V3& n) const { return stride == 3 ? center(i) : center(i) - n * r(i); }
+};
+
+struct Proximity {
+    double alarm_distance;
+    double contact_distance;
+};
+
+namespace detail {
+
+inline bool finite(const DetectionOutput& o) {
+    double s = o.value;
+    for (int k = 0; k < 3; ++k) s += o.point[0][k] + o.point[1][k] + o.normal[k];
+    return std::isfinite(s);
+}
+
+// Appends o unless it holds a NaN / infinity (then counts it): the single exit of every test.
+inline int emit(OutputList& out, const DetectionOutput& o) {
+    if (!finite(o)) {
+        ++out.dropped;
+        return 0;
+    }
+    out.push(o);
+    return 1;
+}
+
+// normal = d / |d| with MeshMinProximityIntersection's guard (|d| <= 1e-15 -> (1, 0, 0)); returns |d|.
+inline double guarded_normal(const V3& d, V3& normal, OutputList& out) {
+    const double length = std::sqrt(norm2(d));
+    if (length > 1e-15) {
+        normal = d / length;
+    } else {
+        normal = V3{{1.0, 0.0, 0.0}};
+        ++out.zero_distances;
+    }
+    return length;
+}
+
+// normal = d / |d| where SOFA divides unguarded (NewProximity's kernels, DiscreteIntersection's
+// sphere-sphere): the same numbers whenever |d| > 0, SOFA's (1, 0, 0) when it is 0.
+inline V3 unit(const V3& d, double length, OutputList& out) {
+    if (length > 0) return d / length;
+    ++out.zero_distances;
+    return V3{{1.0, 0.0, 0.0}};
+}
+
+inline Index larger_model_index(Index size1, Index e1, Index size2, Index e2) { return size1 > size2 ? e1 : e2; }
+
+}  // namespace detail
+
+// =============================================================================================
+// MinProximityIntersection (MinProximityIntersection.h, MeshMinProximityIntersection.{h,cpp},
+// DiscreteIntersection.h for sphere-sphere).
+namespace min_proximity {
+
+inline int point_point(const Proximity& m, const PointModel& a, Index e1, const PointModel& b, Index e2,
+                       OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const V3 p = a.p(e1), q = b.p(e2), pq = q - p;
+    if (norm2(pq) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = e1;
+    o.elem2 = e2;
+    o.id = detail::larger_model_index(a.size, e1, b.size, e2);
+    o.point[0] = p;
+    o.point[1] = q;
+    const double contact = m.contact_distance + a.contact_distance + b.contact_distance;
+    o.value = detail::guarded_normal(pq, o.normal, out) - contact;
+    return detail::emit(out, o);
+}
+
+// Line (first) - Point: the projection is clamped to the segment.
+inline int line_point(const Proximity& m, const LineModel& a, Index line, const PointModel& b, Index point,
+                      OutputList& out) {
+    const double alarm = m.alarm_distance + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p1(line), p2 = a.p2(line), P = b.p(point);
+    const V3 AB = p2 - p1, AP = P - p1;
+    const double A = dot(AB, AB), bb = dot(AP, AB);
+    const double alpha = A > 0 ? bb / A : 0.0;  // zero-length edge: SOFA's 0/0, its first point here
+    V3 Q;
+    if (alpha <= 0.0)
+        Q = p1;
+    else if (alpha >= 1.0)
+        Q = p2;
+    else
+        Q = p1 + AB * alpha;
+    const V3 QP = P - Q;
+    if (norm2(QP) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = line;
+    o.elem2 = point;
+    o.id = point;
+    o.point[0] = Q;
+    o.point[1] = P;
+    const double contact = m.contact_distance + b.contact_distance + a.contact_distance;
+    o.value = detail::guarded_normal(QP, o.normal, out) - contact;
+    return detail::emit(out, o);
+}
+
+inline int line_line(const Proximity& m, const LineModel& a, Index e1, const LineModel& b, Index e2, OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const V3 a1 = a.p1(e1), a2 = a.p2(e1), c1 = b.p1(e2), c2 = b.p2(e2);
+    const V3 AB = a2 - a1, CD = c2 - c1, AC = c1 - a1;
+    const double A00 = dot(AB, AB), A11 = dot(CD, CD), A01 = -dot(CD, AB);
+    const double b0 = dot(AB, AC), b1 = -dot(CD, AC);
+    const double det = A00 * A11 - A01 * A01;
+    double alpha = 0.5, beta = 0.5;
+    if (det < -1.0e-15 || det > 1.0e-15) {
+        alpha = (b0 * A11 - b1 * A01) / det;
+        beta = (b1 * A00 - b0 * A01) / det;
+        if (alpha < 0.000001 || alpha > 0.999999 || beta < 0.000001 || beta > 0.999999) return 0;
+    }
+    const V3 P = a1 + AB * alpha, Q = c1 + CD * beta, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = e1;
+    o.elem2 = e2;
+    o.id = detail::larger_model_index(a.size, e1, b.size, e2);
+    o.point[0] = P;
+    o.point[1] = Q;
+    const double contact = m.contact_distance + a.contact_distance + b.contact_distance;
+    o.value = detail::guarded_normal(PQ, o.normal, out) - contact;
+    return detail::emit(out, o);
+}
+
+// Triangle (first) - Point: the projection must fall strictly inside (1e-6 margins); with
+// use_surface_normals the output normal is the triangle's stored normal.
+inline int triangle_point(const Proximity& m, const TriangleModel& a, Index tri, const PointModel& b, Index point,
+                          bool use_surface_normals, OutputList& out) {
+    const double alarm = m.alarm_distance + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p(tri, 0), p2 = a.p(tri, 1), p3 = a.p(tri, 2), P = b.p(point);
+    const V3 AB = p2 - p1, AC = p3 - p1, AP = P - p1;
+    const double A00 = dot(AB, AB), A11 = dot(AC, AC), A01 = dot(AB, AC);
+    const double b0 = dot(AP, AB), b1 = dot(AP, AC);
+    const double det = A00 * A11 - A01 * A01;
+    if (det == 0) return 0;  // zero area: SOFA's 0/0 lets only NaN outputs through
+    const double alpha = (b0 * A11 - b1 * A01) / det;
+    const double beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < 0.000001 || beta < 0.000001 || alpha + beta > 0.999999) return 0;
+    const V3 Q = p1 + AB * alpha + AC * beta;
+    const V3 QP = P - Q;
+    if (norm2(QP) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = tri;
+    o.elem2 = point;
+    o.id = point;
+    o.point[0] = Q;
+    o.point[1] = P;
+    const double contact = m.contact_distance + b.contact_distance + a.contact_distance;
+    o.value = detail::guarded_normal(QP, o.normal, out) - contact;
+    if (use_surface_normals) o.normal = load3(a.normals, 3, tri);
+    return detail::emit(out, o);
+}
+
+// DiscreteIntersection::computeIntersectionSphere (note: rejects only beyond the alarm distance,
+// `>`, where the other tests reject at it, `>=`).
+inline int sphere_sphere(const Proximity& m, const SphereModel& a, Index e1, const SphereModel& b, Index e2,
+                         OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const double contact = m.contact_distance + a.contact_distance + b.contact_distance;
+    const double r = a.r(e1) + b.r(e2);
+    const double reach = alarm + r;
+    const V3 d = b.center(e2) - a.center(e1);
+    const double n2 = norm2(d);
+    if (n2 > reach * reach) return 0;
+    DetectionOutput o;
+    const double length = std::sqrt(n2);
+    o.normal = detail::unit(d, length, out);
+    o.point[0] = a.contact_point(e1, -o.normal);
+    o.point[1] = b.contact_point(e2, o.normal);
+    o.value = length - r - contact;
+    o.elem1 = e1;
+    o.elem2 = e2;
+    o.id = detail::larger_model_index(a.size, e1, b.size, e2);
+    return detail::emit(out, o);
+}
+
+inline int sphere_point(const Proximity& m, const SphereModel& a, Index sphere, const PointModel& b, Index point,
+                        OutputList& out) {
+    const double r = a.r(sphere);
+    const double alarm = m.alarm_distance + r + a.contact_distance + b.contact_distance;
+    const V3 P = a.center(sphere), Q = b.p(point), PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = sphere;
+    o.elem2 = point;
+    o.id = sphere;
+    const double contact = m.contact_distance + r + a.contact_distance + b.contact_distance;
+    o.value = detail::guarded_normal(PQ, o.normal, out) - contact;
+    o.point[0] = a.contact_point(sphere, -o.normal);
+    o.point[1] = Q;
+    return detail::emit(out, o);
+}
+
+// Triangle (first) - Sphere, parametrised from p1 with x13 = p1 - p2, x23 = p1 - p3 (SOFA's form).
+inline int triangle_sphere(const Proximity& m, const TriangleModel& a, Index tri, const SphereModel& b, Index sphere,
+                           OutputList& out) {
+    const double r = b.r(sphere);
+    const double alarm = m.alarm_distance + r + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p(tri, 0), c = b.center(sphere);
+    const V3 x13 = p1 - a.p(tri, 1), x23 = p1 - a.p(tri, 2), x03 = p1 - c;
+    const double A00 = dot(x13, x13), A11 = dot(x23, x23), A01 = dot(x13, x23);
+    const double b0 = dot(x13, x03), b1 = dot(x23, x03);
+    const double det = A00 * A11 - A01 * A01;
+    if (det == 0) return 0;  // zero area (see triangle_point)
+    const double alpha = (b0 * A11 - b1 * A01) / det;
+    const double beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < 0.000001 || beta < 0.000001 || alpha + beta > 0.999999) return 0;
+    const V3 Q = p1 - x13 * alpha - x23 * beta;
+    const V3 QP = c - Q;
+    if (norm2(QP) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = tri;
+    o.elem2 = sphere;
+    o.id = sphere;
+    const double contact = m.contact_distance + r + b.contact_distance + a.contact_distance;
+    o.value = detail::guarded_normal(QP, o.normal, out) - contact;
+    o.point[0] = Q;
+    o.point[1] = b.contact_point(sphere, o.normal);
+    return detail::emit(out, o);
+}
+
+// Line (first) - Sphere. SOFA measures alpha from p2 (x32 = p1 - p2, x31 = c - p2) but places the
+// point from p1 (Q = p1 - x32 alpha): Q is the centre's projection mirrored about the edge's middle.
+// Reproduced as is; no clamping, alpha outside [1e-6, 0.999999] gives no contact.
+inline int line_sphere(const Proximity& m, const LineModel& a, Index line, const SphereModel& b, Index sphere,
+                       OutputList& out) {
+    const double r = b.r(sphere);
+    const double alarm = m.alarm_distance + r + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p1(line), p2 = a.p2(line), c = b.center(sphere);
+    const V3 x32 = p1 - p2, x31 = c - p2;
+    const double A = dot(x32, x32), bb = dot(x32, x31);
+    const double alpha = bb / A;  // zero-length edge: NaN, rejected by the test below as in SOFA
+    if (!(alpha >= 0.000001 && alpha <= 0.999999)) return 0;
+    const V3 Q = p1 - x32 * alpha;
+    const V3 QP = c - Q;
+    if (norm2(QP) >= alarm * alarm) return 0;
+    DetectionOutput o;
+    o.elem1 = line;
+    o.elem2 = sphere;
+    o.id = sphere;
+    const double contact = m.contact_distance + r + b.contact_distance + a.contact_distance;
+    o.value = detail::guarded_normal(QP, o.normal, out) - contact;
+    o.point[0] = Q;
+    o.point[1] = b.contact_point(sphere, o.normal);
+    return detail::emit(out, o);
+}
+
+}  // namespace min_proximity
+
+// =============================================================================================
+// NewProximityIntersection (NewProximityIntersection.{h,inl}, MeshNewProximityIntersection.{h,inl,cpp}).
+// Each kernel writes points, normal, value = |pq| and id; the element test then sets the elements
+// and subtracts the contact distance from every output it added.
+namespace new_proximity {
+
+namespace kernel {
+
+// doIntersectionPointPoint
+inline int point_point(double dist2, const V3& p, const V3& q, Index id, OutputList& out) {
+    const V3 pq = q - p;
+    const double n2 = norm2(pq);
+    if (n2 >= dist2) return 0;
+    DetectionOutput o{};
+    o.id = id;
+    o.point[0] = p;
+    o.point[1] = q;
+    o.value = std::sqrt(n2);
+    o.normal = detail::unit(pq, o.value, out);
+    return detail::emit(out, o);
+}
+
+// doIntersectionLinePoint: the projection of q on [p1, p2], clamped; with `swap`, point[0] is q
+// and the normal points from q to the segment.
+inline int line_point(double dist2, const V3& p1, const V3& p2, const V3& q, Index id, bool swap, OutputList& out) {
+    const V3 AB = p2 - p1, AQ = q - p1;
+    const double A = dot(AB, AB), b = dot(AQ, AB);
+    double alpha = A > 0 ? b / A : 0.0;  // zero-length edge: SOFA's 0/0, its first point here
+    if (alpha < 0.0)
+        alpha = 0.0;
+    else if (alpha > 1.0)
+        alpha = 1.0;
+    const V3 p = p1 + AB * alpha, pq = q - p;
+    const double n2 = norm2(pq);
+    if (n2 >= dist2) return 0;
+    DetectionOutput o{};
+    o.id = id;
+    o.value = std::sqrt(n2);
+    const V3 n = detail::unit(pq, o.value, out);
+    if (swap) {
+        o.point[0] = q;
+        o.point[1] = p;
+        o.normal = -n;
+    } else {
+        o.point[0] = p;
+        o.point[1] = q;
+        o.normal = n;
+    }
+    return detail::emit(out, o);
+}
+
+// doIntersectionLineLine: interior closest points only (1e-6 margins); parallel (|det| <= 1e-12)
+// segments are compared at their middles.
+inline int line_line(double dist2, const V3& p1, const V3& p2, const V3& q1, const V3& q2, Index id, OutputList& out) {
+    const V3 AB = p2 - p1, CD = q2 - q1, AC = q1 - p1;
+    const double A00 = dot(AB, AB), A11 = dot(CD, CD), A01 = -dot(CD, AB);
+    const double b0 = dot(AB, AC), b1 = -dot(CD, AC);
+    const double det = A00 * A11 - A01 * A01;
+    double alpha = 0.5, beta = 0.5;
+    if (det < -0.000000000001 || det > 0.000000000001) {
+        alpha = (b0 * A11 - b1 * A01) / det;
+        beta = (b1 * A00 - b0 * A01) / det;
+        if (alpha < 0.000001 || alpha > 0.999999 || beta < 0.000001 || beta > 0.999999) return 0;
+    }
+    const V3 p = p1 + AB * alpha, q = q1 + CD * beta, pq = q - p;
+    const double n2 = norm2(pq);
+    if (n2 >= dist2) return 0;
+    DetectionOutput o{};
+    o.id = id;
+    o.point[0] = p;
+    o.point[1] = q;
+    o.value = std::sqrt(n2);
+    o.normal = detail::unit(pq, o.value, out);
+    return detail::emit(out, o);
+}
+
+// doIntersectionTrianglePoint: the closest point of triangle (p1, p2, p3) to q, interior or on the
+// feature (corner, edge) the Voronoi tests pick with DBL_EPSILON margins; a feature the triangle
+// does not own (`flags`) gives no contact, another triangle reports it.
+inline int triangle_point(double dist2, int flags, const V3& p1, const V3& p2, const V3& p3, const V3& q, Index id,
+                          bool swap, OutputList& out) {
+    const V3 AB = p2 - p1, AC = p3 - p1, AQ = q - p1;
+    const double A00 = dot(AB, AB), A11 = dot(AC, AC), A01 = dot(AB, AC);
+    const double b0 = dot(AQ, AB), b1 = dot(AQ, AC);
+    const double det = A00 * A11 - A01 * A01;
+    const double eps = std::numeric_limits<double>::epsilon();
+    double alpha = (b0 * A11 - b1 * A01) / det;
+    double beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < eps || beta < eps || alpha + beta > 1 - eps) {
+        const double pAB = b0 / A00, pAC = b1 / A11;
+        if (pAB < eps && pAC < eps) {
+            if (!(flags & FLAG_P1)) return 0;
+            alpha = 0.0;
+            beta = 0.0;
+        } else if (pAB < 1 - eps && pAB >= eps && beta < eps) {
+            if (!(flags & FLAG_E12)) return 0;
+            alpha = pAB;
+            beta = 0.0;
+        } else if (pAC < 1 - eps && pAC >= eps && alpha < eps) {
+            if (!(flags & FLAG_E31)) return 0;
+            alpha = 0.0;
+            beta = pAC;
+        } else {
+            const double pBC = (b1 - b0 + A00 - A01) / (A00 + A11 - 2 * A01);
+            if (pBC < eps) {
+                if (!(flags & FLAG_P2)) return 0;
+                alpha = 1.0;
+                beta = 0.0;
+            } else if (pBC > 1 - eps) {
+                if (!(flags & FLAG_P3)) return 0;
+                alpha = 0.0;
+                beta = 1.0;
+            } else {
+                if (!(flags & FLAG_E23)) return 0;
+                alpha = 1.0 - pBC;
+                beta = pBC;
+            }
+        }
+    }
+    const V3 p = p1 + AB * alpha + AC * beta, pq = q - p;
+    const double n2 = norm2(pq);
+    if (n2 >= dist2) return 0;
+    DetectionOutput o{};
+    o.id = id;
+    o.value = std::sqrt(n2);
+    const V3 n = detail::unit(pq, o.value, out);
+    if (swap) {
+        o.point[0] = q;
+        o.point[1] = p;
+        o.normal = -n;
+    } else {
+        o.point[0] = p;
+        o.point[1] = q;
+        o.normal = n;
+    }
+    return detail::emit(out, o);
+}
+
+}  // namespace kernel
+
+// The element tests' epilogue: elements and value -= contact distance on the last n outputs.
+inline int finish(OutputList& out, int n, Index e1, Index e2, double contact) {
+    for (std::size_t i = out.size() - static_cast<std::size_t>(n); i < out.size(); ++i) {
+        out[i].elem1 = e1;
+        out[i].elem2 = e2;
+        out[i].value -= contact;
+    }
+    return n;
+}
+
+inline int point_point(const Proximity& m, const PointModel& a, Index e1, const PointModel& b, Index e2,
+                       OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const Index id = detail::larger_model_index(a.size, e1, b.size, e2);
+    const int n = kernel::point_point(alarm * alarm, a.p(e1), b.p(e2), id, out);
+    return finish(out, n, e1, e2, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+inline int line_point(const Proximity& m, const LineModel& a, Index line, const PointModel& b, Index point,
+                      OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const int n = kernel::line_point(alarm * alarm, a.p1(line), a.p2(line), b.p(point), point, false, out);
+    return finish(out, n, line, point, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+inline int line_line(const Proximity& m, const LineModel& a, Index e1, const LineModel& b, Index e2, OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const int n = kernel::line_line(alarm * alarm, a.p1(e1), a.p2(e1), b.p1(e2), b.p2(e2),
+                                    detail::larger_model_index(a.size, e1, b.size, e2), out);
+    return finish(out, n, e1, e2, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+inline int triangle_point(const Proximity& m, const TriangleModel& a, Index tri, const PointModel& b, Index point,
+                          OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const int n = kernel::triangle_point(alarm * alarm, a.flags[tri], a.p(tri, 0), a.p(tri, 1), a.p(tri, 2),
+                                         b.p(point), point, false, out);
+    return finish(out, n, tri, point, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+// Triangle - Line: the line against each vertex the triangle owns, then each end of the line
+// against the triangle, then (use_line_line) each owned edge against the line; id = line index.
+inline int triangle_line(const Proximity& m, const TriangleModel& a, Index tri, const LineModel& b, Index line,
+                         bool use_line_line, OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const double dist2 = alarm * alarm;
+    const V3 p1 = a.p(tri, 0), p2 = a.p(tri, 1), p3 = a.p(tri, 2), q1 = b.p1(line), q2 = b.p2(line);
+    const int f = a.flags[tri];
+    int n = 0;
+    if (f & FLAG_P1) n += kernel::line_point(dist2, q1, q2, p1, line, true, out);
+    if (f & FLAG_P2) n += kernel::line_point(dist2, q1, q2, p2, line, true, out);
+    if (f & FLAG_P3) n += kernel::line_point(dist2, q1, q2, p3, line, true, out);
+    n += kernel::triangle_point(dist2, f, p1, p2, p3, q1, line, false, out);
+    n += kernel::triangle_point(dist2, f, p1, p2, p3, q2, line, false, out);
+    if (use_line_line) {
+        if (f & FLAG_E12) n += kernel::line_line(dist2, p1, p2, q1, q2, line, out);
+        if (f & FLAG_E23) n += kernel::line_line(dist2, p2, p3, q1, q2, line, out);
+        if (f & FLAG_E31) n += kernel::line_line(dist2, p3, p1, q1, q2, line, out);
+    }
+    return finish(out, n, tri, line, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+// Triangle - Triangle. Triangles of one model sharing a vertex never meet. e1's vertices against
+// e2 (point[0] on e1; SOFA tests e1's first vertex without looking at FLAG_P1, the other two
+// only when e1 owns them), then e2's owned vertices against e1, then (use_line_line) owned edge
+// pairs. ids: e1.index * 3 + k for e1's vertices, size1 * 3 + e2.index * 12 + k for the rest.
+// (bothSide only rewrites stored normals no kernel reads: it has no effect here.)
+inline int triangle_triangle(const Proximity& m, const TriangleModel& a, Index e1, const TriangleModel& b, Index e2,
+                             bool same_model, bool use_line_line, OutputList& out) {
+    if (same_model) {
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j)
+                if (a.point(e1, i) == b.point(e2, j)) return 0;
+    }
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const double dist2 = alarm * alarm;
+    const V3 p1 = a.p(e1, 0), p2 = a.p(e1, 1), p3 = a.p(e1, 2);
+    const V3 q1 = b.p(e2, 0), q2 = b.p(e2, 1), q3 = b.p(e2, 2);
+    const int f1 = a.flags[e1], f2 = b.flags[e2];
+    const Index id1 = e1 * 3;
+    const Index id2 = a.size * 3 + e2 * 12;
+    int n = 0;
+    n += kernel::triangle_point(dist2, f2, q1, q2, q3, p1, id1 + 0, true, out);
+    if (f1 & FLAG_P2) n += kernel::triangle_point(dist2, f2, q1, q2, q3, p2, id1 + 1, true, out);
+    if (f1 & FLAG_P3) n += kernel::triangle_point(dist2, f2, q1, q2, q3, p3, id1 + 2, true, out);
+    if (f2 & FLAG_P1) n += kernel::triangle_point(dist2, f1, p1, p2, p3, q1, id2 + 0, false, out);
+    if (f2 & FLAG_P2) n += kernel::triangle_point(dist2, f1, p1, p2, p3, q2, id2 + 1, false, out);
+    if (f2 & FLAG_P3) n += kernel::triangle_point(dist2, f1, p1, p2, p3, q3, id2 + 2, false, out);
+    if (use_line_line) {
+        const V3* pe[3][2] = {{&p1, &p2}, {&p2, &p3}, {&p3, &p1}};
+        const V3* qe[3][2] = {{&q1, &q2}, {&q2, &q3}, {&q3, &q1}};
+        const int edge_flag[3] = {FLAG_E12, FLAG_E23, FLAG_E31};
+        for (int i = 0; i < 3; ++i) {
+            if (!(f1 & edge_flag[i])) continue;
+            for (int j = 0; j < 3; ++j)
+                if (f2 & edge_flag[j])
+                    n += kernel::line_line(dist2, *pe[i][0], *pe[i][1], *qe[j][0], *qe[j][1], id2 + 3 + 3 * i + j,
+                                           out);
+        }
+    }
+    return finish(out, n, e1, e2, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+// Sphere - Sphere through the point-point kernel with the radii added to both distances.
+inline int sphere_sphere(const Proximity& m, const SphereModel& a, Index e1, const SphereModel& b, Index e2,
+                         OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance + a.r(e1) + b.r(e2);
+    const int n = kernel::point_point(alarm * alarm, a.center(e1), b.center(e2),
+                                      detail::larger_model_index(a.size, e1, b.size, e2), out);
+    return finish(out, n, e1, e2, m.contact_distance + a.contact_distance + b.contact_distance + a.r(e1) + b.r(e2));
+}
+
+inline int sphere_point(const Proximity& m, const SphereModel& a, Index sphere, const PointModel& b, Index point,
+                        OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance + a.r(sphere);
+    const int n = kernel::point_point(alarm * alarm, a.center(sphere), b.p(point),
+                                      detail::larger_model_index(a.size, sphere, b.size, point), out);
+    return finish(out, n, sphere, point, m.contact_distance + a.contact_distance + b.contact_distance + a.r(sphere));
+}
+
+inline int line_sphere(const Proximity& m, const LineModel& a, Index line, const SphereModel& b, Index sphere,
+                       OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance + b.r(sphere);
+    const int n = kernel::line_point(alarm * alarm, a.p1(line), a.p2(line), b.center(sphere), sphere, false, out);
+    return finish(out, n, line, sphere, m.contact_distance + a.contact_distance + b.contact_distance + b.r(sphere));
+}
+
+// Triangle - Sphere: its own copy of the feature logic, with SOFA's differences kept: 1e-6
+// margins, `pAC < 1e-7` in the corner test, FLAG_E12 checked for edge AC and FLAG_E31 for edge BC,
+// the guarded normal, and point[1] = the sphere's contact point.
+inline int triangle_sphere(const Proximity& m, const TriangleModel& a, Index tri, const SphereModel& b, Index sphere,
+                           OutputList& out) {
+    const int flags = a.flags[tri];
+    const double r = b.r(sphere);
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance + r;
+    const double dist2 = alarm * alarm;
+    const V3 p1 = a.p(tri, 0), c = b.center(sphere);
+    const V3 AB = a.p(tri, 1) - p1, AC = a.p(tri, 2) - p1, AQ = c - p1;
+    const double A00 = dot(AB, AB), A11 = dot(AC, AC), A01 = dot(AB, AC);
+    const double b0 = dot(AQ, AB), b1 = dot(AQ, AC);
+    const double det = A00 * A11 - A01 * A01;
+    double alpha = (b0 * A11 - b1 * A01) / det;
+    double beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < 0.000001 || beta < 0.000001 || alpha + beta > 0.999999) {
+        const double pAB = b0 / A00, pAC = b1 / A11;
+        if (pAB < 0.000001 && pAC < 0.0000001) {
+            if (!(flags & FLAG_P1)) return 0;
+            alpha = 0.0;
+            beta = 0.0;
+        } else if (pAB < 0.999999 && beta < 0.000001) {
+            if (!(flags & FLAG_E12)) return 0;
+            alpha = pAB;
+            beta = 0.0;
+        } else if (pAC < 0.999999 && alpha < 0.000001) {
+            if (!(flags & FLAG_E12)) return 0;
+            alpha = 0.0;
+            beta = pAC;
+        } else {
+            const double pBC = (b1 - b0 + A00 - A01) / (A00 + A11 - 2 * A01);
+            if (pBC < 0.000001) {
+                if (!(flags & FLAG_P2)) return 0;
+                alpha = 1.0;
+                beta = 0.0;
+            } else if (pBC > 0.999999) {
+                if (!(flags & FLAG_P3)) return 0;
+                alpha = 0.0;
+                beta = 1.0;
+            } else {
+                if (!(flags & FLAG_E31)) return 0;
+                alpha = 1.0 - pBC;
+                beta = pBC;
+            }
+        }
+    }
+    const V3 p = p1 + AB * alpha + AC * beta, pq = c - p;
+    const double n2 = norm2(pq);
+    if (n2 >= dist2) return 0;
+    DetectionOutput o;
+    o.elem1 = tri;
+    o.elem2 = sphere;
+    o.id = sphere;
+    o.value = std::sqrt(n2);
+    if (o.value > 1e-15) {
+        o.normal = pq / o.value;
+    } else {
+        o.normal = V3{{1.0, 0.0, 0.0}};
+        ++out.zero_distances;
+    }
+    o.value -= m.contact_distance + a.contact_distance + b.contact_distance + r;
+    o.point[0] = p;
+    o.point[1] = b.contact_point(sphere, o.normal);
+    return detail::emit(out, o);
+}
+
+}  // namespace new_proximity
+
+}  // namespace sofac::collide

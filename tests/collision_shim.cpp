@@ -1,0 +1,246 @@
+// The C++ side of tests/collision_shim.py (see there).
+#include <atomic>
+#include <cstdlib>
+#include <new>
+#include "sofac/contact.h"
+using sofac::Index;
+using namespace sofac::collide;
+#define API extern "C" __attribute__((visibility("default")))
+
+// Heap allocations made by this library, to check that a step allocates nothing.
+static std::atomic<long> g_allocations{0};
+void* operator new(std::size_t n) {
+    ++g_allocations;
+    if (void* p = std::malloc(n ? n : 1)) return p;
+    throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+API long allocations() { return g_allocations.load(); }
+
+enum Kind { PP, LP, LL, TP, SS, SP, TS, LS, TL, TT };
+enum Method { MIN, NEW };
+
+struct Model {
+    const double* x; const Index* elements; const int* flags; const double* normals; Index size;
+    double cd; const double* radii; Index n_radii; double radius; Index stride;
+    PointModel point() const { return PointModel{x, size, cd}; }
+    LineModel line() const { return LineModel{x, elements, size, cd}; }
+    TriangleModel triangle() const { return TriangleModel{x, elements, flags, normals, size, cd}; }
+    SphereModel sphere() const { return SphereModel{x, stride, radii, n_radii, radius, size, cd}; }
+};
+
+static int test(int method, int kind, const Model& a, Index e1, const Model& b, Index e2, const Proximity& m,
+                int option, OutputList& out) {
+    if (method == MIN) {
+        switch (kind) {
+            case PP: return min_proximity::point_point(m, a.point(), e1, b.point(), e2, out);
+            case LP: return min_proximity::line_point(m, a.line(), e1, b.point(), e2, out);
+            case LL: return min_proximity::line_line(m, a.line(), e1, b.line(), e2, out);
+            case TP: return min_proximity::triangle_point(m, a.triangle(), e1, b.point(), e2, option != 0, out);
+            case SS: return min_proximity::sphere_sphere(m, a.sphere(), e1, b.sphere(), e2, out);
+            case SP: return min_proximity::sphere_point(m, a.sphere(), e1, b.point(), e2, out);
+            case TS: return min_proximity::triangle_sphere(m, a.triangle(), e1, b.sphere(), e2, out);
+            case LS: return min_proximity::line_sphere(m, a.line(), e1, b.sphere(), e2, out);
+        }
+        return -1;
+    }
+    switch (kind) {
+        case PP: return new_proximity::point_point(m, a.point(), e1, b.point(), e2, out);
+        case LP: return new_proximity::line_point(m, a.line(), e1, b.point(), e2, out);
+        case LL: return new_proximity::line_line(m, a.line(), e1, b.line(), e2, out);
+        case TP: return new_proximity::triangle_point(m, a.triangle(), e1, b.point(), e2, out);
+        case SS: return new_proximity::sphere_sphere(m, a.sphere(), e1, b.sphere(), e2, out);
+        case SP: return new_proximity::sphere_point(m, a.sphere(), e1, b.point(), e2, out);
+        case TS: return new_proximity::triangle_sphere(m, a.triangle(), e1, b.sphere(), e2, out);
+        case LS: return new_proximity::line_sphere(m, a.line(), e1, b.sphere(), e2, out);
+        case TL: return new_proximity::triangle_line(m, a.triangle(), e1, b.line(), e2, option != 0, out);
+        case TT: return new_proximity::triangle_triangle(m, a.triangle(), e1, b.triangle(), e2, a.x == b.x, option != 0, out);
+    }
+    return -1;
+}
+
+static Index write(const OutputList& out, double* rows, Index capacity) {
+    const Index n = static_cast<Index>(out.size());
+    for (Index i = 0; i < n && i < capacity; ++i) {
+        const DetectionOutput& o = out[i];
+        double* r = rows + 13 * i;
+        for (int k = 0; k < 3; ++k) { r[k] = o.point[0][k]; r[3 + k] = o.point[1][k]; r[6 + k] = o.normal[k]; }
+        r[9] = o.value; r[10] = double(o.elem1); r[11] = double(o.elem2); r[12] = double(o.id);
+    }
+    return n;
+}
+
+API Index element_test(int method, int kind, const Model* a, Index e1, const Model* b, Index e2, double alarm,
+                       double contact, int option, double* rows, Index* counters) {
+    OutputList out;
+    out.reserve(16);
+    test(method, kind, *a, e1, *b, e2, Proximity{alarm, contact}, option, out);
+    counters[0] = out.zero_distances;
+    counters[1] = out.dropped;
+    return write(out, rows, 16);
+}
+
+static Box element_box(int kind, int side, const Model& m, Index i) {
+    // the first model of TP/TS/TL/TT is triangles, of LP/LL/LS lines, of SS/SP spheres, of PP points
+    const int shape = side == 0 ? (kind == PP ? 0 : (kind == LP || kind == LL || kind == LS) ? 1 : (kind == SS || kind == SP) ? 3 : 2)
+                                : ((kind == PP || kind == LP || kind == TP || kind == SP) ? 0 : (kind == LL || kind == TL) ? 1 : kind == TT ? 2 : 3);
+    switch (shape) {
+        case 0: return point_box(load3(m.x, 3, i), m.cd);
+        case 1: return line_box(load3(m.x, 3, m.elements[2 * i]), load3(m.x, 3, m.elements[2 * i + 1]), m.cd);
+        case 2: return triangle_box(load3(m.x, 3, m.elements[3 * i]), load3(m.x, 3, m.elements[3 * i + 1]), load3(m.x, 3, m.elements[3 * i + 2]), m.cd);
+        default: return sphere_box(load3(m.x, m.stride, i), m.sphere().r(i), m.cd);
+    }
+}
+
+// One model pair through trees and the narrow phase, `steps` times (the positions scaled by
+// `moves[s]` about the origin at step s, to refit a built tree); returns the last step's outputs.
+struct Pair {
+    CubeTree tree1, tree2;
+    NarrowPhaseStack stack;
+    OutputList out;
+};
+
+API Index detect(int method, int kind, const Model* a, const Model* b, int depth, double alarm, double contact,
+                 int option, double* rows, Index capacity, Index* counters) {
+    static Pair pair;  // kept across calls, so a second call runs as a later step (refit)
+    const bool same = a->x == b->x && a->elements == b->elements;
+    if (counters[0] == 0) {  // first call for these models: size everything
+        pair.tree1.resize(a->size, depth);
+        pair.tree2.resize(b->size, depth);
+        pair.out.reserve(static_cast<std::size_t>(capacity));
+    }
+    const long before = g_allocations.load();
+    for (Index i = 0; i < a->size; ++i) pair.tree1.set_box(i, element_box(kind, 0, *a, i));
+    for (Index i = 0; i < b->size; ++i) pair.tree2.set_box(i, element_box(kind, 1, *b, i));
+    pair.tree1.update();
+    pair.tree2.update();
+    if (counters[0] == 0) pair.stack.reserve_for(pair.tree1, pair.tree2);
+    const long after_trees = g_allocations.load();
+    pair.out.clear();
+    const Proximity m{alarm, contact};
+    bvh_narrow_phase(pair.tree1, a->cd, pair.tree2, b->cd, alarm, pair.stack, [&](Index e1, Index e2) {
+        if (same && kind == TT && e1 == e2) return;
+        test(method, kind, *a, e1, *b, e2, m, option, pair.out);
+    });
+    counters[1] = after_trees - before;
+    counters[2] = g_allocations.load() - after_trees;
+    counters[3] = pair.out.growths;
+    return write(pair.out, rows, capacity);
+}
+
+// Every element pair, or (boxes) only those whose leaf boxes meet as the narrow phase tests them.
+API Index brute_force(int method, int kind, const Model* a, const Model* b, double alarm, double contact, int option,
+                      int boxes, double* rows, Index capacity) {
+    OutputList out;
+    out.reserve(static_cast<std::size_t>(capacity));
+    const bool same = a->x == b->x && a->elements == b->elements;
+    for (Index e1 = 0; e1 < a->size; ++e1)
+        for (Index e2 = 0; e2 < b->size; ++e2) {
+            if (same && kind == TT && e1 == e2) continue;
+            if (boxes && !boxes_meet(element_box(kind, 0, *a, e1), element_box(kind, 1, *b, e2), alarm + a->cd + b->cd)) continue;
+            test(method, kind, *a, e1, *b, e2, Proximity{alarm, contact}, option, out);
+        }
+    return write(out, rows, capacity);
+}
+
+// The leaf order of a point model's tree and its cubes: level sizes, and per cube its box and range.
+API Index point_tree(const double* x, Index n, int depth, double cd, Index* leaf_elements, Index* level_sizes,
+                     double* cube_rows) {
+    CubeTree tree;
+    tree.resize(n, depth);
+    for (Index i = 0; i < n; ++i) tree.set_box(i, point_box(load3(x, 3, i), cd));
+    tree.update();
+    for (Index i = 0; i < n; ++i) leaf_elements[i] = tree.leaf(i).element;
+    Index row = 0;
+    for (int l = 0; l <= depth; ++l) {
+        level_sizes[l] = static_cast<Index>(tree.level(l).size());
+        for (const auto& c : tree.level(l)) {
+            double* r = cube_rows + 9 * row++;
+            for (int k = 0; k < 3; ++k) { r[k] = c.box.min[k]; r[3 + k] = c.box.max[k]; }
+            r[6] = c.sub_level; r[7] = double(c.sub_begin); r[8] = double(c.sub_end);
+        }
+    }
+    return row;
+}
+
+API void flags(const Index* triangles, Index n, Index n_points, int* out) { triangle_flags(triangles, n, n_points, out); }
+
+// Point models with one box each (`boxes`: n x 6), broad phase with the rule table.
+API Index broad_phase(const double* boxes, const double* cds, Index n, const std::int8_t* rule, double alarm,
+                      Index* pairs) {
+    std::vector<CubeTree> trees(static_cast<std::size_t>(n));
+    std::vector<BroadPhaseModel> models;
+    for (Index i = 0; i < n; ++i) {
+        const double* b = boxes + 6 * i;
+        trees[i].resize(1, 0);
+        trees[i].set_box(0, Box{V3{{b[0], b[1], b[2]}}, V3{{b[3], b[4], b[5]}}});
+        trees[i].update();
+        models.push_back(BroadPhaseModel{&trees[i], cds[i]});
+    }
+    return brute_force_broad_phase(models.data(), n, rule, alarm, pairs);
+}
+
+// Penalty contacts: n contacts on states of n1 / n2 points; then forces, energy, df for dx.
+API double penalty(Index n, const Index* m, const double* normals, const double* dist, const double* ks,
+                   const double* x1, const double* x2, double* f1, double* f2, const double* dx1, const double* dx2,
+                   double* df1, double* df2, double k_factor, double* pen, double* matrix, Index n1, Index n2) {
+    PenaltyContactForceField ff;
+    ff.reserve(static_cast<std::size_t>(n));
+    for (Index c = 0; c < n; ++c)
+        ff.add_contact(m[2 * c], m[2 * c + 1], 0, 0, load3(normals, 3, c), dist[c], ks[c]);
+    ff.add_force(f1, f2, x1, x2);
+    ff.add_dforce(df1, df2, dx1, dx2, k_factor);
+    const Index size = 3 * (n1 + n2);
+    ff.add_k(k_factor, [&](int s1, Index r, int s2, Index col, double v) {
+        matrix[(s1 * 3 * n1 + r) * size + s2 * 3 * n1 + col] += v;
+    });
+    for (Index c = 0; c < n; ++c) pen[c] = ff.contacts[c].pen;
+    return ff.energy();
+}
+
+// De-duplication then contacts of a Triangle (side 1) / Point (side 2) pair from given outputs.
+API Index penalty_from_outputs(const double* rows, Index n, Index id_bound, const double* tri_x,
+                               const Index* triangles, double cd1, double k1, const double* point_x, double cd2,
+                               double k2, double contact_distance, Index* contact_rows, double* contact_values,
+                               double* mapped) {
+    OutputList out;
+    out.reserve(static_cast<std::size_t>(n));
+    for (Index i = 0; i < n; ++i) {
+        const double* r = rows + 13 * i;
+        DetectionOutput o;
+        for (int k = 0; k < 3; ++k) { o.point[0][k] = r[k]; o.point[1][k] = r[3 + k]; o.normal[k] = r[6 + k]; }
+        o.value = r[9]; o.elem1 = Index(r[10]); o.elem2 = Index(r[11]); o.id = Index(r[12]);
+        out.push(o);
+    }
+    ContactDeduplication dedup;
+    dedup.resize(id_bound, static_cast<std::size_t>(n));
+    dedup.run(out);
+    BarycentricContactPoints points;
+    points.reserve(static_cast<std::size_t>(n));
+    PenaltyContactForceField ff;
+    ff.reserve(static_cast<std::size_t>(n));
+    const ContactSideModel side1{ContactSide::kTriangle, tri_x, triangles, nullptr, cd1, k1, &points};
+    const ContactSideModel side2{ContactSide::kPoint, point_x, nullptr, nullptr, cd2, k2, nullptr};
+    set_penalty_contacts(out, dedup, contact_distance, side1, side2, ff);
+    points.apply(tri_x, mapped);
+    for (std::size_t c = 0; c < ff.contacts.size(); ++c) {
+        const PenaltyContact& p = ff.contacts[c];
+        contact_rows[4 * c] = p.m1; contact_rows[4 * c + 1] = p.m2;
+        contact_rows[4 * c + 2] = p.element1; contact_rows[4 * c + 3] = p.element2;
+        contact_values[2 * c] = p.dist; contact_values[2 * c + 1] = p.ks;
+    }
+    return static_cast<Index>(ff.contacts.size());
+}
+
+// Barycentric contact points: coordinates by apply, and apply_jt of unit forces (J^T).
+API void barycentric(const double* x, const Index* triangles, const Index* edges, const double* P, const Index* element,
+                     const int* in_line, Index n, double* mapped, const double* f, double* jt) {
+    BarycentricContactPoints points;
+    for (Index i = 0; i < n; ++i) {
+        if (in_line[i]) points.add_in_line(load3(P, 3, i), element[i], x, edges);
+        else points.add_in_triangle(load3(P, 3, i), element[i], x, triangles);
+    }
+    points.apply(x, mapped);
+    points.apply_jt(f, jt);
+}

@@ -1,0 +1,172 @@
+"""A ctypes shim over runtime/sofac/{collision,proximity,contact}.h for tests/test_collision_kernels.py.
+
+Every element test, the tree + narrow phase of one model pair, a brute-force all-pairs loop over the
+same element test, the broad phase and the penalty force field, each as a C function; outputs come
+back as rows of 13 doubles (point[0], point[1], normal, value, elem1, elem2, id).
+"""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+from kernel_shim import I64, D, build_shim
+from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
+
+SOURCE = (Path(__file__).parent / "collision_shim.cpp").read_text()
+
+KINDS = {"PP": 0, "LP": 1, "LL": 2, "TP": 3, "SS": 4, "SP": 5, "TS": 6, "LS": 7, "TL": 8, "TT": 9}
+METHODS = {"min": 0, "new": 1}
+
+
+class ModelStruct(ctypes.Structure):
+    _fields_ = [
+        ("x", D),
+        ("elements", I64),
+        ("flags", ctypes.POINTER(ctypes.c_int)),
+        ("normals", D),
+        ("size", ctypes.c_int64),
+        ("cd", ctypes.c_double),
+        ("radii", D),
+        ("n_radii", ctypes.c_int64),
+        ("radius", ctypes.c_double),
+        ("stride", ctypes.c_int64),
+    ]
+
+
+@dataclass
+class Model:
+    """A collision model's arrays, kept alive while the C struct points at them."""
+
+    x: np.ndarray
+    elements: np.ndarray | None = None
+    flags: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    cd: float = 0.0
+    radius: float = 1.0
+    radii: np.ndarray | None = None
+    rigid: bool = False
+    struct: ModelStruct = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.x = np.ascontiguousarray(self.x, dtype=np.float64)
+        if self.elements is not None:
+            self.elements = np.ascontiguousarray(self.elements, dtype=np.int64)
+        if self.flags is not None:
+            self.flags = np.ascontiguousarray(self.flags, dtype=np.int32)
+        if self.normals is not None:
+            self.normals = np.ascontiguousarray(self.normals, dtype=np.float64)
+        if self.radii is not None:
+            self.radii = np.ascontiguousarray(self.radii, dtype=np.float64)
+        stride = 7 if self.rigid else 3
+        size = len(self.elements) if self.elements is not None else self.x.size // stride
+        self.struct = ModelStruct(
+            _d(self.x),
+            _i(self.elements) if self.elements is not None else ctypes.cast(None, I64),
+            self.flags.ctypes.data_as(ctypes.POINTER(ctypes.c_int)) if self.flags is not None else None,
+            _d(self.normals) if self.normals is not None else ctypes.cast(None, D),
+            size,
+            self.cd,
+            _d(self.radii) if self.radii is not None else ctypes.cast(None, D),
+            len(self.radii) if self.radii is not None else 0,
+            self.radius,
+            stride,
+        )
+
+
+@dataclass
+class Output:
+    p0: np.ndarray
+    p1: np.ndarray
+    normal: np.ndarray
+    value: float
+    elem1: int
+    elem2: int
+    id: int
+
+
+def outputs(rows: np.ndarray, n: int) -> list[Output]:
+    return [
+        Output(r[0:3].copy(), r[3:6].copy(), r[6:9].copy(), float(r[9]), int(r[10]), int(r[11]), int(r[12]))
+        for r in rows[:n]
+    ]
+
+
+class Shim:
+    def __init__(self, lib: ctypes.CDLL) -> None:
+        self.lib = lib
+        m = ctypes.POINTER(ModelStruct)
+        i64, dbl, integer = ctypes.c_int64, ctypes.c_double, ctypes.c_int
+        lib.element_test.argtypes = [integer, integer, m, i64, m, i64, dbl, dbl, integer, D, I64]
+        lib.element_test.restype = i64
+        lib.detect.argtypes = [integer, integer, m, m, integer, dbl, dbl, integer, D, i64, I64]
+        lib.detect.restype = i64
+        lib.brute_force.argtypes = [integer, integer, m, m, dbl, dbl, integer, integer, D, i64]
+        lib.brute_force.restype = i64
+        lib.point_tree.argtypes = [D, i64, integer, dbl, I64, I64, D]
+        lib.point_tree.restype = i64
+        lib.flags.argtypes = [I64, i64, i64, ctypes.POINTER(ctypes.c_int)]
+        lib.broad_phase.argtypes = [D, D, i64, ctypes.POINTER(ctypes.c_int8), dbl, I64]
+        lib.broad_phase.restype = i64
+        lib.penalty.argtypes = [i64, I64, D, D, D, D, D, D, D, D, D, D, D, dbl, D, D, i64, i64]
+        lib.penalty.restype = dbl
+        lib.penalty_from_outputs.argtypes = [D, i64, i64, D, I64, dbl, dbl, D, dbl, dbl, dbl, I64, D, D]
+        lib.penalty_from_outputs.restype = i64
+        lib.barycentric.argtypes = [D, I64, I64, D, I64, ctypes.POINTER(ctypes.c_int), i64, D, D, D]
+        lib.allocations.restype = ctypes.c_long
+
+    def test(
+        self,
+        method: str,
+        kind: str,
+        a: Model,
+        e1: int,
+        b: Model,
+        e2: int,
+        alarm: float,
+        contact: float,
+        option: int = 0,
+    ) -> tuple[list[Output], tuple[int, int]]:
+        rows = np.zeros((16, 13))
+        counters = np.zeros(2, dtype=np.int64)
+        n = self.lib.element_test(
+            METHODS[method], KINDS[kind], ctypes.byref(a.struct), e1, ctypes.byref(b.struct), e2, alarm,
+            contact, option, _d(rows), _i(counters),
+        )  # fmt: skip
+        assert n >= 0
+        return outputs(rows, n), (int(counters[0]), int(counters[1]))
+
+    def detect(
+        self, method: str, kind: str, a: Model, b: Model, depth: int, alarm: float, contact: float,
+        option: int = 0, first: bool = True,
+    ) -> tuple[list[Output], np.ndarray]:  # fmt: skip
+        capacity = 20000
+        rows = np.zeros((capacity, 13))
+        counters = np.zeros(4, dtype=np.int64)
+        counters[0] = 0 if first else 1
+        n = self.lib.detect(
+            METHODS[method], KINDS[kind], ctypes.byref(a.struct), ctypes.byref(b.struct), depth, alarm,
+            contact, option, _d(rows), capacity, _i(counters),
+        )  # fmt: skip
+        assert n <= capacity
+        return outputs(rows, n), counters
+
+    def brute_force(
+        self, method: str, kind: str, a: Model, b: Model, alarm: float, contact: float, option: int = 0,
+        boxes: bool = False,
+    ) -> list[Output]:  # fmt: skip
+        capacity = 20000
+        rows = np.zeros((capacity, 13))
+        n = self.lib.brute_force(
+            METHODS[method], KINDS[kind], ctypes.byref(a.struct), ctypes.byref(b.struct), alarm, contact,
+            option, int(boxes), _d(rows), capacity,
+        )  # fmt: skip
+        return outputs(rows, n)
+
+
+def make_shim(tmp_path_factory: pytest.TempPathFactory) -> Shim:
+    return Shim(build_shim(tmp_path_factory, "collision", SOURCE))
