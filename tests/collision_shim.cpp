@@ -81,11 +81,39 @@ API Index element_test(int method, int kind, const Model* a, Index e1, const Mod
     return write(out, rows, 16);
 }
 
+// The model type of either side of a kind: 0 points, 1 lines, 2 triangles, 3 spheres.
+static int shape(int kind, int side) {
+    if (side == 0) return kind == PP ? 0 : (kind == LP || kind == LL || kind == LS) ? 1 : (kind == SS || kind == SP) ? 3 : 2;
+    return (kind == PP || kind == LP || kind == TP || kind == SP) ? 0 : (kind == LL || kind == TL) ? 1 : kind == TT ? 2 : 3;
+}
+
+// The tree of one side through the runtime's update_tree (the triangle normals into a scratch array).
+static void update(int kind, int side, const Model& m, CubeTree& tree) {
+    static std::vector<double> normals(3 * 100000);
+    switch (shape(kind, side)) {
+        case 0: update_tree(tree, m.point()); break;
+        case 1: update_tree(tree, m.line()); break;
+        case 2: update_tree(tree, m.triangle(), normals.data()); break;
+        default: update_tree(tree, m.sphere()); break;
+    }
+}
+
+API void triangle_normals(const Model* m, double* normals) {
+    CubeTree tree;
+    tree.resize(m->size, 2);
+    update_tree(tree, m->triangle(), normals);
+}
+
+API int self_points(Index index, Index index2, const Index* offsets, const Index* items) {
+    return points_can_collide(index, index2, Adjacency{offsets, items});
+}
+
+API int self_lines(Index line, Index line2, const Index* edges, const Index* offsets, const Index* items) {
+    return lines_can_collide(line, line2, edges, Adjacency{offsets, items});
+}
+
 static Box element_box(int kind, int side, const Model& m, Index i) {
-    // the first model of TP/TS/TL/TT is triangles, of LP/LL/LS lines, of SS/SP spheres, of PP points
-    const int shape = side == 0 ? (kind == PP ? 0 : (kind == LP || kind == LL || kind == LS) ? 1 : (kind == SS || kind == SP) ? 3 : 2)
-                                : ((kind == PP || kind == LP || kind == TP || kind == SP) ? 0 : (kind == LL || kind == TL) ? 1 : kind == TT ? 2 : 3);
-    switch (shape) {
+    switch (shape(kind, side)) {
         case 0: return point_box(load3(m.x, 3, i), m.cd);
         case 1: return line_box(load3(m.x, 3, m.elements[2 * i]), load3(m.x, 3, m.elements[2 * i + 1]), m.cd);
         case 2: return triangle_box(load3(m.x, 3, m.elements[3 * i]), load3(m.x, 3, m.elements[3 * i + 1]), load3(m.x, 3, m.elements[3 * i + 2]), m.cd);
@@ -111,10 +139,8 @@ API Index detect(int method, int kind, const Model* a, const Model* b, int depth
         pair.out.reserve(static_cast<std::size_t>(capacity));
     }
     const long before = g_allocations.load();
-    for (Index i = 0; i < a->size; ++i) pair.tree1.set_box(i, element_box(kind, 0, *a, i));
-    for (Index i = 0; i < b->size; ++i) pair.tree2.set_box(i, element_box(kind, 1, *b, i));
-    pair.tree1.update();
-    pair.tree2.update();
+    update(kind, 0, *a, pair.tree1);
+    update(kind, 1, *b, pair.tree2);
     if (counters[0] == 0) pair.stack.reserve_for(pair.tree1, pair.tree2);
     const long after_trees = g_allocations.load();
     pair.out.clear();

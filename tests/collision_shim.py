@@ -118,6 +118,9 @@ class Shim:
         lib.penalty_from_outputs.restype = i64
         lib.barycentric.argtypes = [D, I64, I64, D, I64, ctypes.POINTER(ctypes.c_int), i64, D, D, D]
         lib.allocations.restype = ctypes.c_long
+        lib.triangle_normals.argtypes = [m, D]
+        lib.self_points.argtypes = [i64, i64, I64, I64]
+        lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 
     def test(
         self,

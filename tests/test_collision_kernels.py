@@ -336,6 +336,37 @@ def test_triangle_flags(shim: Shim) -> None:
     assert out[1] == FLAG_P3 | FLAG_E23 | FLAG_E31 | be23 | be31
 
 
+def test_self_collision_element_filters(shim: Shim) -> None:
+    """A chain 0-1-2-3-4: points collide only as (later, earlier) and not within two links; lines
+    not when they share a point or an edge touches both."""
+    around = [[1], [0, 2], [1, 3], [2, 4], [3]]
+    offsets = np.cumsum([0] + [len(a) for a in around]).astype(np.int64)
+    items = np.concatenate(around).astype(np.int64)
+    allowed = {
+        (i, j) for i in range(5) for j in range(5) if shim.lib.self_points(i, j, _i(offsets), _i(items))
+    }
+    assert allowed == {(3, 0), (4, 0), (4, 1)}
+    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4]], dtype=np.int64)
+    edges_around = [[0], [0, 1], [1, 2], [2, 3], [3]]
+    e_offsets = np.cumsum([0] + [len(a) for a in edges_around]).astype(np.int64)
+    e_items = np.concatenate(edges_around).astype(np.int64)
+    pairs = {
+        (i, j)
+        for i in range(4)
+        for j in range(4)
+        if shim.lib.self_lines(i, j, _i(edges), _i(e_offsets), _i(e_items))
+    }
+    assert pairs == {(0, 3), (3, 0)}
+
+
+def test_update_tree_writes_triangle_normals(shim: Shim) -> None:
+    x = np.array([[0.0, 0, 0], [2, 0, 0], [0, 3, 0], [0, 0, 1]])
+    m = Model(x, elements=np.array([[0, 1, 2], [0, 3, 1]]), flags=np.zeros(2))
+    normals = np.zeros((2, 3))
+    shim.lib.triangle_normals(ctypes.byref(m.struct), _d(normals))
+    assert close(normals, [(0, 0, 1), (0, 1, 0)])
+
+
 # -------------------------------------------------------------------------------------------------
 # Bounding tree, narrow phase, broad phase
 

@@ -682,3 +682,90 @@ inline int triangle_sphere(const Proximity& m, const TriangleModel& a, Index tri
 }  // namespace new_proximity
 
 }  // namespace sofac::collide
+
+namespace sofac::collide {
+
+// ---------------------------------------------------------------------------------------------
+// One step of a model's bounding tree: the leaf boxes from the current positions, then
+// CubeTree::update() (built at the first call, refitted after). A static model (moving = 0,
+// simulated = 0) is updated once: SOFA freezes its boxes and normals after the first build.
+
+inline void update_tree(CubeTree& tree, const PointModel& m) {
+    for (Index i = 0; i < m.size; ++i) tree.set_box(i, point_box(m.p(i), m.contact_distance));
+    tree.update();
+}
+
+inline void update_tree(CubeTree& tree, const LineModel& m) {
+    for (Index i = 0; i < m.size; ++i) tree.set_box(i, line_box(m.p1(i), m.p2(i), m.contact_distance));
+    tree.update();
+}
+
+// `normals` (size x 3) receives the triangles' normals when computeNormals is set (not null).
+inline void update_tree(CubeTree& tree, const TriangleModel& m, double* normals) {
+    for (Index i = 0; i < m.size; ++i) {
+        const V3 p1 = m.p(i, 0), p2 = m.p(i, 1), p3 = m.p(i, 2);
+        tree.set_box(i, triangle_box(p1, p2, p3, m.contact_distance));
+        if (normals) {
+            const V3 n = triangle_normal(p1, p2, p3);
+            for (int k = 0; k < 3; ++k) normals[3 * i + k] = n[k];
+        }
+    }
+    tree.update();
+}
+
+inline void update_tree(CubeTree& tree, const SphereModel& m) {
+    for (Index i = 0; i < m.size; ++i) tree.set_box(i, sphere_box(m.center(i), m.r(i), m.contact_distance));
+    tree.update();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Topology adjacency lists in ascending element order (MeshTopology's), in CSR form:
+// the items of entry i are items[offsets[i] .. offsets[i + 1]).
+struct Adjacency {
+    const Index* offsets;
+    const Index* items;
+    Index count(Index i) const { return offsets[i + 1] - offsets[i]; }
+    Index at(Index i, Index k) const { return items[offsets[i] + k]; }
+};
+
+// The element filters of a self-colliding model (canCollideWithElement), asked only when both
+// elements belong to models of the same node with selfCollision set.
+//
+// PointCollisionModel, both elements in the model: only index > index2, and not when a neighbour
+// of one is the other or a neighbour of both (SOFA's loop runs only when both have neighbours).
+inline bool points_can_collide(Index index, Index index2, const Adjacency& vertices_around_vertex) {
+    if (index <= index2) return false;
+    const Index n1 = vertices_around_vertex.count(index), n2 = vertices_around_vertex.count(index2);
+    for (Index i1 = 0; i1 < n1; ++i1) {
+        const Index v1 = vertices_around_vertex.at(index, i1);
+        for (Index i2 = 0; i2 < n2; ++i2) {
+            const Index v2 = vertices_around_vertex.at(index2, i2);
+            if (v1 == v2 || v1 == index2 || index == v2) return false;
+        }
+    }
+    return true;
+}
+
+// LineCollisionModel, both elements in the model: not when they share a point, nor when an edge
+// touches an end of each.
+inline bool lines_can_collide(Index line, Index line2, const Index* edges, const Adjacency& edges_around_vertex) {
+    const Index p11 = edges[2 * line], p12 = edges[2 * line + 1];
+    const Index p21 = edges[2 * line2], p22 = edges[2 * line2 + 1];
+    if (p11 == p21 || p11 == p22 || p12 == p21 || p12 == p22) return false;
+    for (const Index p1 : {p11, p12})
+        for (Index i1 = 0; i1 < edges_around_vertex.count(p1); ++i1) {
+            const Index e = edges_around_vertex.at(p1, i1);
+            for (const Index p2 : {p21, p22})
+                for (Index i2 = 0; i2 < edges_around_vertex.count(p2); ++i2)
+                    if (e == edges_around_vertex.at(p2, i2)) return false;
+        }
+    return true;
+}
+
+// TriangleCollisionModel against the point model of its own node: not a vertex of the triangle.
+// (Against anything else it always answers true.)
+inline bool triangle_point_can_collide(const TriangleModel& m, Index tri, Index point) {
+    return point != m.point(tri, 0) && point != m.point(tri, 1) && point != m.point(tri, 2);
+}
+
+}  // namespace sofac::collide
