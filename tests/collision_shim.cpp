@@ -1,4 +1,5 @@
 // The C++ side of tests/collision_shim.py (see there).
+#include <algorithm>
 #include <atomic>
 #include <cstdlib>
 #include <new>
@@ -269,4 +270,72 @@ API void barycentric(const double* x, const Index* triangles, const Index* edges
     }
     points.apply(x, mapped);
     points.apply_jt(f, jt);
+}
+
+// Adjacency lists (ascending) of a mesh, built here for the LocalMinDistance cones.
+struct Lists {
+    std::vector<Index> offsets, items;
+    Adjacency view() const { return Adjacency{offsets.data(), items.data()}; }
+};
+
+static Lists group(Index n, const std::vector<std::pair<Index, Index>>& pairs) {  // (owner, item) sorted
+    Lists l;
+    l.offsets.assign(static_cast<std::size_t>(n + 1), 0);
+    for (const auto& p : pairs) ++l.offsets[p.first + 1];
+    for (Index i = 0; i < n; ++i) l.offsets[i + 1] += l.offsets[i];
+    for (const auto& p : pairs) l.items.push_back(p.second);
+    return l;
+}
+
+static Lists around_vertices(Index n_points, const Index* elements, Index n, int per) {
+    std::vector<std::pair<Index, Index>> pairs;
+    for (Index e = 0; e < n; ++e)
+        for (int k = 0; k < per; ++k) pairs.emplace_back(elements[per * e + k], e);
+    std::sort(pairs.begin(), pairs.end());
+    return group(n_points, pairs);
+}
+
+static Lists around_edges(const Index* edges, Index n_edges, const Index* triangles, Index n_triangles) {
+    std::vector<std::pair<Index, Index>> pairs;
+    for (Index e = 0; e < n_edges; ++e)
+        for (Index t = 0; t < n_triangles; ++t) {
+            int shared = 0;
+            for (int k = 0; k < 3; ++k) shared += triangles[3 * t + k] == edges[2 * e] || triangles[3 * t + k] == edges[2 * e + 1];
+            if (shared == 2) pairs.emplace_back(e, t);
+        }
+    return group(n_edges, pairs);
+}
+
+// One LocalMinDistance element test; the cones asked for (use_cones: 1 points, 2 lines) read the
+// mesh given, as the point model's and the line model's topology.
+API Index lmd_test(int kind, const Model* a, Index e1, const Model* b, Index e2, double alarm, double contact,
+                   int filter, double angle_cone, double cone_factor, int both_side, const double* mesh_x,
+                   const Index* mesh_triangles, Index n_triangles, const Index* mesh_edges, Index n_edges,
+                   Index n_points, int use_cones, double* rows, Index* counters) {
+    namespace lmd = local_min_distance;
+    const lmd::Options o{filter != 0, angle_cone, cone_factor, false};
+    const Lists tav = around_vertices(n_points, mesh_triangles, n_triangles, 3);
+    const Lists eav = around_vertices(n_points, mesh_edges, n_edges, 2);
+    const Lists tae = around_edges(mesh_edges, n_edges, mesh_triangles, n_triangles);
+    const lmd::PointCone point_cone{mesh_x, mesh_triangles, mesh_edges, tav.view(), eav.view(), both_side != 0};
+    const lmd::LineCone line_cone{mesh_x, mesh_triangles, tae.view(), both_side != 0};
+    const lmd::PointCone* pc = (use_cones & 1) ? &point_cone : nullptr;
+    const lmd::LineCone* lc = (use_cones & 2) ? &line_cone : nullptr;
+    const Proximity m{alarm, contact};
+    OutputList out;
+    out.reserve(4);
+    switch (kind) {
+        case PP: lmd::point_point(m, o, a->point(), e1, pc, b->point(), e2, pc, out); break;
+        case LP: lmd::line_point(m, o, a->line(), e1, lc, b->point(), e2, pc, out); break;
+        case LL: lmd::line_line(m, o, a->line(), e1, lc, b->line(), e2, lc, out); break;
+        case TP: lmd::triangle_point(m, o, a->triangle(), e1, both_side != 0, b->point(), e2, pc, out); break;
+        case SS: lmd::sphere_sphere(m, a->sphere(), e1, b->sphere(), e2, out); break;
+        case SP: lmd::sphere_point(m, o, a->sphere(), e1, b->point(), e2, pc, out); break;
+        case TS: lmd::triangle_sphere(m, o, a->triangle(), e1, both_side != 0, b->sphere(), e2, out); break;
+        case LS: lmd::line_sphere(m, o, a->line(), e1, lc, b->sphere(), e2, out); break;
+        default: return -1;
+    }
+    counters[0] = out.zero_distances;
+    counters[1] = out.dropped;
+    return write(out, rows, 4);
 }

@@ -119,6 +119,9 @@ class Shim:
         lib.barycentric.argtypes = [D, I64, I64, D, I64, ctypes.POINTER(ctypes.c_int), i64, D, D, D]
         lib.allocations.restype = ctypes.c_long
         lib.triangle_normals.argtypes = [m, D]
+        lib.lmd_test.argtypes = [integer, m, i64, m, i64, dbl, dbl, integer, dbl, dbl, integer]
+        lib.lmd_test.argtypes += [D, I64, i64, I64, i64, i64, integer, D, I64]
+        lib.lmd_test.restype = i64
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 
@@ -139,6 +142,27 @@ class Shim:
         n = self.lib.element_test(
             METHODS[method], KINDS[kind], ctypes.byref(a.struct), e1, ctypes.byref(b.struct), e2, alarm,
             contact, option, _d(rows), _i(counters),
+        )  # fmt: skip
+        assert n >= 0
+        return outputs(rows, n), (int(counters[0]), int(counters[1]))
+
+    def lmd(
+        self, kind: str, a: Model, e1: int, b: Model, e2: int, alarm: float, contact: float, *,
+        mesh: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, cones: int = 3, filter: bool = True,
+        angle_cone: float = 0.0, cone_factor: float = 0.5, both_side: bool = False,
+    ) -> tuple[list[Output], tuple[int, int]]:  # fmt: skip
+        """A LocalMinDistance test; `mesh` = (x, triangles, edges) of the topology the cones read
+        (`cones`: 1 the point's, 2 the line's, 3 both)."""
+        x, tris, edges = mesh if mesh is not None else (np.zeros((1, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        tris = np.ascontiguousarray(tris, dtype=np.int64)
+        edges = np.ascontiguousarray(edges, dtype=np.int64)
+        rows = np.zeros((4, 13))
+        counters = np.zeros(2, dtype=np.int64)
+        n = self.lib.lmd_test(
+            KINDS[kind], ctypes.byref(a.struct), e1, ctypes.byref(b.struct), e2, alarm, contact, int(filter),
+            angle_cone, cone_factor, int(both_side), _d(x), _i(tris), len(tris), _i(edges), len(edges),
+            len(x), cones if mesh is not None else 0, _d(rows), _i(counters),
         )  # fmt: skip
         assert n >= 0
         return outputs(rows, n), (int(counters[0]), int(counters[1]))

@@ -738,3 +738,75 @@ def test_barycentric_contact_points(shim: Shim) -> None:
     weights[4:, 3] = mapped[4:, 2] / 3
     weights[4:, 0] = 1 - weights[4:, 3]
     assert close(jt, weights.T @ f, 1e-14)
+
+
+# -------------------------------------------------------------------------------------------------
+# LocalMinDistance
+
+# A flat unit square of two triangles (normals +z) with MeshTopology's edges: (1,2), (2,0) the
+# shared diagonal, (0,1), (2,3), (3,0).
+SQUARE = (
+    np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+    np.array([[0, 1, 2], [0, 2, 3]]),
+    np.array([[1, 2], [2, 0], [0, 1], [2, 3], [3, 0]]),
+)
+
+
+def test_lmd_triangle_point_and_the_triangle_side(shim: Shim) -> None:
+    (o,), _ = shim.lmd("TP", triangle(), 0, points((0.25, 0.25, 0.3)), 0, 1.0, 0.1)
+    assert close(o.p0, (0.25, 0.25, 0)) and close(o.p1, (0.25, 0.25, 0.3)) and close(o.normal, (0, 0, 1))
+    assert o.value == pytest.approx(0.2) and o.id == 0
+    below = points((0.25, 0.25, -0.3))
+    assert not shim.lmd("TP", triangle(), 0, below, 0, 1.0, 0.1)[0]  # behind the triangle
+    assert shim.lmd("TP", triangle(), 0, below, 0, 1.0, 0.1, both_side=True)[0]
+    assert shim.lmd("TP", triangle(), 0, below, 0, 1.0, 0.1, filter=False)[0]
+    assert not shim.lmd("TP", triangle(), 0, points((0.5, 0.0, 0.3)), 0, 1.0, 0.1)[0]  # interior only
+
+
+def test_lmd_point_cone(shim: Shim) -> None:
+    """Vertex 2 of the square against a triangle above it (facing down): inside its cone; below
+    it: outside; a triangle tilted so that PQ leans 17 degrees towards the mesh: outside the
+    edge cone unless angleCone widens it."""
+    vertex = Model(SQUARE[0])
+    above = triangle(np.array([[0.5, 0.5, 0.2], [0.5, 2, 0.2], [2, 0.5, 0.2]]))
+    below = triangle(np.array([[0.5, 0.5, -0.2], [2, 0.5, -0.2], [0.5, 2, -0.2]]))
+    (o,), _ = shim.lmd("TP", above, 0, vertex, 2, 1.0, 0.1, mesh=SQUARE, cones=1)
+    assert close(o.p1, (1, 1, 0)) and close(o.p0, (1, 1, 0.2))
+    assert not shim.lmd("TP", below, 0, vertex, 2, 1.0, 0.1, mesh=SQUARE, cones=1)[0]
+    assert shim.lmd("TP", below, 0, vertex, 2, 1.0, 0.1)[0]  # no cone without the point's topology
+    tilted = triangle(np.array([[0.5, 0.5, 0.05], [0.5, 2, 0.05], [2, 0.5, 0.5]]))
+    assert not shim.lmd("TP", tilted, 0, vertex, 2, 1.0, 0.1, mesh=SQUARE, cones=1)[0]
+    (o,), _ = shim.lmd("TP", tilted, 0, vertex, 2, 1.0, 0.1, mesh=SQUARE, cones=1, angle_cone=0.3)
+    assert close(o.normal, -np.array([-0.3, 0, 1]) / math.sqrt(1.09), 1e-12)
+
+
+def test_lmd_line_cone(shim: Shim) -> None:
+    """The square's diagonal (two triangles around it) accepts only PQ along the mean normal; a
+    boundary edge any PQ orthogonal to it."""
+    lines = Model(SQUARE[0], elements=SQUARE[2])
+    (o,), _ = shim.lmd("LP", lines, 1, points((0.5, 0.5, 0.3)), 0, 1.0, 0.1, mesh=SQUARE, cones=2)
+    assert close(o.p0, (0.5, 0.5, 0)) and close(o.p1, (0.5, 0.5, 0.3)) and o.value == pytest.approx(0.2)
+    assert not shim.lmd("LP", lines, 1, points((0.5, 0.5, -0.3)), 0, 1.0, 0.1, mesh=SQUARE, cones=2)[0]
+    assert shim.lmd(
+        "LP", lines, 1, points((0.5, 0.5, -0.3)), 0, 1.0, 0.1, mesh=SQUARE, cones=2, both_side=True
+    )[0]
+    assert shim.lmd("LP", lines, 2, points((0.5, -0.3, 0.3)), 0, 1.0, 0.1, mesh=SQUARE, cones=2)[0]
+    # no clamping: beyond an end there is no contact (MinProximity would take the end point)
+    assert not shim.lmd("LP", lines, 2, points((1.2, 0.0, 0.1)), 0, 1.0, 0.1)[0]
+    assert shim.test("min", "LP", lines, 2, points((1.2, 0.0, 0.1)), 0, 1.0, 0.1)[0]
+
+
+def test_lmd_line_line_and_spheres(shim: Shim) -> None:
+    a, b = segment((-1, 0, 0), (1, 0, 0)), segment((0, -1, 0.4), (0, 1, 0.4))
+    (o,), _ = shim.lmd("LL", a, 0, b, 0, 1.0, 0.1)
+    assert close(o.p0, (0, 0, 0)) and close(o.p1, (0, 0, 0.4)) and o.value == pytest.approx(0.3)
+    (o,), (zero, _) = shim.lmd("LL", a, 0, segment((0, -1, 0), (0, 1, 0)), 0, 1.0, 0.1)  # crossing
+    assert close(o.normal, (1, 0, 0)) and o.value == -0.1 and zero == 1
+    (o,), _ = shim.lmd("SS", spheres((0, 0, 0), radius=0.5), 0, spheres((1.5, 0, 0), radius=0.7), 0, 1.0, 0.1)
+    assert close(o.p0, (0, 0, 0)) and close(o.p1, (1.5, 0, 0)) and o.value == pytest.approx(1.5 - 1.2 - 0.1)
+    (o,), _ = shim.lmd("TS", triangle(), 0, spheres((0.25, 0.25, 0.9), radius=0.5), 0, 1.0, 0.1)
+    assert close(o.p0, (0.25, 0.25, 0)) and close(o.p1, (0.25, 0.25, 0.9)) and o.value == pytest.approx(0.3)
+    (o,), _ = shim.lmd("LS", a, 0, spheres((0.2, 0.5, 0), radius=0.1), 0, 1.0, 0.1)
+    assert close(o.p0, (0.2, 0, 0)) and o.value == pytest.approx(0.3)  # no mirror, unlike MinProximity
+    (o,), _ = shim.lmd("SP", spheres((0, 0, 0), radius=0.5), 0, points((0, 0.8, 0)), 0, 1.0, 0.1)
+    assert close(o.normal, (0, 1, 0)) and o.value == pytest.approx(0.2)

@@ -769,3 +769,247 @@ inline bool triangle_point_can_collide(const TriangleModel& m, Index tri, Index 
 }
 
 }  // namespace sofac::collide
+
+namespace sofac::collide {
+
+// =============================================================================================
+// LocalMinDistance (LocalMinDistance.{h,cpp}): interior-only projections (no clamping), and,
+// unless useLMDFilters, the "angle cones" (testValidity) of both elements after the distance
+// test. Only Vec3d spheres (SOFA registers no rigid sphere pair for it); a sphere is always valid.
+namespace local_min_distance {
+
+struct Options {
+    bool filter_intersection = true;
+    double angle_cone = 0.0;
+    double cone_factor = 0.5;
+    bool use_lmd_filters = false;
+};
+
+// What a point's cone reads: its model's positions and topology. Pass null instead when SOFA
+// accepts before reading the topology (filterIntersection off, or no LineCollisionModel in the
+// point model's node).
+struct PointCone {
+    const double* x;
+    const Index* triangles;
+    const Index* edges;
+    Adjacency triangles_around_vertex;
+    Adjacency edges_around_vertex;
+    bool both_side;
+};
+
+// A line's cone: positions, triangles and trianglesAroundEdge of the line model's topology (the
+// line model's element i is topology edge i).
+struct LineCone {
+    const double* x;
+    const Index* triangles;
+    Adjacency triangles_around_edge;
+    bool both_side;
+};
+
+inline bool valid(const Options& o, const PointCone* cone, Index point, const V3& PQ) {
+    if (!o.filter_intersection || cone == nullptr) return true;
+    const V3 pt = load3(cone->x, 3, point);
+    V3 mean{{0.0, 0.0, 0.0}};
+    const Index n_triangles = cone->triangles_around_vertex.count(point);
+    const Index n_edges = cone->edges_around_vertex.count(point);
+    for (Index k = 0; k < n_triangles; ++k) {
+        const Index* t = cone->triangles + 3 * cone->triangles_around_vertex.at(point, k);
+        const V3 p0 = load3(cone->x, 3, t[0]);
+        mean = mean + normalized(cross(load3(cone->x, 3, t[1]) - p0, load3(cone->x, 3, t[2]) - p0));
+    }
+    auto edge_direction = [&](Index k) {
+        const Index* e = cone->edges + 2 * cone->edges_around_vertex.at(point, k);
+        return normalized((pt - load3(cone->x, 3, e[0])) + (pt - load3(cone->x, 3, e[1])));
+    };
+    if (n_triangles == 0)
+        for (Index k = 0; k < n_edges; ++k) mean = mean + edge_direction(k);
+    const double pq = std::sqrt(norm2(PQ));
+    if (std::sqrt(norm2(mean)) > 0.0000000001) {
+        mean = normalized(mean);
+        if (dot(mean, PQ) < -o.angle_cone * pq && !cone->both_side) return false;
+    }
+    for (Index k = 0; k < n_edges; ++k) {
+        const V3 l = edge_direction(k);
+        double angle = dot(mean, l) * o.cone_factor;
+        if (angle < 0) angle = 0.0;
+        angle += o.angle_cone;
+        if (dot(l, PQ) < -angle * pq) return false;
+    }
+    return true;
+}
+
+inline bool valid(const Options& o, const LineModel& m, const LineCone* cone, Index line, const V3& PQ) {
+    if (!o.filter_intersection) return true;
+    const V3 AB = normalized(m.p2(line) - m.p1(line));
+    const double pq = std::sqrt(norm2(PQ));
+    if (cone != nullptr && cone->triangles_around_edge.count(line) == 2) {
+        const Index i1 = m.edges[2 * line], i2 = m.edges[2 * line + 1];
+        const Index* t0 = cone->triangles + 3 * cone->triangles_around_edge.at(line, 0);
+        const Index* t1 = cone->triangles + 3 * cone->triangles_around_edge.at(line, 1);
+        const bool t0_left =
+            (i1 == t0[0] && i2 == t0[1]) || (i1 == t0[1] && i2 == t0[2]) || (i1 == t0[2] && i2 == t0[0]);
+        const Index* right = t0_left ? t1 : t0;
+        const Index* left = t0_left ? t0 : t1;
+        auto normal = [&](const Index* t) {
+            const V3 p0 = load3(cone->x, 3, t[0]);
+            return normalized(cross(load3(cone->x, 3, t[1]) - p0, load3(cone->x, 3, t[2]) - p0));
+        };
+        const V3 n1 = normal(right);
+        const V3 tangent1 = normalized(cross(n1, AB));
+        const V3 n2 = normal(left);
+        const V3 tangent2 = normalized(cross(AB, n2));
+        const V3 mean = normalized(n1 + n2);
+        if (dot(mean, PQ) < 0 && !cone->both_side) return false;
+        for (const V3& t : {tangent1, tangent2}) {
+            double angle = dot(mean, t) * o.cone_factor;
+            if (angle < 0) angle = 0.0;
+            angle += o.angle_cone;
+            if (dot(t, PQ) < -angle * pq) return false;
+        }
+        return true;
+    }
+    // a boundary (or free) edge: PQ must be nearly orthogonal to it
+    return !(std::fabs(dot(AB, normalized(PQ))) > o.angle_cone + 0.0001);
+}
+
+inline bool valid(const Options& o, const TriangleModel& m, bool both_side, Index tri, const V3& PQ) {
+    if (!o.filter_intersection || both_side) return true;
+    const V3 p1 = m.p(tri, 0);
+    return dot(cross(m.p(tri, 1) - p1, m.p(tri, 2) - p1), PQ) >= 0.0;
+}
+
+namespace detail {
+inline int emit(OutputList& out, Index e1, Index e2, Index id, const V3& p0, const V3& p1, double contact) {
+    DetectionOutput o;
+    o.elem1 = e1;
+    o.elem2 = e2;
+    o.id = id;
+    o.point[0] = p0;
+    o.point[1] = p1;
+    const V3 d = p1 - p0;
+    const double length = std::sqrt(norm2(d));
+    o.normal = collide::detail::unit(d, length, out);
+    o.value = length - contact;
+    return collide::detail::emit(out, o);
+}
+}  // namespace detail
+
+inline int line_line(const Proximity& m, const Options& o, const LineModel& a, Index e1, const LineCone* cone1,
+                     const LineModel& b, Index e2, const LineCone* cone2, OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const V3 AB = a.p2(e1) - a.p1(e1), CD = b.p2(e2) - b.p1(e2), AC = b.p1(e2) - a.p1(e1);
+    const double A00 = dot(AB, AB), A11 = dot(CD, CD), A01 = -dot(CD, AB);
+    const double b0 = dot(AB, AC), b1 = -dot(CD, AC);
+    const double det = A00 * A11 - A01 * A01;
+    double alpha = 0.5, beta = 0.5;
+    if (det < -1.0e-30 || det > 1.0e-30) {
+        alpha = (b0 * A11 - b1 * A01) / det;
+        beta = (b1 * A00 - b0 * A01) / det;
+        if (alpha < 1e-15 || alpha > (1.0 - 1e-15) || beta < 1e-15 || beta > (1.0 - 1e-15)) return 0;
+    }
+    const V3 P = a.p1(e1) + AB * alpha, Q = b.p1(e2) + CD * beta, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && (!valid(o, a, cone1, e1, PQ) || !valid(o, b, cone2, e2, -PQ))) return 0;
+    const Index id = collide::detail::larger_model_index(a.size, e1, b.size, e2);
+    return detail::emit(out, e1, e2, id, P, Q, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+// Triangle (first) - Point, interior only; the point's cone sees PQ (towards the triangle), the
+// triangle's its reverse.
+inline int triangle_point(const Proximity& m, const Options& o, const TriangleModel& a, Index tri, bool both_side,
+                          const PointModel& b, Index point, const PointCone* cone, OutputList& out) {
+    const double alarm = m.alarm_distance + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p(tri, 0), AB = a.p(tri, 1) - p1, AC = a.p(tri, 2) - p1, P = b.p(point), AP = P - p1;
+    const double A00 = dot(AB, AB), A11 = dot(AC, AC), A01 = dot(AB, AC);
+    const double b0 = dot(AP, AB), b1 = dot(AP, AC);
+    const double det = A00 * A11 - A01 * A01;
+    if (det == 0) return 0;  // zero area (see min_proximity::triangle_point)
+    const double alpha = (b0 * A11 - b1 * A01) / det, beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < 0.000001 || beta < 0.000001 || alpha + beta > 0.999999) return 0;
+    const V3 Q = p1 + AB * alpha + AC * beta, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && (!valid(o, cone, point, PQ) || !valid(o, a, both_side, tri, -PQ))) return 0;
+    return detail::emit(out, tri, point, point, Q, P, m.contact_distance + b.contact_distance + a.contact_distance);
+}
+
+// Triangle (first) - Sphere: as triangle_point with the centre and the radius in both distances.
+inline int triangle_sphere(const Proximity& m, const Options& o, const TriangleModel& a, Index tri, bool both_side,
+                           const SphereModel& b, Index sphere, OutputList& out) {
+    const double r = b.r(sphere);
+    const double alarm = m.alarm_distance + r + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p(tri, 0), AB = a.p(tri, 1) - p1, AC = a.p(tri, 2) - p1, P = b.center(sphere), AP = P - p1;
+    const double A00 = dot(AB, AB), A11 = dot(AC, AC), A01 = dot(AB, AC);
+    const double b0 = dot(AP, AB), b1 = dot(AP, AC);
+    const double det = A00 * A11 - A01 * A01;
+    if (det == 0) return 0;
+    const double alpha = (b0 * A11 - b1 * A01) / det, beta = (b1 * A00 - b0 * A01) / det;
+    if (alpha < 0.000001 || beta < 0.000001 || alpha + beta > 0.999999) return 0;
+    const V3 Q = p1 + AB * alpha + AC * beta, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && !valid(o, a, both_side, tri, -PQ)) return 0;
+    return detail::emit(out, tri, sphere, sphere, Q, P, m.contact_distance + r + b.contact_distance + a.contact_distance);
+}
+
+// Line (first) - Point: no clamping, alpha outside [1e-6, 0.999999] gives no contact, nor does an
+// edge shorter than 1e-12 |AP|.
+inline int line_point(const Proximity& m, const Options& o, const LineModel& a, Index line, const LineCone* line_cone,
+                      const PointModel& b, Index point, const PointCone* point_cone, OutputList& out) {
+    const double alarm = m.alarm_distance + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p1(line), AB = a.p2(line) - p1, P = b.p(point), AP = P - p1;
+    if (std::sqrt(norm2(AB)) < 0.000000000001 * std::sqrt(norm2(AP))) return 0;
+    const double alpha = dot(AP, AB) / dot(AB, AB);
+    if (!(alpha >= 0.000001 && alpha <= 0.999999)) return 0;  // (0/0 on a point on a null edge: none)
+    const V3 Q = p1 + AB * alpha, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && (!valid(o, point_cone, point, PQ) || !valid(o, a, line_cone, line, -PQ))) return 0;
+    return detail::emit(out, line, point, point, Q, P, m.contact_distance + b.contact_distance + a.contact_distance);
+}
+
+inline int line_sphere(const Proximity& m, const Options& o, const LineModel& a, Index line, const LineCone* cone,
+                       const SphereModel& b, Index sphere, OutputList& out) {
+    const double r = b.r(sphere);
+    const double alarm = m.alarm_distance + r + b.contact_distance + a.contact_distance;
+    const V3 p1 = a.p1(line), AB = a.p2(line) - p1, P = b.center(sphere), AP = P - p1;
+    if (std::sqrt(norm2(AB)) < 0.000000000001 * std::sqrt(norm2(AP))) return 0;
+    const double alpha = dot(AP, AB) / dot(AB, AB);
+    if (!(alpha >= 0.000001 && alpha <= 0.999999)) return 0;
+    const V3 Q = p1 + AB * alpha, PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && !valid(o, a, cone, line, -PQ)) return 0;
+    return detail::emit(out, line, sphere, sphere, Q, P, m.contact_distance + r + b.contact_distance + a.contact_distance);
+}
+
+inline int point_point(const Proximity& m, const Options& o, const PointModel& a, Index e1, const PointCone* cone1,
+                       const PointModel& b, Index e2, const PointCone* cone2, OutputList& out) {
+    const double alarm = m.alarm_distance + a.contact_distance + b.contact_distance;
+    const V3 P = a.p(e1), Q = b.p(e2), PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && (!valid(o, cone1, e1, PQ) || !valid(o, cone2, e2, -PQ))) return 0;
+    const Index id = collide::detail::larger_model_index(a.size, e1, b.size, e2);
+    return detail::emit(out, e1, e2, id, P, Q, m.contact_distance + a.contact_distance + b.contact_distance);
+}
+
+inline int sphere_point(const Proximity& m, const Options& o, const SphereModel& a, Index sphere, const PointModel& b,
+                        Index point, const PointCone* cone, OutputList& out) {
+    const double r = a.r(sphere);
+    const double alarm = m.alarm_distance + r + a.contact_distance + b.contact_distance;
+    const V3 P = a.center(sphere), Q = b.p(point), PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    if (!o.use_lmd_filters && !valid(o, cone, point, -PQ)) return 0;
+    const Index id = collide::detail::larger_model_index(a.size, sphere, b.size, point);
+    return detail::emit(out, sphere, point, id, P, Q, m.contact_distance + r + a.contact_distance + b.contact_distance);
+}
+
+inline int sphere_sphere(const Proximity& m, const SphereModel& a, Index e1, const SphereModel& b, Index e2,
+                         OutputList& out) {
+    const double alarm = m.alarm_distance + a.r(e1) + a.contact_distance + b.r(e2) + b.contact_distance;
+    const V3 P = a.center(e1), Q = b.center(e2), PQ = Q - P;
+    if (norm2(PQ) >= alarm * alarm) return 0;
+    const Index id = collide::detail::larger_model_index(a.size, e1, b.size, e2);
+    const double contact = m.contact_distance + a.r(e1) + a.contact_distance + b.r(e2) + b.contact_distance;
+    return detail::emit(out, e1, e2, id, P, Q, contact);
+}
+
+}  // namespace local_min_distance
+
+}  // namespace sofac::collide
