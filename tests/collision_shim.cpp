@@ -339,3 +339,58 @@ API Index lmd_test(int kind, const Model* a, Index e1, const Model* b, Index e2,
     counters[1] = out.dropped;
     return write(out, rows, 4);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Contact order: SOFA's map operations over a scripted sequence of steps, with the runtime's
+// StablePairMap or with a std::map whose comparator is SOFA's expression as written (operand
+// order left to g++). Each step lists its broad-phase pairs and whether each found contacts;
+// the output map's and the contact map's orders after each step are written out.
+#include "sofac/contact_order.h"
+
+struct SofaExpressionCompare {
+    StableIds* ids;
+    bool operator()(const ModelPair& a, const ModelPair& b) const {
+        return std::make_pair(ids->id(b.first), ids->id(b.second)) > std::make_pair(ids->id(a.first), ids->id(a.second));
+    }
+};
+
+template <class OutputMap, class ContactMap>
+static Index run_order(OutputMap& outputs, ContactMap& contacts, const Index* pairs, const int* found,
+                       const Index* step_sizes, Index n_steps, Index* orders) {
+    Index written = 0, at = 0;
+    for (Index s = 0; s < n_steps; ++s) {
+        for (auto& entry : outputs) entry.second = 0;  // beginNarrowPhase: outputs cleared, entries kept
+        for (Index k = 0; k < step_sizes[s]; ++k, ++at) {
+            auto slot = output_slot(outputs, pairs[2 * at], pairs[2 * at + 1]);
+            slot->second = found[at];
+        }
+        erase_empty(outputs, [](int n) { return n == 0; });
+        for (const auto& entry : outputs) contact_slot(contacts, entry.first);
+        remove_inactive(contacts, outputs, [](int) {});
+        for (const auto& entry : outputs) { orders[written++] = entry.first.first; orders[written++] = entry.first.second; }
+        orders[written++] = -1;
+        for (const auto& entry : contacts) { orders[written++] = entry.first.first; orders[written++] = entry.first.second; }
+        orders[written++] = -2;
+    }
+    return written;
+}
+
+API Index contact_order(int sofa_expression, Index n_models, const Index* pairs, const int* found,
+                        const Index* step_sizes, Index n_steps, Index* orders, Index* allocations) {
+    if (sofa_expression) {
+        StableIds ids1, ids2;
+        ids1.resize(n_models);
+        ids2.resize(n_models);
+        std::map<ModelPair, int, SofaExpressionCompare> outputs(SofaExpressionCompare{&ids1});
+        std::map<ModelPair, int, SofaExpressionCompare> contacts(SofaExpressionCompare{&ids2});
+        return run_order(outputs, contacts, pairs, found, step_sizes, n_steps, orders);
+    }
+    StablePairMap<int> outputs, contacts;
+    outputs.reserve(n_models, static_cast<std::size_t>(n_models * n_models));
+    contacts.reserve(n_models, static_cast<std::size_t>(n_models * n_models));
+    const long before = g_allocations.load();
+    const Index n = run_order(outputs.map(), contacts.map(), pairs, found, step_sizes, n_steps, orders);
+    allocations[0] = g_allocations.load() - before;
+    allocations[1] = outputs.growths() + contacts.growths();
+    return n;
+}

@@ -122,6 +122,8 @@ class Shim:
         lib.lmd_test.argtypes = [integer, m, i64, m, i64, dbl, dbl, integer, dbl, dbl, integer]
         lib.lmd_test.argtypes += [D, I64, i64, I64, i64, i64, integer, D, I64]
         lib.lmd_test.restype = i64
+        lib.contact_order.argtypes = [integer, i64, I64, ctypes.POINTER(ctypes.c_int), I64, i64, I64, I64]
+        lib.contact_order.restype = i64
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 
@@ -166,6 +168,37 @@ class Shim:
         )  # fmt: skip
         assert n >= 0
         return outputs(rows, n), (int(counters[0]), int(counters[1]))
+
+    def contact_order(
+        self, steps: list[list[tuple[int, int, int]]], n_models: int, sofa_expression: bool
+    ) -> tuple[list[tuple[list[tuple[int, int]], list[tuple[int, int]]]], tuple[int, int]]:
+        """Per step, the output map's and the contact map's key orders; steps list (model 1,
+        model 2, found contacts) in broad-phase order."""
+        flat = [p for step in steps for p in step]
+        pairs = np.array([(a, b) for a, b, _ in flat], dtype=np.int64).reshape(-1, 2)
+        found = np.array([f for _, _, f in flat], dtype=np.int32)
+        sizes = np.array([len(s) for s in steps], dtype=np.int64)
+        orders = np.zeros(4 * len(flat) * len(steps) + 2 * len(steps) + 8, dtype=np.int64)
+        allocations = np.zeros(2, dtype=np.int64)
+        n = self.lib.contact_order(
+            int(sofa_expression), n_models, _i(pairs), found.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+            _i(sizes), len(steps), _i(orders), _i(allocations),
+        )  # fmt: skip
+        result, current, first = [], [], None
+        values = orders[:n].tolist()
+        i = 0
+        while i < len(values):
+            if values[i] == -1:
+                first, current = current, []
+                i += 1
+            elif values[i] == -2:
+                result.append((first, current))
+                current = []
+                i += 1
+            else:
+                current.append((values[i], values[i + 1]))
+                i += 2
+        return result, (int(allocations[0]), int(allocations[1]))
 
     def detect(
         self, method: str, kind: str, a: Model, b: Model, depth: int, alarm: float, contact: float,

@@ -810,3 +810,33 @@ def test_lmd_line_line_and_spheres(shim: Shim) -> None:
     assert close(o.p0, (0.2, 0, 0)) and o.value == pytest.approx(0.3)  # no mirror, unlike MinProximity
     (o,), _ = shim.lmd("SP", spheres((0, 0, 0), radius=0.5), 0, points((0, 0.8, 0)), 0, 1.0, 0.1)
     assert close(o.normal, (0, 1, 0)) and o.value == pytest.approx(0.2)
+
+
+# -------------------------------------------------------------------------------------------------
+# Contact order (contact_order.h)
+
+
+def test_contact_order_reproduces_the_briefs_harness(shim: Shim) -> None:
+    """The design brief's six pairs of models 10 < 20 < 30 < 40 in broad-phase order: the output
+    map keeps that order, the contact map fed from it iterates in another (g++ 12.2 harness)."""
+    step = [(20, 10, 1), (30, 10, 1), (30, 20, 1), (40, 10, 1), (40, 20, 1), (40, 30, 1)]
+    ((outputs, contacts),), (allocations, growths) = shim.contact_order([step], 41, sofa_expression=False)
+    assert outputs == [(20, 10), (30, 10), (30, 20), (40, 10), (40, 20), (40, 30)]
+    assert contacts == [(30, 10), (30, 20), (20, 10), (40, 10), (40, 30), (40, 20)]
+    assert allocations == 0 and growths == 0  # nodes come from the reserved pool
+
+
+def test_contact_order_matches_sofas_expression_under_gxx(shim: Shim) -> None:
+    """Random steps (pairs appearing and disappearing, broad-phase order): the explicit sequence
+    a.second, a.first, b.second, b.first gives the orders of SOFA's comparator as g++ compiles it."""
+    rng = np.random.default_rng(4)
+    n_models = 7
+    candidates = [(i, j) for i in range(n_models) for j in range(i)]
+    steps = []
+    for _ in range(40):
+        chosen = [p for p in candidates if rng.random() < 0.4]
+        steps.append([(a, b, int(rng.random() < 0.7)) for a, b in chosen])
+    explicit, _ = shim.contact_order(steps, n_models, sofa_expression=False)
+    literal, _ = shim.contact_order(steps, n_models, sofa_expression=True)
+    assert explicit == literal
+    assert any(out != con for out, con in explicit)  # the two maps do disagree at times
