@@ -394,3 +394,29 @@ API Index contact_order(int sofa_expression, Index n_models, const Index* pairs,
     allocations[1] = outputs.growths() + contacts.growths();
     return n;
 }
+
+// A self-colliding point model (a chain): the narrow phase of the model against itself with
+// PointCollisionModel's element filter, or (brute) every element pair through the same filter.
+API Index self_points_detect(const double* x, Index n, const Index* offsets, const Index* items, int depth,
+                             double alarm, double contact, int brute, double* rows, Index capacity) {
+    const PointModel m{x, n, 0.01};
+    const Adjacency around{offsets, items};
+    CubeTree tree;
+    tree.resize(n, depth);
+    update_tree(tree, m);
+    NarrowPhaseStack stack;
+    stack.reserve_for(tree, tree);
+    OutputList out;
+    out.reserve(static_cast<std::size_t>(capacity));
+    const Proximity prox{alarm, contact};
+    auto elements = [&](Index e1, Index e2) {
+        if (points_can_collide(e1, e2, around)) min_proximity::point_point(prox, m, e1, m, e2, out);
+    };
+    if (brute) {
+        for (Index e1 = 0; e1 < n; ++e1)
+            for (Index e2 = 0; e2 < n; ++e2) elements(e1, e2);
+    } else {
+        bvh_narrow_phase(tree, m.contact_distance, tree, m.contact_distance, alarm, stack, elements);
+    }
+    return write(out, rows, capacity);
+}

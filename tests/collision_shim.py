@@ -124,6 +124,8 @@ class Shim:
         lib.lmd_test.restype = i64
         lib.contact_order.argtypes = [integer, i64, I64, ctypes.POINTER(ctypes.c_int), I64, i64, I64, I64]
         lib.contact_order.restype = i64
+        lib.self_points_detect.argtypes = [D, i64, I64, I64, integer, dbl, dbl, integer, D, i64]
+        lib.self_points_detect.restype = i64
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 from collision_shim import KINDS, Model, Output, Shim, make_shim
+from collision_shim import outputs as outputs_of
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
 
@@ -840,3 +841,41 @@ def test_contact_order_matches_sofas_expression_under_gxx(shim: Shim) -> None:
     literal, _ = shim.contact_order(steps, n_models, sofa_expression=True)
     assert explicit == literal
     assert any(out != con for out, con in explicit)  # the two maps do disagree at times
+
+
+def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:
+    """A random-walk chain of points colliding with itself: the narrow phase of the model against
+    itself, with PointCollisionModel's element filter, finds what all pairs through the filter find."""
+    rng = np.random.default_rng(9)
+    n = 300
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    around = [[1]] + [[i - 1, i + 1] for i in range(1, n - 1)] + [[n - 2]]
+    offsets = np.cumsum([0] + [len(a) for a in around]).astype(np.int64)
+    items = np.concatenate(around).astype(np.int64)
+    runs = []
+    for brute in (0, 1):
+        rows = np.zeros((20000, 13))
+        count = shim.lib.self_points_detect(
+            _d(x), n, _i(offsets), _i(items), 6, 0.04, 0.01, brute, _d(rows), 20000
+        )
+        runs.append(sorted(map(key, outputs_of(rows, count))))
+    assert len(runs[1]) > 20 and runs[0] == runs[1]
+    assert all(o[0] > o[1] + 2 for o in runs[0])  # (later, earlier), never within two links
+
+
+def test_rigid_spheres_through_the_narrow_phase(shim: Shim) -> None:
+    rng = np.random.default_rng(12)
+
+    def rigid(centers: np.ndarray, radii: np.ndarray) -> Model:
+        x = np.hstack([centers, np.tile([0.0, 0, 0, 1], (len(centers), 1))])
+        return Model(x, radius=0.05, radii=radii, rigid=True, cd=0.01)
+
+    a = rigid(rng.uniform(-1, 1, (120, 3)), rng.uniform(0.02, 0.08, 60))
+    b = rigid(rng.uniform(-0.6, 1.4, (100, 3)), rng.uniform(0.02, 0.08, 100))
+    for method in ("min", "new"):
+        found, _ = shim.detect(method, "SS", a, b, depth=6, alarm=0.1, contact=0.02)
+        every = shim.brute_force(method, "SS", a, b, alarm=0.1, contact=0.02)
+        assert len(every) > 10 and sorted(map(key, found)) == sorted(map(key, every))
+    for o in found:  # rigid spheres: contact points on the surfaces, so |p1 - p0| = value + contact distances
+        assert close(o.p1 - o.p0, o.normal * np.dot(o.p1 - o.p0, o.normal), 1e-12)
+        assert np.dot(o.p1 - o.p0, o.normal) == pytest.approx(o.value + 0.02 + 0.01 + 0.01, abs=1e-12)
