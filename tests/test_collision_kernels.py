@@ -876,6 +876,13 @@ def test_rigid_spheres_through_the_narrow_phase(shim: Shim) -> None:
         found, _ = shim.detect(method, "SS", a, b, depth=6, alarm=0.1, contact=0.02)
         every = shim.brute_force(method, "SS", a, b, alarm=0.1, contact=0.02)
         assert len(every) > 10 and sorted(map(key, found)) == sorted(map(key, every))
-    for o in found:  # rigid spheres: contact points on the surfaces, so |p1 - p0| = value + contact distances
-        assert close(o.p1 - o.p0, o.normal * np.dot(o.p1 - o.p0, o.normal), 1e-12)
-        assert np.dot(o.p1 - o.p0, o.normal) == pytest.approx(o.value + 0.02 + 0.01 + 0.01, abs=1e-12)
+        for o in found:
+            c1, c2 = a.x[o.elem1, :3], b.x[o.elem2, :3]
+            r1 = a.radii[o.elem1] if o.elem1 < len(a.radii) else 0.05
+            r2 = b.radii[o.elem2] if o.elem2 < len(b.radii) else 0.05
+            distance = np.linalg.norm(c2 - c1)
+            assert o.value == pytest.approx(distance - r1 - r2 - 0.04, abs=1e-12)
+            if method == "min":  # DiscreteIntersection: the points on the rigid spheres' surfaces
+                assert close(o.p0, c1 + o.normal * r1, 1e-12) and close(o.p1, c2 - o.normal * r2, 1e-12)
+            else:  # NewProximity's point-point kernel keeps the centres, whatever the sphere type
+                assert close(o.p0, c1) and close(o.p1, c2)
