@@ -420,3 +420,25 @@ API Index self_points_detect(const double* x, Index n, const Index* offsets, con
     }
     return write(out, rows, capacity);
 }
+
+// The tree's structure is that of its first update: refit with other positions keeps the leaf
+// order (leaf_refit), a fresh tree on those positions sorts them anew (leaf_fresh).
+API int tree_structure(const double* x0, const double* x1, Index n, int depth, Index* leaf_refit, Index* leaf_fresh,
+                       double* root_refit) {
+    CubeTree kept, fresh;
+    kept.resize(n, depth);
+    fresh.resize(n, depth);
+    const int before = kept.built();
+    update_tree(kept, PointModel{x0, n, 0.0});
+    update_tree(kept, PointModel{x1, n, 0.0});
+    update_tree(fresh, PointModel{x1, n, 0.0});
+    for (Index i = 0; i < n; ++i) {
+        leaf_refit[i] = kept.leaf(i).element;
+        leaf_fresh[i] = fresh.leaf(i).element;
+    }
+    for (int k = 0; k < 3; ++k) {
+        root_refit[k] = kept.root().box.min[k];
+        root_refit[3 + k] = kept.root().box.max[k];
+    }
+    return before == 0 && kept.built() ? 1 : 0;
+}

@@ -126,6 +126,7 @@ class Shim:
         lib.contact_order.restype = i64
         lib.self_points_detect.argtypes = [D, i64, I64, I64, integer, dbl, dbl, integer, D, i64]
         lib.self_points_detect.restype = i64
+        lib.tree_structure.argtypes = [D, D, i64, integer, I64, I64, D]
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 

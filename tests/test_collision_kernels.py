@@ -393,6 +393,17 @@ def test_tree_splits_as_sofa(shim: Shim) -> None:
     assert list(leaf[:6]) == [1, 3, 0, 2, 5, 4]
 
 
+def test_tree_structure_is_fixed_by_the_first_update(shim: Shim) -> None:
+    rng = np.random.default_rng(6)
+    x0 = rng.uniform(-1, 1, (40, 3))
+    x1 = x0[::-1].copy()  # the same points, element i now where element 39 - i was
+    refit, fresh = np.zeros(40, dtype=np.int64), np.zeros(40, dtype=np.int64)
+    root = np.zeros(6)
+    assert shim.lib.tree_structure(_d(x0), _d(x1), 40, 6, _i(refit), _i(fresh), _d(root)) == 1
+    assert list(fresh) == [39 - e for e in refit]  # a fresh build would sort the moved points anew
+    assert close(root, np.concatenate([x1.min(axis=0), x1.max(axis=0)]))  # the refit boxes follow x1
+
+
 def random_models(kind: str, rng: np.random.Generator, n: int) -> tuple[Model, Model]:
     def cloud(m: int, center: float) -> np.ndarray:
         return rng.uniform(-1, 1, (m, 3)) + center

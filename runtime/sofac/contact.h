@@ -38,6 +38,11 @@ public:
         keep_.assign(n, 1);
         for (std::size_t i = 0; i < n; ++i) {
             const auto id = static_cast<std::size_t>(outputs[i].id);
+            if (id >= stamp_.size()) {  // an id bound set too small: grow (counted) rather than overrun
+                ++growths;
+                stamp_.resize(id + 1, 0);
+                champion_.resize(id + 1, 0);
+            }
             if (stamp_[id] == step_) {
                 const std::size_t earlier = champion_[id];
                 if (outputs[earlier].value <= outputs[i].value) {

@@ -39,7 +39,6 @@ public:
     std::size_t size() const { return items_.size(); }
     const DetectionOutput& operator[](std::size_t i) const { return items_[i]; }
     DetectionOutput& operator[](std::size_t i) { return items_[i]; }
-    const DetectionOutput* data() const { return items_.data(); }
     void push(const DetectionOutput& o) {
         if (items_.size() == items_.capacity()) ++growths;
         items_.push_back(o);
