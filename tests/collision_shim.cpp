@@ -442,3 +442,60 @@ API int tree_structure(const double* x0, const double* x1, Index n, int depth, I
     }
     return before == 0 && kept.built() ? 1 : 0;
 }
+
+// Points dropped on a static two-triangle floor (NewProximity triangle-point, penalty response), a
+// damped symplectic Euler loop written here: detection, de-duplication, contact points, force. The
+// points' final heights, and the heap allocations of the steps after the first.
+API long drop_points(double* x, Index n, Index steps, double dt, double mass, double damping, double k_floor,
+                     double k_points, double alarm, double contact, Index* contact_counts) {
+    static const double floor_x[] = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
+    static const Index floor_triangles[] = {0, 1, 2, 0, 2, 3};
+    int flags[2];
+    triangle_flags(floor_triangles, 2, 4, flags);
+    const TriangleModel floor{floor_x, floor_triangles, flags, nullptr, 2, 0.0};
+    const PointModel cloud{x, n, 0.0};
+    CubeTree floor_tree, cloud_tree;
+    floor_tree.resize(2, 6);
+    cloud_tree.resize(n, 6);
+    update_tree(floor_tree, floor, nullptr);  // static: once
+    update_tree(cloud_tree, cloud);
+    NarrowPhaseStack stack;
+    stack.reserve_for(floor_tree, cloud_tree);
+    OutputList outputs;
+    outputs.reserve(static_cast<std::size_t>(4 * n));
+    ContactDeduplication dedup;
+    dedup.resize(n, static_cast<std::size_t>(4 * n));
+    BarycentricContactPoints floor_points;
+    floor_points.reserve(static_cast<std::size_t>(4 * n));
+    PenaltyContactForceField ff;
+    ff.reserve(static_cast<std::size_t>(4 * n));
+    std::vector<double> v(static_cast<std::size_t>(3 * n), 0.0), f(static_cast<std::size_t>(3 * n));
+    std::vector<double> x1(static_cast<std::size_t>(12 * n)), f1(static_cast<std::size_t>(12 * n));
+    const ContactSideModel side1{ContactSide::kTriangle, floor_x, floor_triangles, nullptr, 0.0, k_floor, &floor_points};
+    const ContactSideModel side2{ContactSide::kPoint, x, nullptr, nullptr, 0.0, k_points, nullptr};
+    const Proximity prox{alarm, contact};
+    long allocations = 0;
+    for (Index s = 0; s < steps; ++s) {
+        const long before = g_allocations.load();
+        update_tree(cloud_tree, cloud);
+        outputs.clear();
+        bvh_narrow_phase(floor_tree, 0.0, cloud_tree, 0.0, alarm, stack, [&](Index t, Index p) {
+            new_proximity::triangle_point(prox, floor, t, cloud, p, outputs);
+        });
+        dedup.run(outputs);
+        set_penalty_contacts(outputs, dedup, contact, side1, side2, ff);
+        floor_points.apply(floor_x, x1.data());
+        std::fill(f.begin(), f.end(), 0.0);
+        ff.add_force(f1.data(), f.data(), x1.data(), x);
+        for (Index i = 0; i < n; ++i) {
+            f[3 * i + 2] -= mass * 9.81;
+            for (int k = 0; k < 3; ++k) {
+                v[3 * i + k] += dt * (f[3 * i + k] - damping * v[3 * i + k]) / mass;
+                x[3 * i + k] += dt * v[3 * i + k];
+            }
+        }
+        contact_counts[s] = static_cast<Index>(ff.contacts.size());
+        if (s > 0) allocations += g_allocations.load() - before;
+    }
+    return allocations;
+}

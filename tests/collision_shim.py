@@ -127,6 +127,8 @@ class Shim:
         lib.self_points_detect.argtypes = [D, i64, I64, I64, integer, dbl, dbl, integer, D, i64]
         lib.self_points_detect.restype = i64
         lib.tree_structure.argtypes = [D, D, i64, integer, I64, I64, D]
+        lib.drop_points.argtypes = [D, i64, i64, dbl, dbl, dbl, dbl, dbl, dbl, dbl, I64]
+        lib.drop_points.restype = ctypes.c_long
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
 

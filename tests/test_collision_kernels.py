@@ -700,6 +700,25 @@ def test_penalty_against_finite_differences(shim: Shim) -> None:
         assert np.abs(p.run(x1, x2, k_factor=k_factor)["K"] - k_factor * jac).max() < 1e-6 * np.abs(jac).max()
 
 
+def test_points_come_to_rest_on_a_floor(shim: Shim) -> None:
+    """The whole chain in a loop: points dropped on a static floor settle where the penalty force
+    carries their weight, ks (dist - h) = m g with dist = contactDistance and ks = k1 k2 / dist, one
+    contact each (the point on the shared diagonal is reported once, by the triangle owning that
+    edge), and the steps after the first allocate nothing."""
+    x = np.array([[0.3, -0.4, 0.3], [-0.5, 0.2, 0.25], [0.2, 0.2, 0.35], [0.9, 0.9, 0.2], [-2.0, 0.0, 0.3]])
+    steps = 4000
+    counts = np.zeros(steps, dtype=np.int64)
+    mass, k1, k2, contact = 1.0, 100.0, 10.0, 0.05
+    allocations = shim.lib.drop_points(_d(x), 5, steps, 1e-3, mass, 120.0, k1, k2, 0.2, contact, _i(counts))
+    assert allocations == 0
+    ks = k1 * k2 / contact
+    rest = contact - mass * 9.81 / ks
+    assert np.abs(x[:4, 2] - rest).max() < 1e-9
+    assert close(x[:4, :2], [(0.3, -0.4), (-0.5, 0.2), (0.2, 0.2), (0.9, 0.9)], 1e-12)  # pushed straight up
+    assert x[4, 2] < 0  # off the floor: it falls past the floor plane
+    assert counts[-1] == 4 and counts[0] == 0
+
+
 def test_penalty_contacts_from_outputs(shim: Shim) -> None:
     """De-duplication by id (a later duplicate replaces the first only with a strictly smaller
     value, at its own position), barycentric contact points on the triangle side, identity on
