@@ -123,7 +123,6 @@ inline void triangle_flags(const Index* triangles, Index n_triangles, Index n_po
     };
     std::vector<EdgeUse> edges;
     edges.reserve(static_cast<std::size_t>(3 * n_triangles));
-    std::vector<Index> edge_of(static_cast<std::size_t>(3 * n_triangles));
     for (Index t = 0; t < n_triangles; ++t) {
         for (int j = 0; j < 3; ++j) {
             const Index v = triangles[3 * t + j];
@@ -189,7 +188,7 @@ public:
             parent_of_[i] = i;
         }
         levels_.assign(static_cast<std::size_t>(max_depth + 1), {});
-        // Level l holds at most 2^l cubes and at most n / 3 (a split cube has 5 leaves or more).
+        // Level l holds at most 2^l cubes, and fewer than n (a split cube has 5 leaves or more).
         for (int l = 0; l <= max_depth; ++l) {
             const Index by_split = l < 62 ? (Index{1} << l) : n_elements;
             levels_[l].reserve(static_cast<std::size_t>(std::max<Index>(1, std::min(by_split, n_elements))));
