@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from sofac.build import eigen_include
+from sofac.build.compiler import eigen_include
 from sofac.resources import resource_dir
 
 HERE = Path(__file__).resolve().parent
