@@ -136,6 +136,75 @@ def _bound(item: Call, values: dict[Slot, Arg]) -> str:
     return statement(bind(item, values))
 
 
+# Headers every scene includes: the library's ABI and the kernels the template itself calls.
+_ALWAYS_INCLUDED = ("abi.h", "kernels.h")
+# A top-level definition in a runtime header: `inline [attributes] type name(` or `struct Name`.
+_DEFINITION = re.compile(
+    r"^(?:__attribute__\(\([^)]*\)\)\s+)?(?:inline\s+[^;(]*?\b(\w+)\(|struct\s+(\w+))", re.M
+)
+
+
+@functools.cache
+def _header_of() -> dict[str, str]:
+    """Which runtime header defines each kernel and struct a plan's calls can name (read from the
+    headers themselves, so there is no list to keep in step); the always-included ones win."""
+    index: dict[str, str] = {}
+    headers = sorted(
+        (resource_dir("runtime") / "sofac").glob("*.h"), key=lambda h: h.name not in _ALWAYS_INCLUDED
+    )
+    for header in headers:
+        for function, struct in _DEFINITION.findall(header.read_text()):
+            index.setdefault(function or struct, header.name)
+    return index
+
+
+def _names(item: Statement) -> list[str]:
+    if isinstance(item, Note):
+        return []
+    names = [item.kernel]
+    pending = list(item.args)
+    while pending:
+        arg = pending.pop()
+        if isinstance(arg, Function):
+            names.append(arg.name)
+        elif isinstance(arg, Aggregate):
+            names.append(arg.type)
+            pending.extend(arg.fields)
+    return names
+
+
+def _headers(plan: Plan) -> list[str]:
+    """The runtime headers a plan's calls need, beyond the always-included ones."""
+    statements: list[Statement] = []
+    for group in plan.groups:
+        for phase in (
+            group.forces,
+            group.accelerations,
+            group.mass_dx,
+            group.stiffness_dx,
+            group.energy,
+            group.init,
+            group.assemble,
+        ):
+            statements += [s for op in phase for s in op.calls]
+        # (J's assembly reaches the step through group.assemble, where an assembled system uses it)
+        for mapping in (*group.mappings, *group.on_read):
+            statements += [*mapping.apply, mapping.jacobian]
+            statements += [c for c in (mapping.transpose, mapping.geometric) if c is not None]
+        matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        for projection in group.projections:
+            statements += [projection.project]
+            extra = (projection.mark if matrix else None, projection.position, projection.project_velocity)
+            statements += [c for c in extra if c is not None]
+    index = _header_of()
+    needed = set()
+    for name in {n for item in statements for n in _names(item)}:
+        if name not in index:
+            raise KeyError(f"no runtime header defines sofac::{name}")
+        needed.add(index[name])
+    return sorted(needed - set(_ALWAYS_INCLUDED))
+
+
 class _OpView:
     def __init__(self, op: Op) -> None:
         self.origin = op.origin
@@ -275,6 +344,7 @@ def generate_source(plan: Plan) -> str:
         any_direct=any(g.direct or g.preconditioner for g in plan.groups),
         on_read=any(g.on_read for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),
+        headers=_headers(plan),
         dt=plan.dt,
         threads=plan.threads,
         guard=plan.contact_guard,
