@@ -642,7 +642,23 @@ class _Planner:
         self.guard = self._contact_guard()
         if self.prune:
             self._leave_unread_out(list(groups.values()))
+        self._add_point_forces(list(groups.values()))
         return list(groups.values())
+
+    def _add_point_forces(self, groups: list[Group]) -> None:
+        """A force on one DOF of every state the step computes forces on, set from Python between
+        steps without recompiling (``<state>.pointForceIndex``, -1: none, and ``<state>.pointForce``):
+        how ``sofac view`` applies its mouse spring. On a mapped state it goes up through the
+        mapping like any force. Added after the unread states are left out, so that it keeps none in."""
+        for group in groups:
+            for state in (*group.states, *group.mapped):
+                if not state.size:
+                    continue
+                width = state.datatype.deriv_size
+                point = self.buffer(state.component, "pointForceIndex", [-1], "i64", role="param")
+                force = self.buffer(state.component, "pointForce", np.zeros(width), columns=width, role="param")
+                call = _call(f"point_force<{state.cpp_type}>", state.f, point, force, state.size)
+                group.forces.append(Op(f"point force on {state.path} (set from Python)", [call]))
 
     def _contact_guard(self) -> ContactGuard | None:
         """The boxes the step tests before it runs (see ContactGuard): one per collision model on a
