@@ -656,7 +656,8 @@ class _Planner:
                     continue
                 width = state.datatype.deriv_size
                 point = self.buffer(state.component, "pointForceIndex", [-1], "i64", role="param")
-                force = self.buffer(state.component, "pointForce", np.zeros(width), columns=width, role="param")
+                zeros = np.zeros(width)
+                force = self.buffer(state.component, "pointForce", zeros, columns=width, role="param")
                 call = _call(f"point_force<{state.cpp_type}>", state.f, point, force, state.size)
                 group.forces.append(Op(f"point force on {state.path} (set from Python)", [call]))
 
