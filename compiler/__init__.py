@@ -25,6 +25,7 @@ __all__ = [
     "__version__",
     "load",
     "sweep",
+    "view",
 ]
 
 _LAZY = {
@@ -35,6 +36,7 @@ _LAZY = {
     "SimulationDiverged": "loader",
     "load": "loader",
     "sweep": "sweeps",
+    "view": "viewer",
 }
 
 

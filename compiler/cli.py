@@ -347,6 +347,9 @@ def build_parser() -> argparse.ArgumentParser:
     from .render_cli import register as register_render
 
     register_render(commands, _EPILOG)
+    from .view_cli import register as register_view
+
+    register_view(commands, _EPILOG)
     from .sweep_cli import register as register_sweep
 
     register_sweep(commands, _EPILOG)
