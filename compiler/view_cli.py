@@ -18,9 +18,9 @@ _KEYS_HELP = (
     "Keys: space play/pause, n (or Right) one step, r reset, [ ] slower/faster, t real time or as fast "
     "as it can, 1-8 the views front back left right top bottom elevated iso, 0 the first camera, "
     "v b f i c m w toggle the layers visual, behavior, force fields, interaction force fields, collision, "
-    "mappings, wireframe, g the grid, s a screenshot (PNG in --out-dir), shift+s start/stop an MP4, "
-    "h help, q quit. Mouse: drag orbits, right drag pans, the wheel zooms, shift+drag pulls the point "
-    "under the pointer with a spring (applied by the compiled step: nothing is recompiled)."
+    "mappings, wireframe, g the grid, o the overlay, s a screenshot (PNG in --out-dir), ctrl+s "
+    "start/stop an MP4, h help, q quit. Mouse: drag orbits, right drag pans, the wheel zooms, shift+drag "
+    "pulls the point under the pointer with a spring (applied by the compiled step: nothing is recompiled)."
 )
 
 

@@ -12,7 +12,8 @@ context and input events). Keys and mouse (``h`` shows them in the window):
   ``sofac render --view``, ``0`` the first camera;
 * ``v`` ``b`` ``f`` ``i`` ``c`` ``m`` ``w`` toggle the layers visual, behavior, force fields,
   interaction force fields, collision, mappings, wireframe; ``g`` the ground grid;
-* ``s`` a screenshot (PNG), shift+``s`` starts/stops an MP4 recording;
+* ``s`` a screenshot (PNG) of what the window shows, ctrl+``s`` starts/stops an MP4 recording,
+  ``o`` hides/shows the overlay, ``h`` the keys;
 * shift+left drag picks the DOF under the pointer and pulls it with a spring to the pointer, as
   SOFA's mouse interaction does: the spring is applied by the compiled step as the state's point
   force (``<state>.pointForceIndex`` / ``<state>.pointForce``, see plan.py), so nothing is
@@ -52,7 +53,7 @@ LAYER_KEYS = {
 HELP = (
     "space play/pause   n step   r reset   [ ] slower/faster   t real time/fast",
     "drag orbit   right drag pan   wheel zoom   1-8 views   0 first camera",
-    "v b f i c m w layers   g grid   s screenshot   S record MP4",
+    "v b f i c m w layers   g grid   o overlay   s screenshot   ctrl+s record MP4",
     "shift+drag pull a point   h help   q quit",
 )
 FRAME_BUDGET = 0.035  # seconds of stepping per drawn frame, at most
@@ -201,14 +202,14 @@ def ray_hits(
     edge1, edge2 = b - a, c - a
     p = np.cross(direction, edge2)
     det = np.einsum("ij,ij->i", edge1, p)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):  # parallel triangles: inf and NaN, filtered out below
         inverse = 1.0 / det
         t_vec = origin - a
         u = np.einsum("ij,ij->i", t_vec, p) * inverse
         q = np.cross(t_vec, edge1)
         v = (q @ direction) * inverse
         t = np.einsum("ij,ij->i", edge2, q) * inverse
-    hit = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(t)
+        hit = (np.abs(det) > 1e-12) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & np.isfinite(t)
     return float(t[hit].min()) if hit.any() else None
 
 
@@ -235,7 +236,6 @@ class _PointForces:
         self.sim = sim
         params = sim.params()
         self.states = [p for p in sim.objects() if f"{p}.pointForceIndex" in params]
-        self._mass: dict[str, float] = {}
 
     def clear(self) -> None:
         for path in self.states:
@@ -255,33 +255,33 @@ class _PointForces:
         vector[:count] = force[:count]
         self.sim.param(f"{pick.state}.pointForceIndex")[0] = pick.index
 
-    def mass(self, path: str) -> float:
-        """The mass per DOF of the group a state belongs to (its independent states' masses over
-        their DOFs): what sizes the mouse spring. 1 where no mass is known."""
-        if path not in self._mass:
-            self._mass[path] = _dof_mass(self.sim, path)
-        return self._mass[path]
+    def mass(self, path: str, index: int) -> float:
+        """The mass that sizes the mouse spring on a DOF (see _dof_mass)."""
+        return _dof_mass(self.sim, path, index)
 
 
-def _dof_mass(sim: Any, path: str) -> float:
-    for group in sim.plan.groups:
-        members = {s.path for s in (*group.states, *group.mapped)}
-        if path not in members:
-            continue
-        total, count = 0.0, 0
-        for state in group.states:
-            count += state.size
-            if state.mass is None:
-                continue
-            buffer, stride = state.mass
-            values = np.asarray(
-                sim.param(buffer.key) if buffer.role == "param" else buffer.initial, dtype=float
-            )
-            per_vertex = values.reshape(-1, max(int(stride), 1))[:, 0]
-            total += float(per_vertex.sum()) if len(per_vertex) > 1 else float(per_vertex[0]) * state.size
-        if total > 0 and count:
-            return total / count
-    return 1.0
+def _dof_mass(sim: Any, path: str, index: int) -> float:
+    """The mass of a DOF, measured from the kinetic energy of a unit velocity given to it alone
+    (the velocities are put back): M_ii, whatever the mass component. For a DOF with no mass of
+    its own (a mapped state's), the mean mass per DOF of the independent states. 1 if neither."""
+    saved = {p: sim[p].velocity.copy() for p in sim.objects()}
+    try:
+        for velocity in saved:
+            sim[velocity].velocity[...] = 0.0
+        if not sim[path].info.mapped:
+            sim[path].velocity[index, 0] = 1.0
+            mass = 2.0 * sim.energy().kinetic
+            if mass > 0 and math.isfinite(mass):
+                return mass
+        independent = [info for info in sim.states() if not info.mapped and info.size]
+        for info in independent:
+            sim[info.path].velocity[:, 0] = 1.0
+        total = 2.0 * sim.energy().kinetic
+        count = sum(info.size for info in independent)
+        return total / count if total > 0 and math.isfinite(total) and count else 1.0
+    finally:
+        for state, velocity in saved.items():
+            sim[state].velocity[...] = velocity
 
 
 # --- the window -----------------------------------------------------------------------------------
@@ -305,6 +305,7 @@ class Viewer:
         self.fast = opts.fast
         self.speed = opts.speed
         self.help = False
+        self.overlay = True
         self.message = ""  # an error that stopped the simulation
         self.forces = _PointForces(sim)
         self.forces.clear()
@@ -365,7 +366,13 @@ class Viewer:
 
     def _fail(self, error: Exception) -> None:
         self.running = False
-        self._restore(self._good)
+        last_finite = getattr(error, "last_finite", None)  # SimulationDiverged's, nearer than ours
+        if last_finite:
+            for path, (x, v) in last_finite.items():
+                self.sim[path].position[...] = x
+                self.sim[path].velocity[...] = v
+        else:
+            self._restore(self._good)
         text = str(error) or type(error).__name__
         self.message = f"{type(error).__name__}: {text}"
         self.log(f"paused: {self.message}")
@@ -469,7 +476,7 @@ class Viewer:
         _, path, index = best
         point = render._as_points3(frame[path][index : index + 1])[0]
         forward = render._unit(np.asarray(camera.look_at) - np.asarray(camera.position))
-        mass = self.forces.mass(path)
+        mass = self.forces.mass(path, index)
         omega = 0.45 / self.sim.dt  # the spring is applied explicitly: omega dt well under 2
         self.pick = Pick(path, index, point.copy(), forward, point.copy(), mass * omega**2, mass * omega)
         self.log(f"picked {path}[{index}] at {_format(point)}")
@@ -492,7 +499,10 @@ class Viewer:
             return
         state = self.sim[self.pick.state]
         point = render._as_points3(state.position[self.pick.index : self.pick.index + 1])[0]
-        self.log(f"released {self.pick.state}[{self.pick.index}] at {_format(point)}")
+        self.log(
+            f"released {self.pick.state}[{self.pick.index}] at {_format(point)} "
+            f"(pulled toward {_format(self.pick.target)})"
+        )
         self.forces.clear()
         self.pick = None
 
@@ -601,6 +611,10 @@ class Viewer:
         self.realtime_factor = sum(a for _, a in window[1:]) / span if span > 0 else 0.0
 
     def _frame(self) -> None:
+        with np.errstate(all="ignore"):  # the last states before a divergence: huge, drawn as they are
+            self._draw_frame()
+
+    def _draw_frame(self) -> None:
         GL = self.GL
         assert self.eye is not None
         width, height = self._size()
@@ -612,14 +626,15 @@ class Viewer:
             primitives.append(render._Lines(ends, np.tile(_SPRING, (2, 1)), 2.0))
             primitives.append(render._Points(ends, _SPRING, 8.0))
         render.draw_primitives(GL, primitives, self.eye.camera(), width, height, self.renderer.background)
-        if self._wants_image():
+        if self.overlay:
+            self._overlay(width, height)
+        if self._wants_image():  # what the window shows
             image = self._read(width, height)
             if self.recording is not None and self.running:
                 self._record(image)
             while self._pending_shots:
                 self._pending_shots -= 1
                 self.screenshot(image)
-        self._overlay(width, height)
 
     _pending_shots = 0
 
@@ -639,14 +654,12 @@ class Viewer:
             energy_text = f"energy {energy.kinetic + energy.potential:.6g} (kinetic {energy.kinetic:.4g})"
         except Exception as error:
             energy_text = f"energy: {error}"
-        if self.fast:
-            pace = f"as fast as it can, x{self.realtime_factor:.2f} real time"
-        else:
-            pace = f"real time x{self.speed:g} (achieved x{self.realtime_factor:.2f})"
+        achieved = f"x{self.realtime_factor:.2f} real time" if self.running else "paused"
+        pace = "as fast as it can" if self.fast else f"real time x{self.speed:g}"
         lines = [
             f"t = {self.sim.time:.4f} s   step {self.sim.steps}   dt {self.sim.dt:g}   "
             f"{self.ms_per_step:.3f} ms/step",
-            f"{'playing' if self.running else 'paused'}, {pace}",
+            f"{pace} ({achieved})",
             energy_text,
         ]
         if self.pick is not None:
@@ -676,7 +689,6 @@ class Viewer:
         glfw = self._glfw
         if action not in (glfw.PRESS, glfw.REPEAT):
             return
-        shift = bool(mods & glfw.MOD_SHIFT)
         name = glfw.get_key_name(key, scancode)
         if key in (glfw.KEY_ESCAPE, glfw.KEY_Q):
             glfw.set_window_should_close(window, True)
@@ -690,7 +702,7 @@ class Viewer:
             self.log(f"stepped to t={self.sim.time:g}, step {self.sim.steps}")
         elif key == glfw.KEY_R:
             self.reset()
-        elif key == glfw.KEY_S and shift:
+        elif key == glfw.KEY_S and mods & glfw.MOD_CONTROL:
             self.toggle_recording()
         elif key == glfw.KEY_S:
             self._pending_shots += 1
@@ -706,6 +718,9 @@ class Viewer:
             self.log(f"speed x{self.speed:g}")
         elif key == glfw.KEY_H:
             self.help = not self.help
+        elif key == glfw.KEY_O:
+            self.overlay = not self.overlay
+            self.log(f"overlay {'on' if self.overlay else 'off'}")
         elif key == glfw.KEY_G:
             self.renderer.grid = not self.renderer.grid
             self.log(f"grid {'on' if self.renderer.grid else 'off'}")
