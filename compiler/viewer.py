@@ -227,6 +227,25 @@ class Pick:
     anchor: np.ndarray  # a point of the drag plane
     stiffness: float
     damping: float
+    error: np.ndarray | None = None  # target - x when the force was last set
+
+    # The spring is applied explicitly (the force of the step's start), so its stiffness starts
+    # from what the DOF's mass alone keeps stable (omega dt = 0.45). A DOF held by stiff, implicitly
+    # integrated neighbours is stable with far more, and needs it to follow the mouse: while the
+    # DOF neither overshoots the target nor closes in on it quickly, the stiffness grows by GROWTH a
+    # step; an overshoot halves it (never under where it started, at most MOST_GAIN times that).
+    GROWTH = 1.05
+    MOST_GAIN = 1e4
+
+    def adapt(self, error: np.ndarray, start: float) -> None:
+        last = self.error
+        self.error = error
+        if last is None:
+            return
+        if float(error @ last) < 0:
+            self.stiffness = max(self.stiffness / 2, start)
+        elif np.linalg.norm(error) > 0.9 * np.linalg.norm(last):
+            self.stiffness = min(self.stiffness * self.GROWTH, start * self.MOST_GAIN)
 
 
 class _PointForces:
@@ -236,6 +255,7 @@ class _PointForces:
         self.sim = sim
         params = sim.params()
         self.states = [p for p in sim.objects() if f"{p}.pointForceIndex" in params]
+        self.start_stiffness = 0.0  # the picked DOF's stiffness when picked
 
     def clear(self) -> None:
         for path in self.states:
@@ -248,6 +268,7 @@ class _PointForces:
         v = np.zeros(3)
         velocity = state.velocity[pick.index]
         v[: min(3, len(velocity))] = velocity[:3]
+        pick.adapt(pick.target - x, self.start_stiffness)
         force = pick.stiffness * (pick.target - x) - pick.damping * v
         vector = self.sim.param(f"{pick.state}.pointForce")
         vector[:] = 0.0  # a rigid frame's torque stays zero: the spring pulls its centre
@@ -479,6 +500,7 @@ class Viewer:
         mass = self.forces.mass(path, index)
         omega = 0.45 / self.sim.dt  # the spring is applied explicitly: omega dt well under 2
         self.pick = Pick(path, index, point.copy(), forward, point.copy(), mass * omega**2, mass * omega)
+        self.forces.start_stiffness = self.pick.stiffness
         self.log(f"picked {path}[{index}] at {_format(point)}")
         return self.pick
 
