@@ -255,11 +255,13 @@ class _PointForces:
         self.sim = sim
         params = sim.params()
         self.states = [p for p in sim.objects() if f"{p}.pointForceIndex" in params]
+        # The parameter views, looked up once: set before every step while a DOF is pulled.
+        self.views = {p: (params[f"{p}.pointForceIndex"], params[f"{p}.pointForce"]) for p in self.states}
         self.start_stiffness = 0.0  # the picked DOF's stiffness when picked
 
     def clear(self) -> None:
-        for path in self.states:
-            self.sim.param(f"{path}.pointForceIndex")[0] = -1
+        for point, _ in self.views.values():
+            point[0] = -1
 
     def apply(self, pick: Pick) -> None:
         """The spring's force on the picked DOF now: k (target - x) - c v."""
@@ -270,11 +272,11 @@ class _PointForces:
         v[: min(3, len(velocity))] = velocity[:3]
         pick.adapt(pick.target - x, self.start_stiffness)
         force = pick.stiffness * (pick.target - x) - pick.damping * v
-        vector = self.sim.param(f"{pick.state}.pointForce")
+        point, vector = self.views[pick.state]
         vector[:] = 0.0  # a rigid frame's torque stays zero: the spring pulls its centre
         count = min(3, len(vector))
         vector[:count] = force[:count]
-        self.sim.param(f"{pick.state}.pointForceIndex")[0] = pick.index
+        point[0] = pick.index
 
     def mass(self, path: str, index: int) -> float:
         """The mass that sizes the mouse spring on a DOF (see _dof_mass)."""
