@@ -330,6 +330,7 @@ class Viewer:
         self.help = False
         self.overlay = True
         self.message = ""  # an error that stopped the simulation
+        self.notice = ""  # an error of a key or mouse action (the simulation goes on)
         self.forces = _PointForces(sim)
         self.forces.clear()
         self.pick: Pick | None = None
@@ -399,6 +400,7 @@ class Viewer:
         text = str(error) or type(error).__name__
         self.message = f"{type(error).__name__}: {text}"
         self.log(f"paused: {self.message}")
+        self.message += "\nPaused on the last good state: r resets."
 
     def reset(self) -> None:
         self.sim.reset()
@@ -597,10 +599,10 @@ class Viewer:
             self.GL = _window_gl(wayland)
             self._first_camera = self._fit()
             self.eye = _Eye(self._first_camera)
-            glfw.set_key_callback(window, self._on_key)
-            glfw.set_mouse_button_callback(window, self._on_button)
-            glfw.set_cursor_pos_callback(window, self._on_cursor)
-            glfw.set_scroll_callback(window, self._on_scroll)
+            glfw.set_key_callback(window, self._guarded(self._on_key))
+            glfw.set_mouse_button_callback(window, self._guarded(self._on_button))
+            glfw.set_cursor_pos_callback(window, self._guarded(self._on_cursor))
+            glfw.set_scroll_callback(window, self._guarded(self._on_scroll))
             self.log(f"window open ({'playing' if self.running else 'paused'}; h for the keys)")
             last = time.perf_counter()
             while not glfw.window_should_close(window):
@@ -625,6 +627,19 @@ class Viewer:
             glfw.terminate()
             self._window = None
             self._closed.set()
+
+    def _guarded(self, handler: Callable[..., None]) -> Callable[..., None]:
+        """``handler`` with its errors (a screenshot that cannot be written, ...) shown in the
+        overlay and logged, rather than raised through GLFW out of the window's loop."""
+
+        def guarded(*args: Any) -> None:
+            try:
+                handler(*args)
+            except Exception as error:
+                self.notice = f"{type(error).__name__}: {error}"
+                self.log(self.notice)
+
+        return guarded
 
     def _sample_rtf(self, now: float, advanced: float) -> None:
         window = self._rtf_window
@@ -690,6 +705,8 @@ class Viewer:
             lines.append(f"pulling {self.pick.state}[{self.pick.index}]")
         if self.recording is not None:
             lines.append(f"recording {self._record_path} ({self.recorded} frames)")
+        if self.notice:
+            lines.append(self.notice)
         if self.help:
             lines.extend(HELP)
         return lines
