@@ -310,3 +310,51 @@ print("closed", handle.is_running, sim.steps, flush=True)
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["returned", "True", "closed", "False", "0"]
+
+
+# --- the geometry of the camera and the mouse, without a window -----------------------------------
+
+
+def test_the_ray_through_a_pixel_passes_through_the_point_drawn_there() -> None:
+    from sofac.viewer import ray
+
+    camera = render.Camera(position=(1.0, 2.0, 5.0), look_at=(0.2, -0.1, 0.3), fov=50.0)
+    points = np.array([[0.0, 0.0, 0.0], [0.5, -0.4, 1.0], [-0.7, 0.3, -0.2]])
+    for point, (x, y) in zip(points, camera.project(points, *SIZE), strict=True):
+        origin, direction = ray(camera, x, y, *SIZE)
+        along = (point - origin) @ direction
+        assert np.linalg.norm(origin + along * direction - point) < 1e-9
+
+
+def test_a_ray_meets_the_nearest_triangle_it_crosses() -> None:
+    from sofac.viewer import ray_hits
+
+    square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    two_layers = np.r_[square, square + np.array([0.0, 0.0, 2.0])]
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    down = np.array([0.0, 0.0, -1.0])
+    assert ray_hits(np.array([0.3, 0.6, 5.0]), down, two_layers, triangles) == pytest.approx(3.0)
+    assert ray_hits(np.array([1.5, 0.5, 5.0]), down, two_layers, triangles) is None  # beside
+    assert ray_hits(np.array([0.3, 0.6, 5.0]), -down, two_layers, triangles) is None  # behind
+
+
+def test_orbiting_keeps_the_distance_and_a_full_turn_comes_back() -> None:
+    from sofac.viewer import _Eye
+
+    eye = _Eye(render.Camera(position=(0.0, 0.0, 4.0), look_at=(0.0, 1.0, 0.0)))
+    start, distance = eye.position.copy(), eye.distance
+    eye.orbit(0.3, 0.2)
+    assert eye.distance == pytest.approx(distance) and not np.allclose(eye.position, start)
+    eye.orbit(0.0, -0.2)
+    for _ in range(4):
+        eye.orbit(-0.3 / 4 + 2 * np.pi / 4, 0.0)
+    np.testing.assert_allclose(eye.position, start, atol=1e-9)
+
+
+def test_the_mouse_spring_is_sized_by_the_picked_dofs_mass() -> None:
+    from sofac.viewer import _dof_mass
+
+    sim = sofac.load(CUBE)
+    velocity = sim["/cube/dofs"].velocity.copy()
+    assert _dof_mass(sim, "/cube/dofs", 4) == pytest.approx(1.0 / 8)  # totalMass 1 over 8 DOFs
+    assert np.array_equal(sim["/cube/dofs"].velocity, velocity)  # put back
