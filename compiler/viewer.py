@@ -417,8 +417,8 @@ class Viewer:
         if not self.running:
             return
         dt = self.sim.dt
-        per_step = max(self.ms_per_step / 1000.0, 1e-6)
-        most = max(1, int(FRAME_BUDGET / per_step))
+        # Steps that fit in a frame, from the time steps took so far (one until that is known).
+        most = max(1, int(FRAME_BUDGET * 1000.0 / self.ms_per_step)) if self.ms_per_step > 0 else 1
         if self.fast:
             count = most
         else:
