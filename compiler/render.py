@@ -21,6 +21,8 @@ over a whole animation.
 Drawing is headless: OSMesa (Mesa's off-screen software rasterizer) through PyOpenGL, imported with
 ``PYOPENGL_PLATFORM=osmesa``, and legacy fixed-function OpenGL (vertex arrays, two directional
 lights). It needs no display and no GPU; frames are supersampled (2x2 by default) to smooth edges.
+``draw_primitives`` issues the same drawing into whatever OpenGL context is current: ``sofac view``'s
+window (sofac/viewer.py) draws through it.
 """
 
 from __future__ import annotations
