@@ -27,6 +27,7 @@ __all__ = [
     "__version__",
     "load",
     "sweep",
+    "view",
 ]
 
 _LAZY = {
@@ -37,6 +38,7 @@ _LAZY = {
     "SimulationDiverged": "simulation.loader",
     "load": "pipeline",
     "sweep": "sweeps.runner",
+    "view": "viewer.window",
 }
 
 

@@ -52,10 +52,13 @@ def plan_checked(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    interactive: bool = False,
 ) -> Plan:
     from sofac.plan.planner import plan_scene
 
-    return plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+    return plan_scene(
+        checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
+    )
 
 
 def plan_file(path: str | Path, *, data_roots: Sequence[Path] = (), threads: int = 1) -> Plan:
@@ -77,13 +80,16 @@ def compile_checked(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    interactive: bool = False,
 ) -> Compiled:
     """Plan, generate and build a checked scene (the build may come from the cache)."""
     from sofac.build import compiler as build
     from sofac.simulation.loader import Compiled
     from sofac.simulation.runspec import run_spec
 
-    scene_plan = plan_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+    scene_plan = plan_checked(
+        checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
+    )
     source = generate(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
@@ -98,8 +104,8 @@ def compile_checked(
     )
 
 
-def _rebuild(checked: CheckedScene, *, prune: bool, rigid_model: str, threads: int) -> Compiled:
-    return compile_checked(checked, prune=prune, rigid_model=rigid_model, threads=threads)
+def _rebuild(checked: CheckedScene, **options: Any) -> Compiled:
+    return compile_checked(checked, **options)
 
 
 def compile_scene(
@@ -109,10 +115,13 @@ def compile_scene(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    interactive: bool = False,
 ) -> Compiled:
     """Check, plan, generate and build a scene file (the build may come from the cache)."""
     checked, diagnostics = check_file(path, data_roots=data_roots)
-    return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+    return compile_checked(
+        checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
+    )
 
 
 def compile_model(scene: Scene, **options: Any) -> Compiled:
@@ -129,9 +138,12 @@ def load(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    interactive: bool = False,
 ) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
-    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
+    element loops (FEM) on that many OpenMP threads, with the same numbers as one thread;
+    ``interactive`` compiles a point force on each state that Python sets between steps
+    (``<state path>.pointForceIndex`` / ``.pointForce`` parameters: how ``sofac view`` pulls).
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
     record (simulation/warm.py) without being compiled again."""
@@ -144,6 +156,7 @@ def load(
         "prune": prune,
         "rigid_model": rigid_model,
         "threads": threads,
+        "interactive": interactive,
     }
     record = warm.lookup(path, **options)
     if record is not None:

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Idempotent installer for sofac on Debian/Ubuntu, used by scripts/demo.sh and scripts/test.sh:
 #
-#   1. the Debian packages the build stage needs (Eigen, SuiteSparse, OSMesa, g++), via apt-get;
+#   1. the Debian packages the build stage needs (Eigen, SuiteSparse, OSMesa, g++) and those the
+#      viewer's tests need (Xvfb, xdotool, Mesa), via apt-get;
 #   2. sofac itself, editable, with its test extras: python -m pip install -e ".[test]".
 #      Where the system Python is "externally managed" (PEP 668), into a .venv in the checkout.
 #
@@ -13,6 +14,9 @@ cd "$(dirname "$0")/.."
 source scripts/python.sh
 
 DEB_PACKAGES=(libeigen3-dev libsuitesparse-dev libosmesa6-dev g++)
+# tests/test_view.py runs `sofac view` for real: a virtual X server with Mesa's software OpenGL,
+# xdotool to send it keys and mouse events, and the X libraries the glfw wheel's GLFW loads.
+DEB_PACKAGES+=(xvfb xdotool libgl1-mesa-dri libxrandr2 libxinerama1 libxcursor1 libxi6)
 
 log() { printf 'setup: %s\n' "$*"; }
 

@@ -345,6 +345,9 @@ def build_parser() -> argparse.ArgumentParser:
     from sofac.render.cli import register as register_render
 
     register_render(commands, _EPILOG)
+    from sofac.viewer.cli import register as register_view
+
+    register_view(commands, _EPILOG)
     from sofac.sweeps.cli import register as register_sweep
 
     register_sweep(commands, _EPILOG)

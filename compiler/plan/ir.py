@@ -456,6 +456,7 @@ class Plan:
     contact_guard: ContactGuard | None = None
     # Compiled for threads, with groups that share no buffer: they step side by side.
     parallel_groups: bool = False
+    interactive: bool = False  # with a point force on each state, set from Python (plan_scene)
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:

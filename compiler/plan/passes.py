@@ -21,6 +21,8 @@ from sofac.plan.ir import (
     StatePlan,
     bind,
     buffers_of,
+    call,
+    kernel,
     origin_of,
 )
 from sofac.registry import Category
@@ -245,3 +247,21 @@ def leave_unread_out(planner: Planner, groups: list[Group]) -> None:
             dropped = {id(state.dx), id(state.df)}
             planner.buffers = [b for b in planner.buffers if id(b) not in dropped]
             state.dx = state.df = None
+
+
+def add_point_forces(planner: Planner, groups: list[Group]) -> None:
+    """A force on one DOF of every state the step computes forces on, set from Python between
+    steps without recompiling (``<state>.pointForceIndex``, -1: none, and ``<state>.pointForce``):
+    how ``sofac view`` applies its mouse spring. On a mapped state it goes up through the mapping
+    like any force. Added after the unread states are left out, so that it keeps none in."""
+    for group in groups:
+        for state in (*group.states, *group.mapped):
+            if not state.size:
+                continue
+            width = state.datatype.deriv_size
+            point = planner.buffer(state.component, "pointForceIndex", [-1], "i64", role="param")
+            force = planner.buffer(
+                state.component, "pointForce", np.zeros(width), columns=width, role="param"
+            )
+            pull = call(kernel("point_force", state.datatype.name), state.f, point, force, state.size)
+            group.forces.append(Op(f"point force on {state.path} (set from Python)", [pull]))

@@ -33,7 +33,14 @@ from sofac.plan.ir import (
 )
 from sofac.plan.lower import LOWERINGS
 from sofac.plan.lower.common import _mapping_inputs, _topology_of
-from sofac.plan.passes import contact_guard, effects, init_only, leave_unread_out, route_through_mappings
+from sofac.plan.passes import (
+    add_point_forces,
+    contact_guard,
+    effects,
+    init_only,
+    leave_unread_out,
+    route_through_mappings,
+)
 from sofac.plan.solvers import new_group, screen_variational
 from sofac.registry import Category
 from sofac.registry.datatypes import DATATYPES
@@ -64,8 +71,10 @@ class Planner:
         prune: bool = True,
         rigid_model: str = "sofa",
         threads: int = 1,
+        interactive: bool = False,
     ) -> None:
         self.checked = checked
+        self.interactive = interactive
         self.diags = diagnostics
         self.prune = prune
         self.rigid_model = rigid_model
@@ -153,6 +162,7 @@ class Planner:
             init_only=init_only(self, groups),
             threads=self.threads,
             rigid_model=self.rigid_model,
+            interactive=self.interactive,
             contact_guard=self.guard,
             parallel_groups=self.threads > 1
             and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
@@ -346,6 +356,8 @@ class Planner:
         self.guard = contact_guard(self)
         if self.prune:
             leave_unread_out(self, list(groups.values()))
+        if self.interactive:
+            add_point_forces(self, list(groups.values()))
         return list(groups.values())
 
     def _attach_mapped(self, owner: dict[int, Group]) -> None:
@@ -382,16 +394,24 @@ def plan_scene(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    interactive: bool = False,
 ) -> Plan:
     """The static schedule of a checked scene; raises SceneError (E222...) when it cannot be compiled.
     With ``prune``, effects the scene makes vanish (zero gravity) get no code. ``rigid_model="exact"``
     turns rigid inertias with their bodies and keeps the gyroscopic term (explicit solvers; SOFA's
     model, the default, applies the inertia in world axes). ``threads`` > 1 splits large element
-    loops over that many OpenMP threads, with the serial results bit for bit."""
+    loops over that many OpenMP threads, with the serial results bit for bit. ``interactive`` adds
+    a force on one DOF of each state, set from Python between steps (``sofac view``'s mouse
+    spring); scenes compiled without it pay nothing for it."""
     if rigid_model not in ("sofa", "exact"):
         raise ValueError(f"rigid_model must be 'sofa' or 'exact', not {rigid_model!r}")
     if not isinstance(threads, int) or threads < 1:
         raise ValueError(f"threads must be a positive integer, not {threads!r}")
     return Planner(
-        checked, diagnostics if diagnostics is not None else Diagnostics(), prune, rigid_model, threads
+        checked,
+        diagnostics if diagnostics is not None else Diagnostics(),
+        prune,
+        rigid_model,
+        threads,
+        interactive,
     ).run()

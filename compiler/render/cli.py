@@ -121,10 +121,8 @@ def _camera(args: argparse.Namespace, scene_camera: Any) -> Any:
 
 def _write(path: Path, frames: list[Any], fps: float) -> None:
     """Write one frame as PNG, several as an animated GIF or an MP4 (H.264)."""
-    import imageio.v2 as imageio
     import imageio.v3 as iio
     import numpy as np
-    from sofac.diagnostics import SofacError
 
     suffix = path.suffix.lower()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -133,20 +131,36 @@ def _write(path: Path, frames: list[Any], fps: float) -> None:
     elif suffix == ".gif":
         iio.imwrite(path, np.stack(frames), extension=".gif", plugin="pillow", duration=1000.0 / fps, loop=0)
     else:
-        try:
-            import imageio_ffmpeg  # noqa: F401  (the ffmpeg binary imageio writes MP4 with)
-        except ImportError:
-            raise SofacError(
-                "writing MP4 needs imageio-ffmpeg (pip install imageio-ffmpeg, or run scripts/setup.sh); "
-                "--out FILE.gif needs nothing more"
-            ) from None
-        height, width = frames[0].shape[:2]
-        pad = ((0, height % 2), (0, width % 2), (0, 0))  # H.264 in yuv420p needs even sides
-        with imageio.get_writer(
-            path, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8, macro_block_size=1
-        ) as writer:
+        with mp4_writer(path, fps) as writer:
             for frame in frames:
-                writer.append_data(np.pad(frame, pad, mode="edge") if any(p[1] for p in pad) else frame)
+                writer.append_data(even_sides(frame))
+
+
+def mp4_writer(path: Path, fps: float) -> Any:
+    """An imageio writer of H.264 MP4 frames (``append_data``; a context manager)."""
+    import imageio.v2 as imageio
+    from sofac.diagnostics import SofacError
+
+    try:
+        import imageio_ffmpeg  # noqa: F401  (the ffmpeg binary imageio writes MP4 with)
+    except ImportError:
+        raise SofacError(
+            "writing MP4 needs imageio-ffmpeg (pip install imageio-ffmpeg, or run scripts/setup.sh); "
+            "--out FILE.gif needs nothing more"
+        ) from None
+    return imageio.get_writer(
+        path, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=8, macro_block_size=1
+    )
+
+
+def even_sides(frame: Any) -> Any:
+    """``frame`` padded to even sides by repeating its last row/column: H.264 in yuv420p needs them."""
+    import numpy as np
+
+    height, width = frame.shape[:2]
+    if not (height % 2 or width % 2):
+        return frame
+    return np.pad(frame, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
 
 
 def cmd_render(args: argparse.Namespace) -> int:

@@ -21,6 +21,8 @@ over a whole animation.
 Drawing is headless: OSMesa (Mesa's off-screen software rasterizer) through PyOpenGL, imported with
 ``PYOPENGL_PLATFORM=osmesa``, and legacy fixed-function OpenGL (vertex arrays, two directional
 lights). It needs no display and no GPU; frames are supersampled (2x2 by default) to smooth edges.
+``draw_primitives`` issues the same drawing into whatever OpenGL context is current: ``sofac view``'s
+window (sofac/viewer.py) draws through it.
 """
 
 from __future__ import annotations
@@ -624,15 +626,21 @@ class Renderer:
 
     def render(self, frame: Frame | None = None) -> np.ndarray:
         """The picture of ``frame`` (default: the simulation now), (height, width, 3) uint8 RGB."""
+        primitives, (low, high) = self.scene_primitives(frame)
+        camera = self.camera_spec.resolve(low, high, self.width / self.height)
+        self.camera = camera
+        return _draw(self, primitives, camera)
+
+    def scene_primitives(self, frame: Frame | None = None) -> tuple[list[Any], tuple[np.ndarray, np.ndarray]]:
+        """What ``render`` draws for ``frame`` (default: now), grid included, and the bounding box
+        the camera is fitted to; ``draw_primitives`` draws them into any OpenGL context."""
         frame = self.capture() if frame is None else frame
         primitives = self._primitives(frame, self._axis_length)
         low, high = self._fixed_bounds or self._bounds(primitives)
-        camera = self.camera_spec.resolve(low, high, self.width / self.height)
-        self.camera = camera
         if self.grid:
             scale = self.height / 480.0
             primitives.append(_grid((low, high), self._scene.up, max(1.0, scale)))
-        return _draw(self, primitives, camera)
+        return primitives, (low, high)
 
     def visual_positions(self, frame: Frame | None = None) -> dict[str, np.ndarray]:
         """The positions of every visual model in ``frame`` (default: now), by component path."""
@@ -1206,11 +1214,34 @@ def _draw(renderer: Renderer, primitives: Sequence[_Mesh | _Lines | _Points], ca
     buffer = arrays.GLubyteArray.zeros((height, width, 4))
     if not osmesa.OSMesaMakeCurrent(context, buffer, GL.GL_UNSIGNED_BYTE, width, height):
         raise SofacError(f"OSMesa could not draw a {width}x{height} image")
+    draw_primitives(GL, primitives, camera, width, height, renderer.background, ss)
+    GL.glFinish()
+
+    image = np.flipud(np.asarray(buffer)[:, :, :3])
+    if ss > 1:
+        blocks = image.reshape(renderer.height, ss, renderer.width, ss, 3).astype(np.float32)
+        image = np.rint(blocks.mean(axis=(1, 3)))
+    return np.ascontiguousarray(image, dtype=np.uint8)
+
+
+def draw_primitives(
+    GL: Any,
+    primitives: Sequence[_Mesh | _Lines | _Points],
+    camera: Camera,
+    width: int,
+    height: int,
+    background: Sequence[float],
+    line_scale: float = 1.0,
+) -> None:
+    """Draw ``primitives`` seen by a resolved ``camera`` into the current OpenGL context's
+    framebuffer, ``width`` x ``height`` pixels (OSMesa's here, a window's in ``sofac view``).
+    ``line_scale`` widens lines and points (the supersampling factor)."""
+    ss = line_scale
     aspect = width / height
     near, far = _clip_planes(camera, primitives)
 
     GL.glViewport(0, 0, width, height)
-    GL.glClearColor(*renderer.background)
+    GL.glClearColor(*background)
     GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
     GL.glEnable(GL.GL_DEPTH_TEST)
     GL.glDepthFunc(GL.GL_LEQUAL)
@@ -1237,13 +1268,6 @@ def _draw(renderer: Renderer, primitives: Sequence[_Mesh | _Lines | _Points], ca
         _draw_mesh(GL, mesh, ss)
     GL.glDepthMask(GL.GL_TRUE)
     GL.glDisable(GL.GL_BLEND)
-    GL.glFinish()
-
-    image = np.flipud(np.asarray(buffer)[:, :, :3])
-    if ss > 1:
-        blocks = image.reshape(renderer.height, ss, renderer.width, ss, 3).astype(np.float32)
-        image = np.rint(blocks.mean(axis=(1, 3)))
-    return np.ascontiguousarray(image, dtype=np.uint8)
 
 
 def _clip_planes(camera: Camera, primitives: Sequence[_Mesh | _Lines | _Points]) -> tuple[float, float]:
@@ -1277,7 +1301,7 @@ def _lights(GL: Any) -> None:
     GL.glEnable(GL.GL_NORMALIZE)
 
 
-def _draw_mesh(GL: Any, mesh: _Mesh, ss: int) -> None:
+def _draw_mesh(GL: Any, mesh: _Mesh, ss: float) -> None:
     points = np.ascontiguousarray(mesh.points, dtype=np.float32)
     normals = np.ascontiguousarray(vertex_normals(mesh.points, mesh.triangles), dtype=np.float32)
     triangles = np.ascontiguousarray(mesh.triangles, dtype=np.uint32)
@@ -1305,7 +1329,7 @@ def _draw_mesh(GL: Any, mesh: _Mesh, ss: int) -> None:
     GL.glDisable(GL.GL_LIGHTING)
 
 
-def _draw_lines(GL: Any, lines: _Lines, ss: int) -> None:
+def _draw_lines(GL: Any, lines: _Lines, ss: float) -> None:
     if not len(lines.points):
         return
     points = np.ascontiguousarray(lines.points, dtype=np.float32)
@@ -1320,7 +1344,7 @@ def _draw_lines(GL: Any, lines: _Lines, ss: int) -> None:
     GL.glDisableClientState(GL.GL_VERTEX_ARRAY)
 
 
-def _draw_points(GL: Any, dots: _Points, ss: int) -> None:
+def _draw_points(GL: Any, dots: _Points, ss: float) -> None:
     if not len(dots.points):
         return
     points = np.ascontiguousarray(dots.points, dtype=np.float32)
@@ -1344,6 +1368,7 @@ __all__ = [
     "Renderer",
     "capture",
     "check_show",
+    "draw_primitives",
     "flag_words",
     "parse_material",
     "render",

@@ -643,7 +643,11 @@ class Simulation:
         rebuild = self.compiled._rebuild
         assert rebuild is not None, "a Compiled made by sofac.pipeline can be rebuilt"
         compiled = rebuild(
-            self.compiled.checked, prune=prune, rigid_model=self.spec.rigid_model, threads=self.spec.threads
+            self.compiled.checked,
+            prune=prune,
+            rigid_model=self.spec.rigid_model,
+            threads=self.spec.threads,
+            interactive=self.spec.interactive,
         )
         fresh = Simulation(compiled, resumed=True)
         now = {

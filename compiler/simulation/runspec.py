@@ -81,6 +81,7 @@ class RunSpec:
     pruned: dict[str, str]  # parameter key -> why its effect was compiled out
     threads: int
     rigid_model: str
+    interactive: bool  # compiled with the point forces an interactive viewer pulls with
 
     def index(self, key: str) -> int:
         return next(i for i, b in enumerate(self.buffers) if b.key == key)
@@ -144,6 +145,7 @@ def run_spec(scene_plan: Plan) -> RunSpec:
         dict(scene_plan.pruned),
         scene_plan.threads,
         scene_plan.rigid_model,
+        scene_plan.interactive,
     )
 
 

@@ -96,12 +96,15 @@ def _unchanged(path: Path, digest: str | None) -> bool:
     return _sha256(path) == digest if digest is not None else not path.is_file()
 
 
-def _options(data_roots: Sequence[Path], prune: bool, rigid_model: str, threads: int) -> dict[str, Any]:
+def _options(
+    data_roots: Sequence[Path], prune: bool, rigid_model: str, threads: int, interactive: bool = False
+) -> dict[str, Any]:
     return {
         "data_roots": [str(Path(r)) for r in data_roots],
         "prune": prune,
         "rigid_model": rigid_model,
         "threads": threads,
+        "interactive": interactive,
     }
 
 
@@ -167,6 +170,7 @@ def _spec_to_json(spec: RunSpec) -> dict[str, Any]:
         "pruned": spec.pruned,
         "threads": spec.threads,
         "rigid_model": spec.rigid_model,
+        "interactive": spec.interactive,
     }
 
 
@@ -185,4 +189,5 @@ def _spec_from_json(meta: dict[str, Any], arrays: list[np.ndarray]) -> RunSpec:
         dict(meta["pruned"]),
         int(meta["threads"]),
         str(meta["rigid_model"]),
+        bool(meta["interactive"]),
     )

@@ -340,6 +340,15 @@ inline double spring_energy(const Springs& s, const double* x1, const double* x2
     return energy;
 }
 
+// A force on one DOF, set from Python between steps (sofac view's mouse spring): none while `point`
+// is outside [0, size), so an index written from Python can never reach outside the state.
+template <class DT>
+inline void point_force(double* f, const Index* point, const double* force, Index size) {
+    const Index i = point[0];
+    if (i < 0 || i >= size) return;
+    for (int d = 0; d < DT::deriv; ++d) f[DT::deriv * i + d] += force[d];
+}
+
 // A constant force per listed DOF (deriv-shaped rows).
 template <class DT>
 inline void constant_forces(double* f, const Index* indices, const double* forces, Index count) {
