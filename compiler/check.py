@@ -24,7 +24,7 @@ from .model import Component, Node, Scene
 from .registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from .registry.components.common import MATRIX_TEMPLATE_ALIASES
 from .registry.datatypes import DATATYPES, canonical_datatype, split_template
-from .registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, Springs
+from .registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, SofaData, Springs
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -572,6 +572,9 @@ class _Checker:
         assert checked.spec is not None
         if depth > 32:
             return None
+        field_spec = checked.spec.field(name)
+        if field_spec is not None and isinstance(field_spec.type, SofaData):
+            return None  # a Data known only from SOFA's source: sofac cannot say what it holds
         if name in checked.fields:
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
@@ -1140,8 +1143,6 @@ class _Checker:
 
     # --- plugins -----------------------------------------------------------------------------
     def _check_plugins(self) -> None:
-        known = {spec.module for spec in registry.all_components().values() if spec.module}
-        prefixes = {".".join(m.split(".")[:i]) for m in known for i in range(1, m.count(".") + 2)}
         for checked in self.checked:
             spec = checked.spec
             if spec is None or spec.name != "RequiredPlugin":
@@ -1150,12 +1151,12 @@ class _Checker:
             if not names and checked.component.name:
                 names = [checked.component.name]
             for plugin in names:
-                if plugin in prefixes:
+                if registry.provides_components(plugin):
                     continue
                 self.diags.add(
                     "W224",
                     checked.component.loc,
-                    f"RequiredPlugin names {plugin!r}, which provides none of the components sofac knows",
+                    f"RequiredPlugin names {plugin!r}, which provides none of the components SOFA registers",
                     "old module names (SofaBaseMechanics...) were replaced by Sofa.Component.* "
                     "in SOFA v22.06",
                 )

@@ -367,6 +367,20 @@ class LinkList(Link):
 
 
 @dataclass(frozen=True)
+class SofaData(FieldType):
+    """A Data known only from SOFA's source (registry/catalogue.py): its C++ type, read as text."""
+
+    kind = "sofa"
+    cpp_type: str = ""
+
+    def parse(self, text: str) -> str:
+        return text.strip()
+
+    def describe(self) -> str:
+        return self.cpp_type or self.kind
+
+
+@dataclass(frozen=True)
 class FileName(FieldType):
     """A data file path; ``output`` files are written by SOFA, so they need not exist."""
 
