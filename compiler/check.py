@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from . import evaluate, links, meshes, registry
+from . import datafiles, evaluate, links, meshes, registry
 from .diagnostics import Diagnostics, SceneError, SourceLoc
 from .fem_topology import CELL_KINDS
 from .model import Component, Node, Scene
@@ -142,6 +142,7 @@ class _Checker:
                 self._check_required(checked)
         self._check_mappings()
         self._check_solvers()
+        self._add_data_repositories()
         for checked in self.checked:
             if checked.spec is not None:
                 self._check_files(checked)
@@ -308,7 +309,15 @@ class _Checker:
         assert checked.spec is not None
         self._parse_attributes(checked.component, checked.spec, checked, checked.fields)
         src_text = checked.component.get("src")
-        if src_text is not None:
+        if src_text is not None and src_text.strip() == "@":
+            self.diags.add(
+                "W225",
+                checked.component.attribute_loc("src"),
+                f"{checked.spec.name} {checked.component.label!r}: src=\"@\" names no object: "
+                "SOFA warns that it does nothing",
+                'remove src="@", or name the loader: src="@loader"',
+            )
+        elif src_text is not None:
             loc = checked.component.attribute_loc("src")
             source = links.resolve_src(src_text, checked.component)
             if source is None:
@@ -434,7 +443,8 @@ class _Checker:
                 continue
             source = self.checked.components.get(id(target))
             data = path.data or name
-            if source is not None and source.spec is not None and source.spec.field(data) is None:
+            known = source is not None and source.spec is not None and not source.spec.from_sofa_source
+            if known and source.spec.field(data) is None:  # type: ignore[union-attr]
                 self.diags.add(
                     "E213",
                     loc,
@@ -489,6 +499,18 @@ class _Checker:
                 continue
             checked.state = state
 
+    def _unsupported_template(self, checked: CheckedComponent, template: str, loc: SourceLoc) -> None:
+        spec = checked.spec
+        assert spec is not None
+        self.diags.add(
+            "E222",
+            loc,
+            f"unsupported component {spec.name} at line {checked.component.loc.line}: {spec.name} "
+            f"{template} is supported by SOFA, not compiled by sofac yet (sofac compiles "
+            f"{_fmt_types(spec.templates)})",
+            "remove it, or pass --allow-unsupported to only validate the scene",
+        )
+
     def _parse_template(self, checked: CheckedComponent) -> list[str] | None:
         """The written template's parts, canonicalised; reports unknown spellings."""
         text = checked.component.get("template")
@@ -535,12 +557,15 @@ class _Checker:
         if written:
             template = ",".join(written)
             if spec.templates and template not in spec.templates and written[0] not in spec.templates:
-                self.diags.add(
-                    "E208",
-                    loc,
-                    f"{owner}: template {template!r} is not available; {spec.name} accepts "
-                    f"{_fmt_types(spec.templates)}",
-                )
+                if registry.sofa_has_template(spec, template):
+                    self._unsupported_template(checked, template, loc)
+                else:
+                    self.diags.add(
+                        "E208",
+                        loc,
+                        f"{owner}: template {template!r} is not available; {spec.name} accepts "
+                        f"{_fmt_types(spec.templates)}",
+                    )
                 checked.template = inferred
                 return
             if inferred is not None and checked.state is not None and written[0] != inferred:
@@ -622,7 +647,7 @@ class _Checker:
         except evaluate.UnknownInput:
             pass  # computed by a generator sofac cannot evaluate (yet): nothing to check against
         except evaluate.EvaluationError as error:
-            if error.code != "E219":  # missing files are reported by _check_files
+            if not isinstance(error, evaluate.MissingFile):  # missing files: reported by _check_files
                 self.diags.add(
                     error.code,
                     checked.component.attribute_loc(self._attribute_name(checked, error.attribute))
@@ -780,12 +805,17 @@ class _Checker:
                 continue
             if field_spec.name in checked.fields or field_spec.name in checked.data_links:
                 continue
-            if checked.src is not None:
+            if checked.src is not None or field_spec.name in checked.links:
                 continue
+            unresolved = (
+                f": none is written and {field_spec.default!r} reaches none"
+                if isinstance(field_spec.type, Link) and field_spec.default
+                else ""
+            )
             self.diags.add(
                 "E226",
                 checked.component.loc,
-                f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}",
+                f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}{unresolved}",
                 field_spec.doc,
             )
 
@@ -837,7 +867,11 @@ class _Checker:
                     f"{owner} has template {','.join(written)!r} but maps {source.label!r} ({in_type}) "
                     f"to {target.label!r} ({out_type})",
                 )
-            if spec.templates and actual not in spec.templates:
+            if in_type is None:
+                pass  # the input's template is unknown or not compiled: reported at the input
+            elif spec.templates and actual not in spec.templates and registry.sofa_has_template(spec, actual):
+                self._unsupported_template(checked, actual, component.loc)
+            elif spec.templates and actual not in spec.templates:
                 inputs = sorted({t.split(",")[0] for t in spec.templates})
                 self.diags.add(
                     "E214",
@@ -882,6 +916,7 @@ class _Checker:
                 node = checked.component.node
                 explicit = checked.links.get("linearSolver")
                 found = explicit if explicit is not None else self._linear_solver_below(node)
+                found = found if found is not None else self._unknown_below(node)
                 if found is None:
                     self.diags.add(
                         "E221",
@@ -908,6 +943,15 @@ class _Checker:
         for descendant in node.walk():
             for component in descendant.objects:
                 if self._is(component, Category.LINEAR_SOLVER):
+                    return component
+        return None
+
+    def _unknown_below(self, node: Node) -> Component | None:
+        """An unknown component (E200) in ``node`` or below: it may be the linear solver
+        (SparseTAUCSLLtSolver), so no second diagnostic says there is none."""
+        for descendant in node.walk():
+            for component in descendant.objects:
+                if self.checked.of(component).spec is None:
                     return component
         return None
 
@@ -1141,6 +1185,34 @@ class _Checker:
             )
         return path
 
+    def _add_data_repositories(self) -> None:
+        """AddDataRepository: its folder (relative to the scene's) is searched for the files."""
+        for checked in self.checked:
+            spec = checked.spec
+            if spec is None or spec.role != "data_repository" or not checked.fields.get("path"):
+                continue
+            text = str(checked.fields["path"])
+            folder = Path(checked.component.loc.file).parent / text
+            problem = datafiles.add_data_folder(self.scene, folder)
+            if problem is None:
+                continue
+            owner = f"AddDataRepository {checked.component.label!r}"
+            loc = checked.component.attribute_loc("path")
+            if problem == "outside":
+                self.diags.add(
+                    "E108",
+                    loc,
+                    f"{owner}: folder {text!r} is outside the allowed data roots",
+                    f"pass it with --data-path {datafiles.real_path(folder)}",
+                )
+            else:
+                self.diags.add(
+                    "E219",
+                    loc,
+                    f"{owner}: folder {text!r} {'not found' if problem == 'missing' else 'is not a folder'}",
+                    "fix the path (relative to the scene's folder)",
+                )
+
     # --- plugins -----------------------------------------------------------------------------
     def _check_plugins(self) -> None:
         for checked in self.checked:
@@ -1186,10 +1258,16 @@ class _EvalContext:
         return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
 
     def input_positions(self) -> np.ndarray | None:
-        if self.is_set("position"):
+        source = self.checked.src
+        from_src = source is not None and self.checker.checked.of(source).spec is not None
+        if from_src:  # src="@loader" links the engine's position to the loader's
+            from_src = self.checker.checked.of(source).spec.field("position") is not None  # type: ignore[union-attr]
+        if self.is_set("position") or from_src:
             value = self.value("position")
             if value is None:
-                return None
+                # Linked to a Data sofac does not compute (an unsupported loader or mesh creator,
+                # reported there): not known here, and no second error.
+                raise evaluate.UnknownInput("the input positions are only known at run time")
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)

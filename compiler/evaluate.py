@@ -26,6 +26,10 @@ class EvaluationError(Exception):
         self.code = code
 
 
+class MissingFile(EvaluationError):
+    """The input file is missing: the checker reports that once, for the file (E219)."""
+
+
 class UnknownInput(Exception):
     """An input exists but its value cannot be known before run time; outputs stay unknown."""
 
@@ -65,7 +69,7 @@ def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
 def _file(ctx: Context) -> Path:
     path = ctx.file("filename")
     if path is None:
-        raise EvaluationError("no readable file", "filename")
+        raise MissingFile("no readable file", "filename")
     return path
 
 
@@ -182,7 +186,7 @@ def sparse_grid(ctx: Context) -> Outputs:
     path = ctx.file("filename")
     if path is None:
         if ctx.is_set("filename"):
-            raise EvaluationError("no readable file", "filename")
+            raise MissingFile("no readable file", "filename")
         raise EvaluationError(
             "building the grid from position/triangles/facets (no fileTopology) is not supported yet; "
             'give the surface as fileTopology="mesh.obj"',

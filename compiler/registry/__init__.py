@@ -37,6 +37,7 @@ __all__ = [
     "lookup",
     "node_spec",
     "provides_components",
+    "sofa_has_template",
     "split_template",
     "suggest",
 ]
@@ -104,6 +105,11 @@ def lookup(name: str) -> Resolution | None:
     if claimed is not None:
         return Resolution(claimed.spec, NameStatus.ALIAS if is_alias else claimed.status)
     return Resolution(spec, NameStatus.ALIAS if is_alias else NameStatus.CURRENT)
+
+
+def sofa_has_template(spec: ComponentSpec, template: str) -> bool:
+    """Does SOFA register ``spec``'s class for ``template`` (one sofac does not compile, then)?"""
+    return template in catalogue.templates(spec.name)
 
 
 def provides_components(plugin: str) -> bool:

@@ -17,7 +17,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from .fields import Link, SofaData
+from .fields import Link, LinkList, SofaData
 from .spec import Category, ComponentSpec, FieldSpec
 
 # Links SOFA's base classes resolve to a mechanical state or a topology (the rest name any object).
@@ -70,6 +70,13 @@ def modules() -> frozenset[str]:
     return frozenset(entry[0] for entry in _catalogue()[0].values() if entry[0])
 
 
+def templates(name: str) -> tuple[str, ...]:
+    """The templates SOFA's factory registers for class ``name`` (a hand-written spec lists only
+    those sofac compiles)."""
+    entry = _catalogue()[0].get(name)
+    return tuple(entry[3]) if entry else ()
+
+
 def resolve(name: str) -> tuple[ComponentSpec, bool] | None:
     """The spec of a class SOFA registers under ``name``, and whether ``name`` is a factory alias."""
     components, aliases = _catalogue()
@@ -91,8 +98,10 @@ def spec(name: str) -> ComponentSpec:
             owners.setdefault(alias, []).append(field_name)
     fields = []
     for field_name, cpp_type, default, *field_aliases in data:
-        if cpp_type == "link":
-            field_type: Any = Link(_LINK_TARGETS.get(field_name, "object"))
+        if cpp_type == "link" and category is Category.MULTI_MAPPING and field_name == "input":
+            field_type: Any = LinkList("state")  # MultiMapping's input: several states
+        elif cpp_type == "link":
+            field_type = Link(_LINK_TARGETS.get(field_name, "object"))
             default = link_defaults.get(field_name)
         else:
             field_type = SofaData(cpp_type)
@@ -114,6 +123,7 @@ def spec(name: str) -> ComponentSpec:
         aliases=tuple(aliases),
         supported=drawing,
         unsupported_reason=f"{name} is supported by SOFA ({where}), not compiled by sofac yet",
+        from_sofa_source=True,
     )
 
 
