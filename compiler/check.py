@@ -556,7 +556,8 @@ class _Checker:
             inferred = next(iter(types)) if len(types) == 1 else None
         if written:
             template = ",".join(written)
-            if spec.templates and template not in spec.templates and written[0] not in spec.templates:
+            unknown = template not in spec.templates and written[0] not in spec.templates
+            if spec.templates and unknown and not spec.from_sofa_source:  # SOFA-only classes: E222
                 if registry.sofa_has_template(spec, template):
                     self._unsupported_template(checked, template, loc)
                 else:
@@ -867,11 +868,13 @@ class _Checker:
                     f"{owner} has template {','.join(written)!r} but maps {source.label!r} ({in_type}) "
                     f"to {target.label!r} ({out_type})",
                 )
-            if in_type is None:
-                pass  # the input's template is unknown or not compiled: reported at the input
-            elif spec.templates and actual not in spec.templates and registry.sofa_has_template(spec, actual):
+            # One-parameter mappings (DistanceToPlaneMapping<Vec3d>) name their input only.
+            fits = not spec.templates or actual in spec.templates or in_type in spec.templates
+            if in_type is None or spec.from_sofa_source:
+                pass  # the input's template is reported at the input; SOFA-only classes are E222
+            elif not fits and registry.sofa_has_template(spec, actual):
                 self._unsupported_template(checked, actual, component.loc)
-            elif spec.templates and actual not in spec.templates:
+            elif not fits:
                 inputs = sorted({t.split(",")[0] for t in spec.templates})
                 self.diags.add(
                     "E214",

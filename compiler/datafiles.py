@@ -39,6 +39,16 @@ def _auto_data_root(directory: Path) -> Path | None:
     return None
 
 
+def _sofa_tree(directory: Path) -> Path | None:
+    """The nearest directory above ``directory`` holding SOFA's ``share/mesh`` and ``examples/``."""
+    for candidate in directory.parents:
+        if candidate == Path(candidate.anchor):
+            break
+        if (candidate / "share" / "mesh").is_dir() and (candidate / "examples").is_dir():
+            return candidate
+    return None
+
+
 def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list[Path]:
     """The ordered, de-duplicated allowed roots: the scene's directory, the explicit roots, the
     ``SOFAC_DATA_PATH`` entries, SOFA's own (``SOFA_DATA_PATH``, then ``$SOFA_ROOT/share`` and
@@ -59,6 +69,10 @@ def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list
         candidates.append(auto)
         if auto.name == "examples" and (auto.parent / "share" / "mesh").is_dir():
             candidates.append(auto.parent / "share")
+    else:  # a plugin's scene inside a SOFA tree (applications/plugins/X/examples): SOFA's share/, examples/
+        tree = _sofa_tree(real_path(Path(scene_dir)))
+        if tree is not None:
+            candidates.extend((tree / "share", tree / "examples"))
     roots: list[Path] = []
     for candidate in candidates:
         try:

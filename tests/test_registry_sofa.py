@@ -406,3 +406,39 @@ def test_no_e221_next_to_an_unknown_or_unsupported_linear_solver(tmp_path: Path)
     assert codes(diagnostics) == [("E200", 3)]
     _, diagnostics = check(tmp_path, scene.format(solver="LULinearSolver"))
     assert codes(diagnostics) == [("E222", 3)]
+
+
+# --- check and compile agree -----------------------------------------------------------------
+def test_check_reports_what_the_compile_refuses(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A RestShapeSpringsForceField pulling towards another state's positions checks as valid
+    SOFA; the planner refuses it, and `sofac check` says so at its line, as `sofac run` would."""
+    from sofac.cli import main
+
+    scene = tmp_path / "scene.scn"
+    scene.write_text(
+        HEAD + '    <Node name="rest"><MechanicalObject name="target" position="0 1 0 1 1 0 2 1 0"/></Node>\n'
+        '    <UniformMass totalMass="1"/>\n'
+        '    <RestShapeSpringsForceField stiffness="10" external_rest_shape="@rest/target"/>\n</Node>\n'
+    )
+    _, diagnostics = check_file(scene)
+    assert codes(diagnostics) == []  # the checker alone finds nothing wrong
+    assert main(["check", "--format", "json", str(scene)]) == 1
+    import json
+
+    reported = [(d["code"], d["line"]) for d in json.loads(capsys.readouterr().out)]
+    assert reported == [("E222", 8)]
+
+
+def test_plugin_scene_in_a_sofa_tree_finds_share(tmp_path: Path) -> None:
+    """applications/plugins/X/examples/scene.scn of a SOFA checkout: SOFA's share/ and examples/."""
+    (tmp_path / "share" / "mesh").mkdir(parents=True)
+    (tmp_path / "share" / "mesh" / "square.obj").write_text(SQUARE_OBJ)
+    (tmp_path / "examples").mkdir()
+    folder = tmp_path / "applications" / "plugins" / "X" / "examples"
+    folder.mkdir(parents=True)
+    (folder / "scene.scn").write_text(
+        '<Node name="root">\n    <MeshOBJLoader name="l" filename="mesh/square.obj"/>\n'
+        '    <MechanicalObject src="@l"/>\n</Node>\n'
+    )
+    _, diagnostics = check_file(folder / "scene.scn")
+    assert codes(diagnostics) == []

@@ -98,11 +98,14 @@ def spec(name: str) -> ComponentSpec:
             owners.setdefault(alias, []).append(field_name)
     fields = []
     for field_name, cpp_type, default, *field_aliases in data:
+        if cpp_type == "link":
+            default = link_defaults.get(field_name)
         if cpp_type == "link" and category is Category.MULTI_MAPPING and field_name == "input":
             field_type: Any = LinkList("state")  # MultiMapping's input: several states
-        elif cpp_type == "link":
-            field_type = Link(_LINK_TARGETS.get(field_name, "object"))
-            default = link_defaults.get(field_name)
+        elif cpp_type == "link" and field_name in _LINK_TARGETS:
+            field_type = Link(_LINK_TARGETS[field_name])
+        elif cpp_type == "link":  # single or multi-link: initLink does not say, so a list is read
+            field_type = LinkList("object")
         else:
             field_type = SofaData(cpp_type)
         own = tuple(a for a in field_aliases if len(owners[a]) == 1)
