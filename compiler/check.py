@@ -721,6 +721,8 @@ class _Checker:
                 value = points
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
+            if not count and self._default_single(checked):
+                count = 1  # MechanicalObject's constructor resizes to one default coordinate
             if not count:
                 return None
             rest = np.zeros((count, datatype.coord_size))
@@ -743,6 +745,13 @@ class _Checker:
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
+
+    def _default_single(self, checked: CheckedComponent) -> bool:
+        """A state nothing gives positions (none written, linked or from src; no mapping writes
+        it) keeps the one coordinate SOFA's MechanicalObject starts with."""
+        component = checked.component
+        written = any(name in checked.fields or name in checked.data_links for name in ("position", "size"))
+        return not written and checked.src is None and self.checked.mapping_of(component) is None
 
     def _linked_width(self, checked: CheckedComponent, name: str) -> int | None:
         """Numbers per element of the positions a field links to: a state's coordinate size, or 3

@@ -442,3 +442,20 @@ def test_plugin_scene_in_a_sofa_tree_finds_share(tmp_path: Path) -> None:
     )
     _, diagnostics = check_file(folder / "scene.scn")
     assert codes(diagnostics) == []
+
+
+def test_state_without_positions_has_sofa_s_one_default_coordinate(tmp_path: Path) -> None:
+    """MechanicalObject's constructor resizes to one coordinate: a rigid frame at the origin."""
+    scene = (
+        '<Node name="root">\n    <EulerImplicitSolver/>\n    <CGLinearSolver/>\n'
+        '    <MechanicalObject name="frame" template="Rigid3d"/>\n'
+        '    <FixedProjectiveConstraint indices="{index}"/>\n    <Node name="child">\n'
+        '        <MechanicalObject name="point" position="1 0 0"/>\n'
+        '        <RigidMapping name="map" index="0"/>\n    </Node>\n</Node>\n'
+    )
+    checked, diagnostics = check(tmp_path, scene.format(index=0))
+    assert codes(diagnostics) == []
+    frame = component(checked, "frame").component
+    assert checked.positions(frame).tolist() == [[0, 0, 0, 0, 0, 0, 1]]
+    _, diagnostics = check(tmp_path, scene.format(index=1))
+    assert codes(diagnostics) == [("E218", 5)]  # index 1 is past the one DOF
