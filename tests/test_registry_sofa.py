@@ -154,6 +154,22 @@ def test_rendering_only_components_never_block(tmp_path: Path) -> None:
     assert codes(diagnostics) == []
 
 
+def test_sofa_visual_models_are_drawing_only(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Visual models sofac has no spec of (CylinderVisualModel, ClipPlane, DataDisplay) take no
+    part in the step: the scene checks clean and plans (a mapping into one is a visual mapping)."""
+    from sofac.cli import main
+
+    scene = tmp_path / "scene.scn"
+    scene.write_text(
+        HEAD + '    <UniformMass totalMass="1"/>\n    <Node name="v">\n'
+        '        <CylinderVisualModel name="c"/>\n'
+        '        <IdentityMapping input="@../dofs" output="@c"/>\n        <ClipPlane/>\n'
+        "        <DataDisplay/>\n    </Node>\n</Node>\n"
+    )
+    assert main(["check", "-q", str(scene)]) == 0
+    assert capsys.readouterr().out == ""
+
+
 def test_required_plugin_of_a_sofa_plugin_is_known(tmp_path: Path) -> None:
     _, diagnostics = check(
         tmp_path, HEAD + '    <RequiredPlugin pluginName="SofaCarving"/>\n'

@@ -2,11 +2,12 @@
 ``scripts/sofa_components.py``), turned into specs for the names the hand-written specs of
 ``components/`` do not describe.
 
-Such a component is known, never "unknown": it is either rendering-only (accepted, no part in the
-step) or reported as supported by SOFA but not compiled by sofac yet (E222), naming its module. Its
-Data keep SOFA's C++ types and default expressions; only its links are typed, so that the checker
-resolves them as SOFA would. The catalogue is imported on the first look-up the hand-written specs
-cannot answer, never for a scene that only uses those.
+Such a component is known, never "unknown": it is either rendering-only (a visual model, light,
+shader...: accepted, no part in the step, drawn where ``sofac render`` knows its mesh) or reported
+as supported by SOFA but not compiled by sofac yet (E222), naming its module. Its Data keep SOFA's
+C++ types and default expressions; only its links are typed, so that the checker resolves them as
+SOFA would. The catalogue is read on the first look-up the hand-written specs cannot answer, never
+for a scene that only uses those.
 """
 
 from __future__ import annotations
@@ -113,7 +114,7 @@ def spec(name: str) -> ComponentSpec:
     for alias, targets in owners.items():
         if len(targets) > 1 and alias not in {f.name for f in fields}:
             fields.append(FieldSpec(alias, SofaData(), doc=f"sets {', '.join(targets)}", sets=tuple(targets)))
-    drawing = category is Category.RENDERING or module.startswith(_NO_PHYSICS_MODULES)
+    drawing = category in (Category.RENDERING, Category.VISUAL) or module.startswith(_NO_PHYSICS_MODULES)
     where = f"{'module' if module.startswith('Sofa.') else 'plugin'} {module}" if module else "its core"
     return ComponentSpec(
         name=name,
