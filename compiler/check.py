@@ -747,11 +747,15 @@ class _Checker:
         return value.reshape(-1, datatype.coord_size)
 
     def _default_single(self, checked: CheckedComponent) -> bool:
-        """A state nothing gives positions (none written, linked or from src; no mapping writes
-        it) keeps the one coordinate SOFA's MechanicalObject starts with."""
+        """A state nothing gives positions (none written, linked or from src; no topology in its
+        node, no mapping writing it) keeps the one coordinate SOFA's MechanicalObject starts with."""
         component = checked.component
         written = any(name in checked.fields or name in checked.data_links for name in ("position", "size"))
-        return not written and checked.src is None and self.checked.mapping_of(component) is None
+        if written or checked.src is not None or self.checked.mapping_of(component) is not None:
+            return False
+        node = component.node
+        topology, _ = links.pick_in_node(node, lambda c: self._is(c, Category.TOPOLOGY), climb=False)
+        return topology is None
 
     def _linked_width(self, checked: CheckedComponent, name: str) -> int | None:
         """Numbers per element of the positions a field links to: a state's coordinate size, or 3

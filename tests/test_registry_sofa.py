@@ -475,3 +475,15 @@ def test_state_without_positions_has_sofa_s_one_default_coordinate(tmp_path: Pat
     assert checked.positions(frame).tolist() == [[0, 0, 0, 0, 0, 0, 1]]
     _, diagnostics = check(tmp_path, scene.format(index=1))
     assert codes(diagnostics) == [("E218", 5)]  # index 1 is past the one DOF
+
+
+def test_state_beside_a_topology_takes_no_default_coordinate(tmp_path: Path) -> None:
+    """Beside a topology whose points come from an engine sofac does not evaluate, the state's
+    size is unknown (SOFA's init takes the topology's points): no E218 against one DOF."""
+    _, diagnostics = check(
+        tmp_path,
+        '<Node name="root">\n    <GenerateCylinder name="cyl"/>\n'
+        '    <TetrahedronSetTopologyContainer position="@cyl.output_position"/>\n'
+        '    <MechanicalObject name="dofs"/>\n    <FixedProjectiveConstraint indices="15"/>\n</Node>\n',
+    )
+    assert codes(diagnostics) == [("E222", 2)]
