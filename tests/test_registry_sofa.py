@@ -487,3 +487,14 @@ def test_state_beside_a_topology_takes_no_default_coordinate(tmp_path: Path) -> 
         '    <MechanicalObject name="dofs"/>\n    <FixedProjectiveConstraint indices="15"/>\n</Node>\n',
     )
     assert codes(diagnostics) == [("E222", 2)]
+
+
+def test_warm_load_reads_no_registry() -> None:
+    """A scene loaded before comes from its warm record: neither the registry nor SOFA's list is
+    imported (compiler/warm.py)."""
+    scene = str(REPO / "scenes" / "hybrid_pendulum.scn")
+    load = f"import sys, sofac\nsofac.load({scene!r})\n"
+    subprocess.run([sys.executable, "-c", load], check=True, capture_output=True)  # compiles once
+    probe = load + "print('sofac.registry' in sys.modules, 'sofac.registry.catalogue' in sys.modules)\n"
+    result = subprocess.run([sys.executable, "-c", probe], check=True, capture_output=True, text=True)
+    assert result.stdout.split() == ["False", "False"]
