@@ -705,10 +705,9 @@ class _Checker:
         velocity = self.value(checked, "velocity", raw=True)
         # MechanicalObject::init also takes its topology's points when it holds one position and at
         # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
-        # size > 1 resized it at parse time (Vec3 states only: other widths would need converting).
+        # size > 1 resized it at parse time.
         single = (
-            datatype.coord_size == 3
-            and np.size(value) == 3
+            np.size(value) == datatype.coord_size
             and np.size(velocity) <= datatype.deriv_size
             and int(checked.fields.get("size", 0)) <= 1
         )
@@ -717,8 +716,16 @@ class _Checker:
                 state.node, lambda c: self._is(c, Category.TOPOLOGY), climb=False
             )
             points = self.value(self.checked.of(topology), "position") if topology is not None else None
-            if points is not None and np.size(points):
-                value = points
+            if points is not None and np.size(points) and np.size(points) % 3 == 0:
+                # DataTypes::set(x, px, py, pz): the first min(3, dimension) numbers of each point
+                # (a Vec2 state keeps x and y; a rigid frame its centre, with identity orientation).
+                points = np.asarray(points, dtype=float).reshape(-1, 3)
+                rest = np.zeros((len(points), datatype.coord_size))
+                if datatype.coord_size == 7:
+                    rest[:, 6] = 1.0
+                copied = min(3, datatype.spatial_dim)
+                rest[:, :copied] = points[:, :copied]
+                return rest
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
             if not count and self._default_single(checked):

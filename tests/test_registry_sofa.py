@@ -498,3 +498,20 @@ def test_warm_load_reads_no_registry() -> None:
     probe = load + "print('sofac.registry' in sys.modules, 'sofac.registry.catalogue' in sys.modules)\n"
     result = subprocess.run([sys.executable, "-c", probe], check=True, capture_output=True, text=True)
     assert result.stdout.split() == ["False", "False"]
+
+
+def test_vec2_and_rigid_states_take_their_topology_points(tmp_path: Path) -> None:
+    """MechanicalObject::init copies its topology's points with DataTypes::set(x, px, py, pz):
+    a Vec2 state keeps x and y, a rigid one the centre with identity orientation."""
+    checked, diagnostics = check(
+        tmp_path,
+        '<Node name="root">\n    <Node name="flat">\n        <MechanicalObject name="m" template="Vec2d"/>\n'
+        '        <RegularGridTopology n="3 2 1" min="0 0 0" max="2 1 0"/>\n    </Node>\n'
+        '    <Node name="frames">\n        <MechanicalObject name="r" template="Rigid3d"/>\n'
+        '        <MeshTopology position="1 2 3  4 5 6"/>\n    </Node>\n</Node>\n',
+    )
+    assert codes(diagnostics) == []
+    flat = checked.positions(component(checked, "m").component)
+    assert flat.tolist() == [[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1]]
+    frames = checked.positions(component(checked, "r").component)
+    assert frames.tolist() == [[1, 2, 3, 0, 0, 0, 1], [4, 5, 6, 0, 0, 0, 1]]
