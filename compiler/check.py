@@ -355,8 +355,10 @@ class _Checker:
                 for item in str(text).split():
                     path = links.parse_link(item if item.startswith("@") else "@" + item)
                     found = links.resolve(path, component) if path is not None else None
+                    role = field_spec.type.target
+                    if isinstance(found, Node) and role == "object":
+                        continue  # a link of unknown kind may name a node (targetNode...)
                     if isinstance(found, Node):
-                        role = field_spec.type.target
                         found = self._singleton(found, role) if role in ("state", "topology") else None
                     if found is None:
                         self.diags.add(

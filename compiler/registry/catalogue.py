@@ -26,6 +26,8 @@ _LINK_TARGETS = {
     "mstate": "state",
     "input": "state",
     "output": "state",
+    "input1": "state",  # Multi2Mapping's two kinds of input states
+    "input2": "state",
     "object1": "state",
     "object2": "state",
     "topology": "topology",
@@ -101,8 +103,8 @@ def spec(name: str) -> ComponentSpec:
     for field_name, cpp_type, default, *field_aliases in data:
         if cpp_type == "link":
             default = link_defaults.get(field_name)
-        if cpp_type == "link" and category is Category.MULTI_MAPPING and field_name == "input":
-            field_type: Any = LinkList("state")  # MultiMapping's input: several states
+        if cpp_type == "link" and category is Category.MULTI_MAPPING and field_name.startswith("input"):
+            field_type: Any = LinkList("state")  # a MultiMapping's inputs: several states
         elif cpp_type == "link" and field_name in _LINK_TARGETS:
             field_type = Link(_LINK_TARGETS[field_name])
         elif cpp_type == "link":  # single or multi-link: initLink does not say, so a list is read
