@@ -135,12 +135,30 @@ def grid(ctx: Context) -> Outputs:
     from .barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    cells = _grid_cells(counts)
+    if "quads" in cells and ctx.value("computeTriangleList") is not False:
+        # A 2-D grid: SOFA's GridUpdate also splits each quad (q0 q1 q2) (q0 q2 q3) and, from those
+        # triangles, derives the edges.
+        quads = cells["quads"].reshape(-1, 4)
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+        cells["triangles"] = triangles.ravel()
+        if ctx.value("computeEdgeList") is not False:
+            cells["edges"] = triangle_edges(triangles).ravel()
     return {
         "position": lattice.points().ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
-        **_grid_cells(counts),
+        **cells,
     }
+
+
+def triangle_edges(triangles: np.ndarray) -> np.ndarray:
+    """The edges of triangles as SOFA's createEdgeSetArray makes them: for each triangle t and
+    j = 0, 1, 2 the edge (t[j+1], t[j+2]) (indices mod 3), in the order first met, once each."""
+    ends = np.stack([triangles[:, [1, 2]], triangles[:, [2, 0]], triangles[:, [0, 1]]], axis=1).reshape(-1, 2)
+    keys = np.sort(ends, axis=1)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return ends[np.sort(first)]
 
 
 def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:

@@ -515,3 +515,31 @@ def test_vec2_and_rigid_states_take_their_topology_points(tmp_path: Path) -> Non
     assert flat.tolist() == [[0, 0], [1, 0], [2, 0], [0, 1], [1, 1], [2, 1]]
     frames = checked.positions(component(checked, "r").component)
     assert frames.tolist() == [[1, 2, 3, 0, 0, 0, 1], [4, 5, 6, 0, 0, 0, 1]]
+
+
+def test_two_dimensional_grid_has_sofa_s_triangles_and_edges(tmp_path: Path, capsys) -> None:
+    """GridTopology's update splits each quad (q0 q1 q2) (q0 q2 q3) and derives the edges from the
+    triangles (createEdgeSetArray's order): a triangle container reading the grid through src= gets
+    them, and TriangularFEMForceField compiles on it."""
+    from sofac.cli import main
+
+    text = (
+        '<Node name="root" dt="0.01">\n    <EulerImplicitSolver/>\n    <CGLinearSolver iterations="25"'
+        ' tolerance="1e-9" threshold="1e-9"/>\n'
+        '    <RegularGridTopology name="grid" n="3 2 1" min="0 0 0" max="2 1 0"/>\n'
+        '    <MechanicalObject src="@grid"/>\n    <TriangleSetTopologyContainer name="tri" src="@grid"/>\n'
+        '    <DiagonalMass massDensity="1"/>\n    <FixedProjectiveConstraint indices="0 3"/>\n'
+        '    <TriangularFEMForceField youngModulus="60" poissonRatio="0.3" method="large"/>\n</Node>\n'
+    )
+    checked, diagnostics = check(tmp_path, text)
+    assert codes(diagnostics) == []
+    grid = component(checked, "grid").component
+    assert checked.value(grid, "quads").reshape(-1, 4).tolist() == [[0, 1, 4, 3], [1, 2, 5, 4]]
+    triangles = [[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4]]
+    assert checked.value(grid, "triangles").reshape(-1, 3).tolist() == triangles
+    edges = [[1, 4], [4, 0], [0, 1], [4, 3], [3, 0], [2, 5], [5, 1], [1, 2], [5, 4]]
+    assert checked.value(grid, "edges").reshape(-1, 2).tolist() == edges
+    tri = component(checked, "tri").component
+    assert checked.value(tri, "triangles").reshape(-1, 3).tolist() == triangles
+    assert main(["check", "-q", str(tmp_path / "scene.scn")]) == 0  # and the planner accepts it
+    assert capsys.readouterr().out == ""
