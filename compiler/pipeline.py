@@ -8,6 +8,7 @@ The stages themselves import nothing from here: data flows one way.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -59,6 +60,18 @@ def plan_checked(
     return plan_scene(
         checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
     )
+
+
+def add_compile_refusals(checked: CheckedScene | None, diagnostics: Diagnostics) -> None:
+    """What ``sofac run`` would refuse, reported by ``sofac check``: a scene that checks clean is
+    planned (no code generated, no build) and the planner's refusals (E222...) join the check's
+    diagnostics, with the code, file and line the compile would give. The rules stay in the
+    planner alone. A scene with errors (or with unsupported components let through as warnings)
+    is not planned: its own diagnostics already say why it will not compile."""
+    if checked is None or diagnostics.has_errors() or any(d.code == "E222" for d in diagnostics):
+        return
+    with contextlib.suppress(SceneError):  # its diagnostics are in ``diagnostics`` already
+        plan_checked(checked, diagnostics)
 
 
 def plan_file(path: str | Path, *, data_roots: Sequence[Path] = (), threads: int = 1) -> Plan:

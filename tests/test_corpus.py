@@ -26,6 +26,7 @@ from sofac.cli.main import find_scenes, main
 from sofac.diagnostics import Diagnostic, Diagnostics, Severity
 from sofac.front.model import Component, Node
 from sofac.front.parse import parse_scene
+from sofac.pipeline import add_compile_refusals
 
 # Diagnostics about the text itself: they may point at any line (an unclosed tag, a repaired '&').
 TEXT_CODES = {"E101", "E102", "E104", "W105"}
@@ -56,6 +57,7 @@ def results(corpus_dir: Path) -> dict[str, Result]:
     out: dict[str, Result] = {}
     for path in sorted(find_scenes([str(corpus_dir)])):
         checked, diags = check_file(path)  # an exception here fails every test of this file
+        add_compile_refusals(checked, diags)  # as `sofac check` does: what the compile would refuse
         out[path.relative_to(corpus_dir).as_posix()] = Result(path, checked, diags)
     return out
 

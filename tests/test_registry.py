@@ -176,6 +176,8 @@ def test_supported_flags_follow_the_manifest() -> None:
         assert offending, entry["scene"]
         for name in offending:
             spec = registry.lookup(name).spec  # type: ignore[union-attr]
+            if spec.category is registry.Category.RENDERING:
+                continue  # lights and cameras are accepted since the manifest (issue 19)
             assert not spec.supported, f"{name} ({entry['scene']}) should be unsupported"
 
 

@@ -19,13 +19,13 @@ import numpy as np
 from sofac import registry
 from sofac.check import evaluate
 from sofac.diagnostics import Diagnostics, SceneError, SourceLoc
-from sofac.front import links, meshes
+from sofac.front import datafiles, links, meshes
 from sofac.front.model import Component, Node, Scene
 from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
-from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, Springs
+from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, SofaData, Springs
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -160,6 +160,7 @@ class _Checker:
                 self._check_required(checked)
         self._check_mappings()
         self._check_solvers()
+        self._add_data_repositories()
         for checked in self.checked:
             if checked.spec is not None:
                 self._check_files(checked)
@@ -326,7 +327,15 @@ class _Checker:
         assert checked.spec is not None
         self._parse_attributes(checked.component, checked.spec, checked, checked.fields)
         src_text = checked.component.get("src")
-        if src_text is not None:
+        if src_text is not None and src_text.strip() == "@":
+            self.diags.add(
+                "W225",
+                checked.component.attribute_loc("src"),
+                f"{checked.spec.name} {checked.component.label!r}: src=\"@\" names no object: "
+                "SOFA warns that it does nothing",
+                'remove src="@", or name the loader: src="@loader"',
+            )
+        elif src_text is not None:
             loc = checked.component.attribute_loc("src")
             source = links.resolve_src(src_text, checked.component)
             if source is None:
@@ -364,8 +373,10 @@ class _Checker:
                 for item in str(text).split():
                     path = links.parse_link(item if item.startswith("@") else "@" + item)
                     found = links.resolve(path, component) if path is not None else None
+                    role = field_spec.type.target
+                    if isinstance(found, Node) and role == "object":
+                        continue  # a link of unknown kind may name a node (targetNode...)
                     if isinstance(found, Node):
-                        role = field_spec.type.target
                         found = self._singleton(found, role) if role in ("state", "topology") else None
                     if found is None:
                         self.diags.add(
@@ -452,7 +463,8 @@ class _Checker:
                 continue
             source = self.checked.components.get(id(target))
             data = path.data or name
-            if source is not None and source.spec is not None and source.spec.field(data) is None:
+            known = source is not None and source.spec is not None and not source.spec.from_sofa_source
+            if known and source.spec.field(data) is None:  # type: ignore[union-attr]
                 self.diags.add(
                     "E213",
                     loc,
@@ -507,6 +519,18 @@ class _Checker:
                 continue
             checked.state = state
 
+    def _unsupported_template(self, checked: CheckedComponent, template: str, loc: SourceLoc) -> None:
+        spec = checked.spec
+        assert spec is not None
+        self.diags.add(
+            "E222",
+            loc,
+            f"unsupported component {spec.name} at line {checked.component.loc.line}: {spec.name} "
+            f"{template} is supported by SOFA, not compiled by sofac yet (sofac compiles "
+            f"{_fmt_types(spec.templates)})",
+            "remove it, or pass --allow-unsupported to only validate the scene",
+        )
+
     def _parse_template(self, checked: CheckedComponent) -> list[str] | None:
         """The written template's parts, canonicalised; reports unknown spellings."""
         text = checked.component.get("template")
@@ -552,13 +576,17 @@ class _Checker:
             inferred = next(iter(types)) if len(types) == 1 else None
         if written:
             template = ",".join(written)
-            if spec.templates and template not in spec.templates and written[0] not in spec.templates:
-                self.diags.add(
-                    "E208",
-                    loc,
-                    f"{owner}: template {template!r} is not available; {spec.name} accepts "
-                    f"{_fmt_types(spec.templates)}",
-                )
+            unknown = template not in spec.templates and written[0] not in spec.templates
+            if spec.templates and unknown and not spec.from_sofa_source:  # SOFA-only classes: E222
+                if registry.sofa_has_template(spec, template):
+                    self._unsupported_template(checked, template, loc)
+                else:
+                    self.diags.add(
+                        "E208",
+                        loc,
+                        f"{owner}: template {template!r} is not available; {spec.name} accepts "
+                        f"{_fmt_types(spec.templates)}",
+                    )
                 checked.template = inferred
                 return
             if inferred is not None and checked.state is not None and written[0] != inferred:
@@ -590,6 +618,9 @@ class _Checker:
         assert checked.spec is not None
         if depth > 32:
             return None
+        field_spec = checked.spec.field(name)
+        if field_spec is not None and isinstance(field_spec.type, SofaData):
+            return None  # a Data known only from SOFA's source: sofac cannot say what it holds
         if name in checked.fields:
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
@@ -637,7 +668,7 @@ class _Checker:
         except evaluate.UnknownInput:
             pass  # computed by a generator sofac cannot evaluate (yet): nothing to check against
         except evaluate.EvaluationError as error:
-            if error.code != "E219":  # missing files are reported by _check_files
+            if not isinstance(error, evaluate.MissingFile):  # missing files: reported by _check_files
                 self.diags.add(
                     error.code,
                     checked.component.attribute_loc(self._attribute_name(checked, error.attribute))
@@ -694,10 +725,9 @@ class _Checker:
         velocity = self.value(checked, "velocity", raw=True)
         # MechanicalObject::init also takes its topology's points when it holds one position and at
         # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
-        # size > 1 resized it at parse time (Vec3 states only: other widths would need converting).
+        # size > 1 resized it at parse time.
         single = (
-            datatype.coord_size == 3
-            and np.size(value) == 3
+            np.size(value) == datatype.coord_size
             and np.size(velocity) <= datatype.deriv_size
             and int(checked.fields.get("size", 0)) <= 1
         )
@@ -706,10 +736,20 @@ class _Checker:
                 state.node, lambda c: self._is(c, Category.TOPOLOGY), climb=False
             )
             points = self.value(self.checked.of(topology), "position") if topology is not None else None
-            if points is not None and np.size(points):
-                value = points
+            if points is not None and np.size(points) and np.size(points) % 3 == 0:
+                # DataTypes::set(x, px, py, pz): the first min(3, dimension) numbers of each point
+                # (a Vec2 state keeps x and y; a rigid frame its centre, with identity orientation).
+                points = np.asarray(points, dtype=float).reshape(-1, 3)
+                rest = np.zeros((len(points), datatype.coord_size))
+                if datatype.coord_size == 7:
+                    rest[:, 6] = 1.0
+                copied = min(3, datatype.spatial_dim)
+                rest[:, :copied] = points[:, :copied]
+                return rest
         if value is None or np.size(value) == 0:
             count = int(checked.fields.get("size", 0))
+            if not count and self._default_single(checked):
+                count = 1  # MechanicalObject's constructor resizes to one default coordinate
             if not count:
                 return None
             rest = np.zeros((count, datatype.coord_size))
@@ -732,6 +772,17 @@ class _Checker:
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
+
+    def _default_single(self, checked: CheckedComponent) -> bool:
+        """A state nothing gives positions (none written, linked or from src; no topology in its
+        node, no mapping writing it) keeps the one coordinate SOFA's MechanicalObject starts with."""
+        component = checked.component
+        written = any(name in checked.fields or name in checked.data_links for name in ("position", "size"))
+        if written or checked.src is not None or self.checked.mapping_of(component) is not None:
+            return False
+        node = component.node
+        topology, _ = links.pick_in_node(node, lambda c: self._is(c, Category.TOPOLOGY), climb=False)
+        return topology is None
 
     def _linked_width(self, checked: CheckedComponent, name: str) -> int | None:
         """Numbers per element of the positions a field links to: a state's coordinate size, or 3
@@ -795,12 +846,17 @@ class _Checker:
                 continue
             if field_spec.name in checked.fields or field_spec.name in checked.data_links:
                 continue
-            if checked.src is not None:
+            if checked.src is not None or field_spec.name in checked.links:
                 continue
+            unresolved = (
+                f": none is written and {field_spec.default!r} reaches none"
+                if isinstance(field_spec.type, Link) and field_spec.default
+                else ""
+            )
             self.diags.add(
                 "E226",
                 checked.component.loc,
-                f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}",
+                f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}{unresolved}",
                 field_spec.doc,
             )
 
@@ -852,7 +908,13 @@ class _Checker:
                     f"{owner} has template {','.join(written)!r} but maps {source.label!r} ({in_type}) "
                     f"to {target.label!r} ({out_type})",
                 )
-            if spec.templates and actual not in spec.templates:
+            # One-parameter mappings (DistanceToPlaneMapping<Vec3d>) name their input only.
+            fits = not spec.templates or actual in spec.templates or in_type in spec.templates
+            if in_type is None or spec.from_sofa_source:
+                pass  # the input's template is reported at the input; SOFA-only classes are E222
+            elif not fits and registry.sofa_has_template(spec, actual):
+                self._unsupported_template(checked, actual, component.loc)
+            elif not fits:
                 inputs = sorted({t.split(",")[0] for t in spec.templates})
                 self.diags.add(
                     "E214",
@@ -897,6 +959,7 @@ class _Checker:
                 node = checked.component.node
                 explicit = checked.links.get("linearSolver")
                 found = explicit if explicit is not None else self._linear_solver_below(node)
+                found = found if found is not None else self._unknown_below(node)
                 if found is None:
                     self.diags.add(
                         "E221",
@@ -923,6 +986,15 @@ class _Checker:
         for descendant in node.walk():
             for component in descendant.objects:
                 if self._is(component, Category.LINEAR_SOLVER):
+                    return component
+        return None
+
+    def _unknown_below(self, node: Node) -> Component | None:
+        """An unknown component (E200) in ``node`` or below: it may be the linear solver
+        (SparseTAUCSLLtSolver), so no second diagnostic says there is none."""
+        for descendant in node.walk():
+            for component in descendant.objects:
+                if self.checked.of(component).spec is None:
                     return component
         return None
 
@@ -1156,10 +1228,36 @@ class _Checker:
             )
         return path
 
+    def _add_data_repositories(self) -> None:
+        """AddDataRepository: its folder (relative to the scene's) is searched for the files."""
+        for checked in self.checked:
+            spec = checked.spec
+            if spec is None or spec.role != "data_repository" or not checked.fields.get("path"):
+                continue
+            text = str(checked.fields["path"])
+            folder = Path(checked.component.loc.file).parent / text
+            problem = datafiles.add_data_folder(self.scene, folder)
+            if problem is None:
+                continue
+            owner = f"AddDataRepository {checked.component.label!r}"
+            loc = checked.component.attribute_loc("path")
+            if problem == "outside":
+                self.diags.add(
+                    "E108",
+                    loc,
+                    f"{owner}: folder {text!r} is outside the allowed data roots",
+                    f"pass it with --data-path {datafiles.real_path(folder)}",
+                )
+            else:
+                self.diags.add(
+                    "E219",
+                    loc,
+                    f"{owner}: folder {text!r} {'not found' if problem == 'missing' else 'is not a folder'}",
+                    "fix the path (relative to the scene's folder)",
+                )
+
     # --- plugins -----------------------------------------------------------------------------
     def _check_plugins(self) -> None:
-        known = {spec.module for spec in registry.all_components().values() if spec.module}
-        prefixes = {".".join(m.split(".")[:i]) for m in known for i in range(1, m.count(".") + 2)}
         for checked in self.checked:
             spec = checked.spec
             if spec is None or spec.name != "RequiredPlugin":
@@ -1168,12 +1266,12 @@ class _Checker:
             if not names and checked.component.name:
                 names = [checked.component.name]
             for plugin in names:
-                if plugin in prefixes:
+                if registry.provides_components(plugin):
                     continue
                 self.diags.add(
                     "W224",
                     checked.component.loc,
-                    f"RequiredPlugin names {plugin!r}, which provides none of the components sofac knows",
+                    f"RequiredPlugin names {plugin!r}, which provides none of the components SOFA registers",
                     "old module names (SofaBaseMechanics...) were replaced by Sofa.Component.* "
                     "in SOFA v22.06",
                 )
@@ -1203,10 +1301,16 @@ class _EvalContext:
         return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
 
     def input_positions(self) -> np.ndarray | None:
-        if self.is_set("position"):
+        source = self.checked.src
+        from_src = source is not None and self.checker.checked.of(source).spec is not None
+        if from_src:  # src="@loader" links the engine's position to the loader's
+            from_src = self.checker.checked.of(source).spec.field("position") is not None  # type: ignore[union-attr]
+        if self.is_set("position") or from_src:
             value = self.value("position")
             if value is None:
-                return None
+                # Linked to a Data sofac does not compute (an unsupported loader or mesh creator,
+                # reported there): not known here, and no second error.
+                raise evaluate.UnknownInput("the input positions are only known at run time")
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)

@@ -25,6 +25,10 @@ class EvaluationError(Exception):
         self.code = code
 
 
+class MissingFile(EvaluationError):
+    """The input file is missing: the checker reports that once, for the file (E219)."""
+
+
 class UnknownInput(Exception):
     """An input exists but its value cannot be known before run time; outputs stay unknown."""
 
@@ -64,7 +68,7 @@ def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
 def _file(ctx: Context) -> Path:
     path = ctx.file("filename")
     if path is None:
-        raise EvaluationError("no readable file", "filename")
+        raise MissingFile("no readable file", "filename")
     return path
 
 
@@ -130,12 +134,30 @@ def grid(ctx: Context) -> Outputs:
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    cells = _grid_cells(counts)
+    if "quads" in cells and ctx.value("computeTriangleList") is not False:
+        # A 2-D grid: SOFA's GridUpdate also splits each quad (q0 q1 q2) (q0 q2 q3) and, from those
+        # triangles, derives the edges.
+        quads = cells["quads"].reshape(-1, 4)
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+        cells["triangles"] = triangles.ravel()
+        if ctx.value("computeEdgeList") is not False:
+            cells["edges"] = triangle_edges(triangles).ravel()
     return {
         "position": lattice.points().ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
-        **_grid_cells(counts),
+        **cells,
     }
+
+
+def triangle_edges(triangles: np.ndarray) -> np.ndarray:
+    """The edges of triangles as SOFA's createEdgeSetArray makes them: for each triangle t and
+    j = 0, 1, 2 the edge (t[j+1], t[j+2]) (indices mod 3), in the order first met, once each."""
+    ends = np.stack([triangles[:, [1, 2]], triangles[:, [2, 0]], triangles[:, [0, 1]]], axis=1).reshape(-1, 2)
+    keys = np.sort(ends, axis=1)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return ends[np.sort(first)]
 
 
 def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
@@ -181,7 +203,7 @@ def sparse_grid(ctx: Context) -> Outputs:
     path = ctx.file("filename")
     if path is None:
         if ctx.is_set("filename"):
-            raise EvaluationError("no readable file", "filename")
+            raise MissingFile("no readable file", "filename")
         raise EvaluationError(
             "building the grid from position/triangles/facets (no fileTopology) is not supported yet; "
             'give the surface as fileTopology="mesh.obj"',

@@ -118,13 +118,16 @@ def _data_roots(values: Sequence[str] | None) -> list[Path]:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
 
     data_roots = _data_roots(args.data_path)
     files = find_scenes(args.paths)
     results: list[FileResult] = []
     has_errors = False
     for path in files:
-        _, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=args.allow_unsupported)
+        allow = args.allow_unsupported
+        checked, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=allow)
+        add_compile_refusals(checked, diagnostics)
         items: list[Diagnostic] = diagnostics.sorted()
         if args.quiet:
             items = [d for d in items if d.severity is Severity.ERROR]

@@ -39,18 +39,40 @@ def _auto_data_root(directory: Path) -> Path | None:
     return None
 
 
+def _sofa_tree(directory: Path) -> Path | None:
+    """The nearest directory above ``directory`` holding SOFA's ``share/mesh`` and ``examples/``."""
+    for candidate in directory.parents:
+        if candidate == Path(candidate.anchor):
+            break
+        if (candidate / "share" / "mesh").is_dir() and (candidate / "examples").is_dir():
+            return candidate
+    return None
+
+
 def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list[Path]:
     """The ordered, de-duplicated allowed roots: the scene's directory, the explicit roots, the
-    ``SOFAC_DATA_PATH`` entries, then the auto-detected SOFA data root. Only existing directories."""
+    ``SOFAC_DATA_PATH`` entries, SOFA's own (``SOFA_DATA_PATH``, then ``$SOFA_ROOT/share`` and
+    ``$SOFA_ROOT/examples``, as SOFA's DataRepository starts), then the auto-detected SOFA data root
+    (with its ``share/`` when it is SOFA's ``examples/``). Only existing directories."""
     candidates: list[Path] = [Path(scene_dir), *(Path(r) for r in data_roots)]
-    env = os.environ.get("SOFAC_DATA_PATH", "")
-    candidates.extend(Path(entry) for entry in env.split(os.pathsep) if entry.strip())
+    for variable in ("SOFAC_DATA_PATH", "SOFA_DATA_PATH"):
+        env = os.environ.get(variable, "")
+        candidates.extend(Path(entry) for entry in env.split(os.pathsep) if entry.strip())
+    sofa_root = os.environ.get("SOFA_ROOT", "").strip()
+    if sofa_root:
+        candidates.extend((Path(sofa_root) / "share", Path(sofa_root) / "examples"))
     try:
         auto = _auto_data_root(real_path(Path(scene_dir)))
     except (OSError, ValueError, RuntimeError):
         auto = None
     if auto is not None:
         candidates.append(auto)
+        if auto.name == "examples" and (auto.parent / "share" / "mesh").is_dir():
+            candidates.append(auto.parent / "share")
+    else:  # a plugin's scene inside a SOFA tree (applications/plugins/X/examples): SOFA's share/, examples/
+        tree = _sofa_tree(real_path(Path(scene_dir)))
+        if tree is not None:
+            candidates.extend((tree / "share", tree / "examples"))
     roots: list[Path] = []
     for candidate in candidates:
         try:
@@ -60,6 +82,22 @@ def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list
         if real.is_dir() and real not in roots:
             roots.append(real)
     return roots
+
+
+def add_data_folder(scene: Scene, folder: Path) -> str | None:
+    """Append ``folder`` to the scene's data roots, as SOFA's AddDataRepository appends it to its
+    DataRepository; what is wrong with it otherwise ("outside", "missing", "not a folder"). Only a
+    folder inside an allowed root is probed: a scene cannot widen what sofac reads."""
+    real = real_path(folder)
+    if not any(_is_within(real, real_path(root)) for root in scene.data_roots):
+        return "outside"
+    if not real.exists():
+        return "missing"
+    if not real.is_dir():
+        return "not a folder"
+    if real not in scene.data_roots:
+        scene.data_roots.append(real)
+    return None
 
 
 @dataclass(frozen=True)

@@ -42,11 +42,13 @@ world Z (``R = Rz @ Ry @ Rx``). See :func:`apply_transform`.
 from __future__ import annotations
 
 import functools
+import io
 import math
 import os
 import re
 import warnings
 from collections.abc import Sequence
+from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -1134,12 +1136,16 @@ def _read_with_meshio(path: str, file_format: str) -> Mesh:
         import meshio
     except ImportError:  # pragma: no cover - meshio is a dependency
         raise MeshError(f"reading this {file_format} file needs the 'meshio' package") from None
+    said, complained = io.StringIO(), io.StringIO()
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), redirect_stdout(said), redirect_stderr(complained):
             warnings.simplefilter("ignore")
             data = meshio.read(path, file_format=file_format)
     except Exception as error:  # meshio raises many types (ReadError, ValueError, IndexError...)
         raise MeshError(f"cannot read {file_format} file (meshio: {error})") from None
+    except SystemExit:  # on a file no reader takes (a POLYDATA .vtk) meshio prints why and exits
+        why = " ".join(said.getvalue().split()) or "no reader accepts this file"
+        raise MeshError(f"cannot read {file_format} file (meshio: {why})") from None
     points = np.asarray(data.points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise MeshError(f"unexpected point array of shape {points.shape}")

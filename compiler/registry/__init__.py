@@ -2,7 +2,9 @@
 
 Component families live in ``registry/components/*.py``; each module defines a ``COMPONENTS``
 tuple of :class:`ComponentSpec`. This package collects them and answers name look-ups (current
-names, silent aliases, renamed and former names) for every later stage.
+names, silent aliases, renamed and former names) for every later stage. Every other class SOFA's
+factory registers comes from SOFA's own list (``catalogue.py``), read only when a name is not one
+of these.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import pkgutil
 from dataclasses import dataclass
 from functools import cache
 
+from . import catalogue
 from . import components as _components_pkg
 from .datatypes import DATATYPES, DataType, canonical_datatype, split_template
 from .fields import FieldType
@@ -33,6 +36,8 @@ __all__ = [
     "canonical_datatype",
     "lookup",
     "node_spec",
+    "provides_components",
+    "sofa_has_template",
     "split_template",
     "suggest",
 ]
@@ -78,12 +83,44 @@ def _tables() -> tuple[dict[str, ComponentSpec], dict[str, Resolution]]:
 
 def all_components() -> dict[str, ComponentSpec]:
     """Every registered component (including the scene-graph ``Node``), by canonical name."""
-    return dict(_tables()[0])
+    specs = dict(_tables()[0])
+    for name in catalogue.names():
+        resolution = lookup(name)
+        if resolution is not None:
+            specs.setdefault(resolution.spec.name, resolution.spec)
+    return specs
 
 
 def lookup(name: str) -> Resolution | None:
     """Resolve a component name as SOFA's factory would (current name, alias, renamed, former)."""
-    return _tables()[1].get(name)
+    found = _tables()[1].get(name)
+    if found is not None:
+        return found
+    from_sofa = catalogue.resolve(name)
+    if from_sofa is None:
+        return None
+    spec, is_alias = from_sofa
+    # A SOFA class whose name a hand-written spec claims (as an alias) is that spec's.
+    claimed = _tables()[1].get(spec.name)
+    if claimed is not None:
+        return Resolution(claimed.spec, NameStatus.ALIAS if is_alias else claimed.status)
+    return Resolution(spec, NameStatus.ALIAS if is_alias else NameStatus.CURRENT)
+
+
+def sofa_has_template(spec: ComponentSpec, template: str) -> bool:
+    """Does SOFA register ``spec``'s class for ``template`` (one sofac does not compile, then)?"""
+    return template in catalogue.templates(spec.name)
+
+
+def provides_components(plugin: str) -> bool:
+    """Does a SOFA module or plugin (or a prefix of one: "Sofa.Component") provide known components?"""
+    return plugin in _module_prefixes(False) or plugin in _module_prefixes(True)
+
+
+@cache
+def _module_prefixes(from_sofa: bool) -> frozenset[str]:
+    modules = catalogue.modules() if from_sofa else {s.module for s in _tables()[0].values() if s.module}
+    return frozenset(".".join(m.split(".")[:i]) for m in modules for i in range(1, m.count(".") + 2))
 
 
 def node_spec() -> ComponentSpec:
@@ -93,6 +130,7 @@ def node_spec() -> ComponentSpec:
 def suggest(name: str, limit: int = 3) -> list[str]:
     """Closest known component names, SOFA-style fuzzy matching (ratio >= 0.6)."""
     candidates = [n for n, r in _tables()[1].items() if r.status is not NameStatus.FORMER and n != "Node"]
+    candidates += [n for n in catalogue.names() if n not in _tables()[1]]
     lowered = {c.lower(): c for c in candidates}
     exact = lowered.get(name.lower())
     if exact:

@@ -9,6 +9,7 @@ the component is known; ``format`` writes a value back in SOFA's text form.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,20 +31,44 @@ def _format_real(x: float) -> str:
     return repr(float(x)) if not float(x).is_integer() or abs(x) >= 1e16 else str(int(x))
 
 
+# One number as C++'s stream extraction reads it (the longest prefix strtod accepts).
+_STREAM_REAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+
+
+def _stream_reals(token: str) -> list[str] | None:
+    """A word SOFA's ``>> double`` reads as several numbers ("0-0.707107" is 0 then -0.707107)."""
+    parts = []
+    position = 0
+    while position < len(token):
+        match = _STREAM_REAL.match(token, position)
+        if match is None:
+            return None
+        parts.append(match.group())
+        position = match.end()
+    return parts
+
+
 def parse_reals(text: str) -> np.ndarray:
     """Whitespace-separated reals (SOFA also tolerates commas and brackets in vectors)."""
     tokens = text.replace(",", " ").replace("[", " ").replace("]", " ").split()
     try:
         values = np.array(tokens, dtype=np.float64)
     except ValueError:
+        split: list[str] = []
         for position, token in enumerate(tokens, start=1):
             try:
                 float(token)
+                split.append(token)
+                continue
             except ValueError:
+                pieces = _stream_reals(token)
+            if pieces is None:
                 raise FieldValueError(
                     f"value {position} ({token!r}) is not a number", hint="write plain decimal numbers"
                 ) from None
-        raise
+            split.extend(pieces)
+        tokens = split
+        values = np.array(tokens, dtype=np.float64)
     if values.size and not np.isfinite(values).all():
         bad = int(np.flatnonzero(~np.isfinite(values))[0])
         raise FieldValueError(
@@ -54,19 +79,51 @@ def parse_reals(text: str) -> np.ndarray:
     return values
 
 
+# SOFA expands "A-B" and "A-B-step" in integer lists; more values than this is not an index list.
+_MAX_RANGE_VALUES = 10_000_000
+
+
+def _integers(token: str) -> list[int]:
+    """One word of an integer list as SOFA's vector<int>::read reads it: "7", or the inclusive
+    range "A-B" (descending when B < A), or "A-B-step" (a step against the direction swaps A, B)."""
+    hyphen = token.find("-", 1)
+    if hyphen < 0:
+        return [int(token)]
+    second = token.find("-", hyphen + 2)
+    first = int(token[:hyphen])
+    if second < 0:
+        last = int(token[hyphen + 1 :])
+        step = 1 if first < last else -1
+    else:
+        last, step = int(token[hyphen + 1 : second]), int(token[second + 1 :])
+        if step == 0:
+            step = 1 if first < last else -1
+        if (last - first) * step < 0:
+            first, last = last, first
+    if abs(last - first) // abs(step) >= _MAX_RANGE_VALUES:
+        raise OverflowError(token)
+    return list(range(first, last + (1 if step > 0 else -1), step))
+
+
 def parse_ints(text: str, *, nonnegative: bool = True) -> np.ndarray:
     tokens = text.replace(",", " ").replace("[", " ").replace("]", " ").split()
     try:
-        values = np.array([int(t) for t in tokens], dtype=np.int64)
+        values = np.array([i for t in tokens for i in _integers(t)], dtype=np.int64)
     except (ValueError, OverflowError):
         for position, token in enumerate(tokens, start=1):
             try:
-                number = int(token)
+                numbers = _integers(token)
             except ValueError:
                 raise FieldValueError(
-                    f"value {position} ({token!r}) is not an integer", hint="indices are whole numbers"
+                    f"value {position} ({token!r}) is not an integer or a range A-B",
+                    hint="indices are whole numbers; SOFA reads 0-50 as 0 to 50, 0-50-2 as every other one",
                 ) from None
-            if not -(2**63) <= number < 2**63:
+            except OverflowError:
+                raise FieldValueError(
+                    f"value {position} ({token!r}) is a range of {_MAX_RANGE_VALUES:,} values or more",
+                    hint="index lists are far shorter",
+                ) from None
+            if any(not -(2**63) <= number < 2**63 for number in numbers):
                 shown = token if len(token) <= 24 else token[:21] + "..."
                 raise FieldValueError(
                     f"value {position} ({shown}) does not fit in a 64-bit integer",
@@ -364,6 +421,20 @@ class LinkList(Link):
 
     def parse(self, text: str) -> tuple[str, ...]:  # type: ignore[override]
         return tuple(text.split())
+
+
+@dataclass(frozen=True)
+class SofaData(FieldType):
+    """A Data known only from SOFA's source (registry/catalogue.py): its C++ type, read as text."""
+
+    kind = "sofa"
+    cpp_type: str = ""
+
+    def parse(self, text: str) -> str:
+        return text.strip()
+
+    def describe(self) -> str:
+        return self.cpp_type or self.kind
 
 
 @dataclass(frozen=True)

@@ -144,6 +144,9 @@ class ComponentSpec:
     # barycentric mappers a topology gets ("regular_grid", "sparse_grid", "dynamic"; "" = mesh),
     # "corotational" vs "linear" element force fields, "gravity" and "nodal_mass_density" data.
     role: str = ""
+    # Described only by SOFA's source (registry/catalogue.py): its Data are those the constructors
+    # declare, not the ones some components create at run time (MeshSplittingEngine's position1...).
+    from_sofa_source: bool = False
 
     _by_name: dict[str, FieldSpec] = field(default_factory=dict, compare=False, repr=False)
 

@@ -54,7 +54,7 @@ def _installation() -> str:
     package = Path(__file__).resolve().parents[1]
     for root in (package, resource_dir("templates"), resource_dir("runtime")):
         for path in sorted(root.rglob("*")):
-            if path.suffix in (".py", ".j2", ".h", ".cpp") and "__pycache__" not in path.parts:
+            if path.suffix in (".py", ".json", ".j2", ".h", ".cpp") and "__pycache__" not in path.parts:
                 info = path.stat()
                 stamp.update(f"{path}\0{info.st_size}\0{info.st_mtime_ns}\n".encode())
     compiler = shutil.which(build.compiler())

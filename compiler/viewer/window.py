@@ -16,8 +16,8 @@ context and input events). Keys and mouse (``h`` shows them in the window):
   ``o`` hides/shows the overlay, ``h`` the keys;
 * shift+left drag picks the DOF under the pointer and pulls it with a spring to the pointer, as
   SOFA's mouse interaction does: the spring is applied by the compiled step as the state's point
-  force (``<state>.pointForceIndex`` / ``<state>.pointForce``, compiled by ``load(..., interactive=True)``), so nothing is
-  recompiled.
+  force (``<state>.pointForceIndex`` / ``<state>.pointForce``, compiled by
+  ``load(..., interactive=True)``), so nothing is recompiled.
 
 A step that diverges or fails leaves the window open, paused, on the last good state, with the
 message. Without a display, :class:`NoDisplay` says so and points to ``sofac render``.

@@ -336,9 +336,10 @@ DYNAMIC_TOPOLOGY = tuple(
 
 # --- topological mappings ----------------------------------------------------------------------
 
+# SOFA's TopologicalMapping::create reads a missing input as "@../" and a missing output as "@./".
 _TOPO_LINKS = (
-    FieldSpec("input", Link("topology"), doc="input topology container", required=True),
-    FieldSpec("output", Link("topology"), doc="output topology container", required=True),
+    FieldSpec("input", Link("topology"), "@../", "input topology container", required=True),
+    FieldSpec("output", Link("topology"), "@./", "output topology container", required=True),
 )
 
 

@@ -67,9 +67,10 @@ ADD_DATA_REPOSITORY = ComponentSpec(
     name="AddDataRepository",
     category=Category.UTILITY,
     module="Sofa.Component.SceneUtility",
-    doc="Adds a directory to the data file search path.",
-    unsupported_reason="AddDataRepository is not supported: pass the folder with --data-path",
-    fields=(FieldSpec("path", FileName(), doc="directory to add"),),
+    doc="Adds a directory (relative to the scene's) to the data file search path, after the others.",
+    supported=True,
+    role="data_repository",
+    fields=(FieldSpec("path", Text(), doc="directory to add"),),
 )
 
 WRITE_STATE = ComponentSpec(

@@ -167,7 +167,7 @@ RECORDED_CAMERA = ComponentSpec(
     category=Category.RENDERING,
     module=_VISUAL_MODULE,
     doc="Camera moving along a predefined rotation or path.",
-    unsupported_reason="RecordedCamera (animated camera) is not supported",
+    supported=True,  # rendering only: accepted, no part in the step (sofac render keeps its own camera)
     effects=_VISUAL,
     fields=(
         FieldSpec("zoomSpeed", Real(), 250.0),
@@ -246,7 +246,7 @@ POSITIONAL_LIGHT = ComponentSpec(
     category=Category.RENDERING,
     module=_SHADER,
     doc="Point OpenGL light.",
-    unsupported_reason="PositionalLight is not supported (rendering only; use DirectionalLight)",
+    supported=True,  # rendering only: accepted, no part in the step (sofac render lights the scene itself)
     effects=_VISUAL,
     fields=_POSITIONAL_FIELDS,
 )
@@ -256,7 +256,7 @@ SPOT_LIGHT = ComponentSpec(
     category=Category.RENDERING,
     module=_SHADER,
     doc="Spot OpenGL light.",
-    unsupported_reason="SpotLight is not supported (rendering only; use DirectionalLight)",
+    supported=True,  # rendering only: accepted, no part in the step (sofac render lights the scene itself)
     effects=_VISUAL,
     fields=(
         FieldSpec("direction", Reals(3), (0.0, 0.0, -1.0)),
