@@ -24,6 +24,7 @@ __all__ = [
     "SofacError",
     "__version__",
     "load",
+    "save",
     "sweep",
 ]
 
@@ -34,6 +35,7 @@ _LAZY = {
     "Simulation": "loader",
     "SimulationDiverged": "loader",
     "load": "loader",
+    "save": "pyscene",
     "sweep": "sweeps",
 }
 

@@ -133,7 +133,12 @@ def _cmd_check(args: argparse.Namespace) -> int:
     results: list[FileResult] = []
     has_errors = False
     for path in files:
-        _, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=args.allow_unsupported)
+        if args.no_exec and path.suffix.lower() == ".py":
+            from .pyscene import refused
+
+            diagnostics = refused(path)
+        else:
+            _, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=args.allow_unsupported)
         items: list[Diagnostic] = diagnostics.sorted()
         if args.quiet:
             items = [d for d in items if d.severity is Severity.ERROR]
@@ -251,7 +256,11 @@ def build_parser() -> argparse.ArgumentParser:
     check = commands.add_parser(
         "check",
         help="validate scene files and report problems",
-        description="Parse and check scene files; report every problem with file, line and a hint.",
+        description=(
+            "Parse and check scene files; report every problem with file, line and a hint. A .py "
+            "file is a SofaPython3 scene: checking it RUNS its code (createScene), as SOFA does; "
+            "--no-exec refuses such files instead."
+        ),
         epilog=_EPILOG,
     )
     check.add_argument(
@@ -273,6 +282,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder to search for meshes and included files (repeatable)",
     )
     check.add_argument("--quiet", "-q", action="store_true", help="report errors only, without a summary")
+    check.add_argument(
+        "--no-exec",
+        action="store_true",
+        help="never run code: refuse .py scene scripts (E114) instead of executing them",
+    )
     check.set_defaults(handler=_cmd_check)
 
     inspect = commands.add_parser(

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib.util
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -727,7 +728,7 @@ def compile_checked(
 
 
 def load(
-    path: str | Path,
+    path: str | Path | Any,
     *,
     dt: float | None = None,
     data_roots: Sequence[Path] = (),
@@ -739,7 +740,17 @@ def load(
     element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
-    record (warm.py) without being compiled again."""
+    record (warm.py) without being compiled again.
+
+    ``path`` may also be a ``.py`` SofaPython3 scene script, or a root node built in Python
+    (sofac.model.Node, Sofa.Core.Node): see pyscene.py."""
+    if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() == ".py":
+        from . import pyscene
+
+        front = pyscene.load_tree if not isinstance(path, (str, os.PathLike)) else pyscene.load_python
+        return front(
+            path, dt=dt, data_roots=data_roots, prune=prune, rigid_model=rigid_model, threads=threads
+        )
     started = time.perf_counter()
     options: dict[str, Any] = {
         "data_roots": tuple(data_roots),
