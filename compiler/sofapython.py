@@ -20,9 +20,11 @@ AttributeError, so ``hasattr`` still works) naming the missing name.
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.abc
 import importlib.machinery
 import inspect
+import os
 import sys
 import weakref
 from collections.abc import Callable, Iterator
@@ -53,8 +55,12 @@ def _missing(what: str, detail: str = "") -> SofaAPIError:
 # --- where the user's code is ------------------------------------------------------------------
 
 
+@functools.cache
 def _is_user_frame(filename: str) -> bool:
-    return not filename.startswith(_PACKAGE_DIR) and not filename.startswith("<frozen")
+    # Real paths: sofac may be imported through a symlink (an editable install, .pkg/sofac).
+    if filename.startswith("<frozen"):
+        return False
+    return not os.path.realpath(filename).startswith(_PACKAGE_DIR + os.sep)
 
 
 def user_loc() -> SourceLoc:
