@@ -267,6 +267,11 @@ class Compiled:
         return self._checked
 
     def instantiate(self) -> Simulation:
+        scene = getattr(self._checked, "scene", None)
+        if getattr(scene, "controllers", None):  # a Python scene's controllers run with it
+            from .pyscene import instantiate
+
+            return instantiate(self, scene)
         return Simulation(self)
 
 

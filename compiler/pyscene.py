@@ -57,6 +57,8 @@ class PythonScene(model.Scene):
     """A scene built by Python code, with the controllers it added (in event order)."""
 
     controllers: list[sofapython.Controller] = field(default_factory=list)
+    # Whether a simulation runs with these controllers: another one needs its own (a new run).
+    started: bool = False
 
 
 class ControllerError(SofacError):
@@ -330,12 +332,36 @@ def _compile(
 def _start(
     compiled: Compiled, scene: model.Scene, controllers: Sequence[sofapython.Controller]
 ) -> Simulation:
-    sim = ControlledSimulation(compiled, controllers) if controllers else compiled.instantiate()
+    for controller in controllers:
+        if controller._running:
+            raise SofacError(
+                f"controller {controller.getName()!r} ({controller.location}) already drives a simulation "
+                "(its Data are views of that simulation): build the tree again, with new controllers, "
+                "for another"
+            )
+    sim = ControlledSimulation(compiled, controllers) if controllers else Simulation(compiled)
+    for controller in controllers:
+        controller._running = True
+    if isinstance(scene, PythonScene):
+        scene.started = True
     sofapython.bind(scene.root, sim)
     with sofapython.injected():
         for controller in controllers:
             controller.init()
     return sim
+
+
+def instantiate(compiled: Compiled, scene: PythonScene) -> Simulation:
+    """``Compiled.instantiate()`` of a scene with controllers (sweeps, accuracy studies): each
+    simulation gets controllers of its own, from a new run of the script."""
+    if scene.started:
+        if scene.file is None:
+            raise SofacError(
+                "a tree built in Python with controllers gives one simulation: build the tree again "
+                "(with new controllers) for another"
+            )
+        scene = execute_script(scene.file, Diagnostics(), data_roots=scene.data_roots)
+    return _start(compiled, scene, scene.controllers)
 
 
 def load_python(
@@ -385,8 +411,9 @@ def _tree_scene(tree: Any, data_roots: Sequence[Path]) -> tuple[model.Scene, lis
         )
     if tree.parent is not None:
         raise SofacError(f"node {tree.path!r} is not a root: load the root of its tree ({tree.root!r})")
-    scene = PythonScene(tree, data_roots=default_data_roots(Path.cwd(), data_roots))
-    return scene, _controllers_in_order(tree)
+    controllers = _controllers_in_order(tree)
+    scene = PythonScene(tree, data_roots=default_data_roots(Path.cwd(), data_roots), controllers=controllers)
+    return scene, controllers
 
 
 def load_tree(

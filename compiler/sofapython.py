@@ -596,6 +596,7 @@ class Controller:
     _node: Node | None = None
     _controller_name: str = ""
     _loc: SourceLoc = SourceLoc("<python>", 0)
+    _running = False  # set once a compiled simulation calls it
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self._controller_name = str(kwargs.pop("name", ""))

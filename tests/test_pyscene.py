@@ -533,3 +533,45 @@ def test_warm_record_follows_the_files_the_script_reads(tmp_path: Path) -> None:
     assert not changed.compiled.warm
     stiffer = sofac.load(write(tmp_path, "stiffer.scn", chain_scn(4, "300", "0.5", "0.001")))
     assert np.array_equal(trajectory(changed, 20, "/chain/dofs"), trajectory(stiffer, 20, "/chain/dofs"))
+
+
+def test_every_instance_gets_controllers_of_its_own(tmp_path: Path) -> None:
+    """Sweeps and accuracy studies instantiate a compiled scene many times (Compiled.instantiate)."""
+    from sofac.loader import compile_scene
+
+    script = write(tmp_path, "beam.py", BEAM_PY)
+    compiled = compile_scene(script)
+    first, second = compiled.instantiate(), compiled.instantiate()
+    assert isinstance(first, pyscene.ControlledSimulation) and isinstance(
+        second, pyscene.ControlledSimulation
+    )
+    assert first.controllers[0] is not second.controllers[0]
+    assert np.array_equal(trajectory(first, 4, "/beam/dofs"), trajectory(second, 4, "/beam/dofs"))
+    assert (first.controllers[0].count, second.controllers[0].count) == (4, 4)
+
+
+def test_a_tree_with_controllers_drives_one_simulation(tmp_path: Path) -> None:
+    namespace = load_module(write(tmp_path, "beam.py", BEAM_PY))
+    root = sofapython.Sofa.Core.Node("root")
+    namespace["createScene"](root)
+    sofac.load(root)
+    with pytest.raises(sofac.SofacError, match="already drives a simulation"):
+        sofac.load(root)
+    with pytest.raises(sofac.SofacError, match=r"a \.scn file cannot hold"):
+        sofac.save(root, tmp_path / "beam.scn")
+
+
+def test_a_real_sofa_module_is_put_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import types
+
+    real = types.ModuleType("Sofa")  # stands for a SOFA installation imported before
+    monkeypatch.setitem(sys.modules, "Sofa", real)
+    seen = tmp_path / "seen.txt"
+    script = write(
+        tmp_path,
+        "which.py",
+        f"import Sofa\nopen({str(seen)!r}, 'w').write(Sofa.__doc__)\ndef createScene(root):\n    pass\n",
+    )
+    parse_scene(script, Diagnostics())
+    assert "sofac" in seen.read_text()  # the script saw sofac's API...
+    assert sys.modules["Sofa"] is real  # ...and the installation's module is back
