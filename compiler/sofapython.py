@@ -36,6 +36,7 @@ import numpy as np
 
 from . import model
 from .diagnostics import SofacError, SourceLoc, relative_name
+from .loader import State
 from .registry import lookup, node_spec
 
 _PACKAGE_DIR = str(Path(__file__).resolve().parent)
@@ -329,12 +330,25 @@ def _parse_value(element: model._Element, name: str, *, copy: bool) -> Any:
 
 
 def _compiled_view(sim: Any, element: model._Element, name: str) -> np.ndarray | None:
-    """The native buffer behind a field of the compiled scene, shaped as SofaPython3 shapes it."""
+    """The native buffer behind a field of the compiled scene (cached per instance: controllers
+    read the same fields at every step)."""
+    cache = sim.__dict__.get("_data_views")
+    if cache is None or cache[0] is not sim._native:  # recompile() swaps the native instance
+        cache = sim.__dict__["_data_views"] = (sim._native, {})
+    key = (id(element), name)
+    if key not in cache[1]:
+        cache[1][key] = _find_view(sim, element, name)
+    found = cache[1][key]
+    # A state's arrays are read through it: a mapped state left out of the step is mapped on read.
+    return getattr(found, name) if isinstance(found, State) else found  # type: ignore[no-any-return]
+
+
+def _find_view(sim: Any, element: model._Element, name: str) -> Any:
+    """The State, or the native parameter shaped as SofaPython3 shapes it, behind a field."""
     path = element.path
     if isinstance(element, model.Component) and name in ("position", "velocity", "force"):
         with contextlib.suppress(KeyError):
-            state = sim[path]
-            return getattr(state, name)
+            return sim[path]
     key = f"{path}.{name}"
     params = sim.params()
     view = params.get(key)
