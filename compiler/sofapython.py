@@ -414,9 +414,17 @@ class Node(_Base):
         assert isinstance(self._element, model.Node)
         return self._element
 
+    def _editable(self, what: str) -> None:
+        if bound_simulation(self._node) is not None:
+            raise SofaAPIError(
+                f"{what} on {self._node.path!r}: the scene is compiled, its components are fixed while it "
+                "runs (change parameters and state through Data instead, or build and load a new tree)"
+            )
+
     # --- building ---
     def addObject(self, type_name: Any, *args: Any, **attributes: Any) -> Any:
         loc = user_loc()
+        self._editable("addObject")
         if isinstance(type_name, Controller):
             if args or attributes:
                 raise SofaAPIError("addObject(controller) takes no other arguments")
@@ -443,6 +451,7 @@ class Node(_Base):
 
     def addChild(self, child: Any, **attributes: Any) -> Node:
         loc = user_loc()
+        self._editable("addChild")
         if isinstance(child, Node):
             if child._node.parent is not None:
                 raise SofaAPIError(f"node {child.getPathName()!r} already has a parent")
@@ -459,6 +468,7 @@ class Node(_Base):
     createChild = addChild
 
     def removeChild(self, child: Any) -> None:
+        self._editable("removeChild")
         target = child._node if isinstance(child, Node) else self._node.child(str(child))
         if target is None or target not in self._node.children:
             raise SofaAPIError(f"node {self.getPathName()!r} has no child {child!r}")
@@ -466,6 +476,7 @@ class Node(_Base):
         target.parent = None
 
     def removeObject(self, obj: Any) -> None:
+        self._editable("removeObject")
         if isinstance(obj, Controller):
             self._controllers.remove(obj)
             return

@@ -575,3 +575,43 @@ def test_a_real_sofa_module_is_put_back(tmp_path: Path, monkeypatch: pytest.Monk
     parse_scene(script, Diagnostics())
     assert "sofac" in seen.read_text()  # the script saw sofac's API...
     assert sys.modules["Sofa"] is real  # ...and the installation's module is back
+
+
+def test_data_before_the_tree_is_compiled_read_and_write_the_model() -> None:
+    Sofa = sofapython.Sofa
+    root = Sofa.Core.Node("root")
+    root.dt = 0.02
+    assert root.findData("dt").value == 0.02 and root.dt.value == 0.02
+    dofs = root.addChild("body").addObject("MechanicalObject", name="dofs", position=[[0, 0, 0], [1, 2, 3]])
+    assert root.body.dofs is dofs and root["body.dofs"] is dofs and root.body.objects["dofs"] is dofs
+    assert np.array_equal(dofs.position.value, [0, 0, 0, 1, 2, 3])
+    with dofs.position.writeableArray() as position:
+        position[3] = 5
+    assert dofs._element.get("position") == "0 0 0 5 2 3"  # written back to the model's text
+    spring = root.body.addObject("SpringForceField", name="s", spring=[[0, 1, 10, 0.5, 1.0]])
+    assert spring.getLinkPath() == "@/body/s" and dofs.position.getLinkPath() == "@/body/dofs.position"
+    assert root.body.getObject("missing") is None and not hasattr(root.body, "missing")
+    with pytest.raises(sofapython.SofaAPIError, match="has no data named 'stifness'"):
+        _ = spring.stifness
+
+
+def test_a_failing_controller_names_its_line_and_step(tmp_path: Path) -> None:
+    script = write(
+        tmp_path,
+        "failing.py",
+        BEAM_PY.replace(
+            "        self.count += 1\n",
+            "        self.count += 1\n"
+            "        if self.count == 3:\n"
+            "            raise RuntimeError('cable snapped')\n",
+        ),
+    )
+    sim = sofac.load(script)
+    line = next(i for i, text in enumerate(script.read_text().splitlines(), 1) if "cable snapped" in text)
+    with pytest.raises(
+        pyscene.ControllerError, match=rf"failing.py:{line}: controller 'puller'.*cable snapped.*step 3"
+    ):
+        sim.step(5)
+    assert sim.steps == 2
+    with pytest.raises(sofapython.SofaAPIError, match="the scene is compiled"):
+        sim.controllers[0].getContext().addChild("late")
