@@ -267,8 +267,9 @@ class Compiled:
         return self._checked
 
     def instantiate(self) -> Simulation:
-        scene = getattr(self._checked, "scene", None)
-        if getattr(scene, "controllers", None):  # a Python scene's controllers run with it
+        # A Python scene's controllers run with it (pyscene.py; a warm load keeps the scene aside).
+        scene = getattr(self, "python_scene", None) or getattr(self._checked, "scene", None)
+        if getattr(scene, "controllers", None):
             from .pyscene import instantiate
 
             return instantiate(self, scene)

@@ -471,6 +471,7 @@ def test_diagnostics_point_to_the_script_line(tmp_path: Path, capsys: pytest.Cap
             "node '/n' has no child, object or data named",
         ),
         ("    x = 1\n    raise ValueError('bad size')\n", 5, "raised ValueError: bad size"),
+        ("    x = 1\n    y = (x,\n\n", 5, "raised SyntaxError: '(' was never closed"),
         ("    root.addObject('X', position=object())\n", 4, "a object cannot be a SOFA data value"),
     ],
 )
@@ -541,13 +542,17 @@ def test_every_instance_gets_controllers_of_its_own(tmp_path: Path) -> None:
 
     script = write(tmp_path, "beam.py", BEAM_PY)
     compiled = compile_scene(script)
-    first, second = compiled.instantiate(), compiled.instantiate()
-    assert isinstance(first, pyscene.ControlledSimulation) and isinstance(
-        second, pyscene.ControlledSimulation
-    )
-    assert first.controllers[0] is not second.controllers[0]
-    assert np.array_equal(trajectory(first, 4, "/beam/dofs"), trajectory(second, 4, "/beam/dofs"))
-    assert (first.controllers[0].count, second.controllers[0].count) == (4, 4)
+    sofac.load(script)
+    warm_load = sofac.load(script)
+    assert warm_load.compiled.warm
+    first, second, third = compiled.instantiate(), compiled.instantiate(), warm_load.compiled.instantiate()
+    for sim in (first, second, third):
+        assert isinstance(sim, pyscene.ControlledSimulation)
+    assert len({id(sim.controllers[0]) for sim in (first, second, third, warm_load)}) == 4
+    expected = trajectory(first, 4, "/beam/dofs")
+    assert np.array_equal(trajectory(second, 4, "/beam/dofs"), expected)
+    assert np.array_equal(trajectory(third, 4, "/beam/dofs"), expected)
+    assert [sim.controllers[0].count for sim in (first, second, third)] == [4, 4, 4]
 
 
 def test_a_tree_with_controllers_drives_one_simulation(tmp_path: Path) -> None:
