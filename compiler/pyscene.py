@@ -173,9 +173,7 @@ def _scene_modules_dropped(before: set[str], directory: str) -> list[str]:
 def _controllers_in_order(root: model.Node) -> list[sofapython.Controller]:
     ordered: list[sofapython.Controller] = []
     for node in root.walk():
-        wrapper = sofapython._WRAPPERS.get(node)
-        if wrapper is not None:
-            ordered.extend(wrapper._controllers)
+        ordered.extend(sofapython.controllers_of(node))
     return ordered
 
 

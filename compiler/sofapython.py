@@ -26,7 +26,6 @@ import importlib.machinery
 import inspect
 import os
 import sys
-import weakref
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from types import ModuleType
@@ -86,29 +85,36 @@ def display_file(filename: str) -> str:
 
 # --- wrappers and bindings ---------------------------------------------------------------------
 
-_WRAPPERS: weakref.WeakKeyDictionary[model._Element, _Base] = weakref.WeakKeyDictionary()
-# Compiled simulations, by the model root node they were compiled from.
-_BINDINGS: weakref.WeakKeyDictionary[model.Node, Any] = weakref.WeakKeyDictionary()
+# Kept on the model elements themselves (a wrapper and its element, a simulation and its tree,
+# are freed together): a weak-keyed table would keep them alive through its values.
+_WRAPPER = "_sofa_api"
+_SIMULATION = "_sofa_simulation"
 
 
 def wrap(element: model._Element) -> Any:
     """The API object of a model element (made on first use, then always the same one)."""
-    wrapper = _WRAPPERS.get(element)
+    wrapper = element.__dict__.get(_WRAPPER)
     if wrapper is None:
         wrapper = Node._of(element) if isinstance(element, model.Node) else Object._of(element)
     return wrapper
 
 
+def controllers_of(node: model.Node) -> list[Controller]:
+    """The controllers added to a node, in order."""
+    wrapper = node.__dict__.get(_WRAPPER)
+    return list(wrapper._controllers) if wrapper is not None else []
+
+
 def bind(root: model.Node, sim: Any) -> None:
     """Make the Data of the tree under ``root`` views of ``sim`` (a compiled Simulation)."""
-    _BINDINGS[root] = sim
+    root.__dict__[_SIMULATION] = sim
 
 
 def bound_simulation(element: model._Element) -> Any:
     root = element if isinstance(element, model.Node) else element.parent
     if root is None:
         return None
-    return _BINDINGS.get(root.root)
+    return root.root.__dict__.get(_SIMULATION)
 
 
 def _text(value: Any, where: str) -> str:
@@ -215,13 +221,12 @@ class _Base:
     """What nodes and objects share: a model element, Data access by attribute, names, paths."""
 
     _element: model._Element
-    _API = "Sofa.Core.Base"
 
     @classmethod
     def _of(cls, element: model._Element) -> Any:
         wrapper = cls.__new__(cls)
         object.__setattr__(wrapper, "_element", element)
-        _WRAPPERS[element] = wrapper
+        element.__dict__[_WRAPPER] = wrapper
         return wrapper
 
     # --- names and paths ---
@@ -395,13 +400,11 @@ _NODE_UNSUPPORTED = frozenset(
 class Node(_Base):
     """``Sofa.Core.Node``: a node of the scene graph."""
 
-    _API = "Sofa.Core.Node"
-
     def __init__(self, name: str = "root") -> None:
         node = model.Node(name, user_loc())
         object.__setattr__(self, "_element", node)
         object.__setattr__(self, "_controllers", [])
-        _WRAPPERS[node] = self
+        node.__dict__[_WRAPPER] = self
 
     @classmethod
     def _of(cls, element: model._Element) -> Any:
@@ -576,8 +579,6 @@ _OBJECT_UNSUPPORTED = frozenset(
 class Object(_Base):
     """``Sofa.Core.Object``: a component of the scene graph (made by ``node.addObject``)."""
 
-    _API = "Sofa.Core.Object"
-
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         raise SofaAPIError("Sofa.Core.Object cannot be made directly: use node.addObject('Type', ...)")
 
@@ -726,7 +727,7 @@ def _reset(root: Any) -> None:
 
 def _unload(root: Any) -> None:
     if isinstance(root, Node):
-        _BINDINGS.pop(root._node, None)
+        root._node.root.__dict__.pop(_SIMULATION, None)
 
 
 # --- Sofa.Helper messages ----------------------------------------------------------------------

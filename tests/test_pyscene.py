@@ -457,6 +457,22 @@ def test_diagnostics_point_to_the_script_line(tmp_path: Path, capsys: pytest.Cap
 
 
 @pytest.mark.parametrize(
+    ("fmt", "expected"),
+    [
+        ("text", "{file}:9: error E207 [totalMass]"),
+        ("github", "::error file={file},line=9,title=E207::"),
+        ("junit", "{file}:9: error E207 [totalMass]"),
+    ],
+)
+def test_every_format_names_the_script_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], fmt: str, expected: str
+) -> None:
+    script = write(tmp_path, "bad.py", BAD_PY)
+    assert main(["check", "--format", fmt, str(script)]) == 1
+    assert expected.format(file=script) in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
     ("body", "line", "message"),
     [
         (
@@ -620,3 +636,16 @@ def test_a_failing_controller_names_its_line_and_step(tmp_path: Path) -> None:
     assert sim.steps == 2
     with pytest.raises(sofapython.SofaAPIError, match="the scene is compiled"):
         sim.controllers[0].getContext().addChild("late")
+
+
+def test_a_dropped_python_scene_frees_its_simulation(tmp_path: Path) -> None:
+    """Sweeps make a simulation (and a tree) per run: nothing may keep the old ones alive."""
+    import gc
+    import weakref
+
+    sim = sofac.load(write(tmp_path, "chain.py", CHAIN_PY))
+    tree = weakref.ref(sim.compiled.python_scene.root)
+    gone = weakref.ref(sim)
+    del sim
+    gc.collect()
+    assert gone() is None and tree() is None
