@@ -40,16 +40,11 @@ __all__ = [
     "ControllerError",
     "PythonScene",
     "execute_script",
-    "is_python_scene",
     "load_python",
     "load_tree",
     "refused",
     "save",
 ]
-
-
-def is_python_scene(path: str | os.PathLike[str]) -> bool:
-    return Path(path).suffix.lower() == ".py"
 
 
 @dataclass
