@@ -22,6 +22,7 @@ import contextlib
 import os
 import site
 import sys
+import sysconfig
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -84,12 +85,14 @@ def _audit(event: str, args: tuple[Any, ...]) -> None:
 
 
 def _installation_dirs() -> list[str]:
-    """Folders whose files belong to Python or its packages, not to the scene."""
-    dirs = {sys.prefix, sys.base_prefix, sys.exec_prefix, sofapython._PACKAGE_DIR}
+    """Folders whose files belong to Python (its standard library, installed packages) or sofac,
+    not to the scene (whose files may well lie under the prefix, e.g. /usr/share)."""
+    dirs = {sofapython._PACKAGE_DIR}
+    for layout in {sysconfig.get_default_scheme(), "posix_user"} & set(sysconfig.get_scheme_names()):
+        paths = sysconfig.get_paths(layout)
+        dirs.update(paths[key] for key in ("stdlib", "platstdlib", "purelib", "platlib") if key in paths)
     with contextlib.suppress(AttributeError):
         dirs.update(site.getsitepackages())
-    with contextlib.suppress(AttributeError):
-        dirs.add(site.getusersitepackages())
     return [os.path.realpath(d) + os.sep for d in dirs if d]
 
 

@@ -267,6 +267,8 @@ class _Base:
     # --- data values ---
     def _read(self, name: str, *, writeable: bool) -> Any:
         sim = bound_simulation(self._element)
+        if sim is not None and name == "time" and isinstance(self._element, model.Node):
+            return sim.time  # the simulation's clock, as SOFA's context time
         if sim is not None:
             view = _compiled_view(sim, self._element, name)
             if view is not None:

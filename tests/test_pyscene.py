@@ -420,7 +420,7 @@ def test_simulation_functions_drive_the_compiled_tree(tmp_path: Path) -> None:
     sim = sofapython.bound_simulation(root._node)
     root.gravity.value = [0, 0, -1]
     assert np.array_equal(sim.param("/.gravity"), [0, 0, -1])
-    assert root.dt.value == 0.001
+    assert root.dt.value == 0.001 and root.time.value == sim.time == pytest.approx(0.005)
     Sofa.Simulation.reset(root)
     assert sim.steps == 0
     assert np.array_equal(dofs.position.value, [[0.1 * i, 0, 0] for i in range(4)])
