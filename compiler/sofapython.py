@@ -20,6 +20,7 @@ AttributeError, so ``hasattr`` still works) naming the missing name.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import functools
 import importlib.abc
 import importlib.machinery
@@ -555,11 +556,12 @@ class Node(_Base):
         if name.startswith("__"):
             raise AttributeError(name)
         node = self._node
-        if _is_field(node, name):
-            return Data(self, name)
-        found = self.getChild(name) or self.getObject(name)
+        # SofaPython3's order: an object, then a child node, then a data field of that name.
+        found = self.getObject(name) or self.getChild(name)
         if found is not None:
             return found
+        if _is_field(node, name):
+            return Data(self, name)
         if name in _NODE_UNSUPPORTED:
             raise _missing(f"Sofa.Core.Node.{name}")
         names = [c.label for c in node.children] + [o.label for o in node.objects]
@@ -605,9 +607,13 @@ class Object(_Base):
             return Data(self, name)
         if name in _OBJECT_UNSUPPORTED:
             raise _missing(f"Sofa.Core.Object.{name}")
+        resolution = lookup(element.tag)
+        known = [*element.attributes, *(resolution.spec.field_names if resolution is not None else ())]
+        close = difflib.get_close_matches(name, known, n=3, cutoff=0.75)
         raise SofaAPIError(
-            f"{element.tag} {element.path!r} has no data named {name!r}, "
-            f"nor is Sofa.Core.Object.{name} part of the SofaPython3 API sofac provides"
+            f"{element.tag} {element.path!r} has no data named {name!r}"
+            + (f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else "")
+            + f", nor is Sofa.Core.Object.{name} part of the SofaPython3 API sofac provides"
         )
 
     def __repr__(self) -> str:

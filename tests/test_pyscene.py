@@ -612,7 +612,8 @@ def test_data_before_the_tree_is_compiled_read_and_write_the_model() -> None:
     spring = root.body.addObject("SpringForceField", name="s", spring=[[0, 1, 10, 0.5, 1.0]])
     assert spring.getLinkPath() == "@/body/s" and dofs.position.getLinkPath() == "@/body/dofs.position"
     assert root.body.getObject("missing") is None and not hasattr(root.body, "missing")
-    with pytest.raises(sofapython.SofaAPIError, match="has no data named 'stifness'"):
+    typo = r"has no data named 'stifness' \(did you mean 'stiffness'\?\)"
+    with pytest.raises(sofapython.SofaAPIError, match=typo):
         _ = spring.stifness
 
 
