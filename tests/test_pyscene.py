@@ -369,6 +369,7 @@ def test_scene_parameterised_by_function_arguments(tmp_path: Path) -> None:
     # The defaults, through the script's createScene.
     scn = write(tmp_path, "chain.scn", chain_scn(4, "100", "0.5", "0.001"))
     defaults, reference = sofac.load(script), sofac.load(scn)
+    assert type(defaults) is sofac.Simulation  # no controllers: the plain simulation, nothing in between
     assert np.array_equal(trajectory(defaults, 50, "/chain/dofs"), trajectory(reference, 50, "/chain/dofs"))
 
     # Other arguments, building the tree from Python and compiling it without a file.
@@ -603,6 +604,7 @@ def test_data_before_the_tree_is_compiled_read_and_write_the_model() -> None:
     root = Sofa.Core.Node("root")
     root.dt = 0.02
     assert root.findData("dt").value == 0.02 and root.dt.value == 0.02
+    assert root.name.value == "root" and root.getName() == "root" and root.findData("nosuch") is None
     dofs = root.addChild("body").addObject("MechanicalObject", name="dofs", position=[[0, 0, 0], [1, 2, 3]])
     assert root.body.dofs is dofs and root["body.dofs"] is dofs and root.body.objects["dofs"] is dofs
     assert np.array_equal(dofs.position.value, [0, 0, 0, 1, 2, 3])
