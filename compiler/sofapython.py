@@ -650,6 +650,10 @@ class Controller:
     def name(self) -> Data:
         return _ControllerName(self)  # type: ignore[return-value]
 
+    @name.setter
+    def name(self, value: Any) -> None:  # `self.name = "x"` sets the data, as in SofaPython3
+        self._controller_name = str(value)
+
     def getName(self) -> str:
         return self._controller_name or type(self).__name__
 
