@@ -153,7 +153,7 @@ def test_beam_controller_matches_the_scn_driven_through_sim_param(tmp_path: Path
     assert with_controller[-1, 98, 2] > 1e-4
 
     puller = controlled.controllers[0]
-    assert puller.count == STEPS and puller.name.value == "puller" and puller.getPathName() == "/puller"
+    assert puller.count == STEPS and puller.name.value == "puller" and puller.getPathName() == "/beam/puller"
     # onAnimateEndEvent saw the state after each step, as SOFA's AnimateEndEvent does.
     assert [kind for kind, _ in puller.ends] == ["AnimateEndEvent"] * STEPS
     assert np.array_equal(np.array([tip for _, tip in puller.ends]), with_controller[:, 98])
