@@ -226,6 +226,9 @@ class Compiled:
     when the scene was compiled in this process. A scene taken whole from the cache (``warm.py``)
     has only its run spec and library: they are computed again on first use."""
 
+    #: The Python scene this was compiled from, kept by a warm load (pyscene.py), else None.
+    python_scene: Any = None
+
     def __init__(
         self,
         spec: RunSpec,
@@ -267,8 +270,8 @@ class Compiled:
         return self._checked
 
     def instantiate(self) -> Simulation:
-        # A Python scene's controllers run with it (pyscene.py; a warm load keeps the scene aside).
-        scene = getattr(self, "python_scene", None) or getattr(self._checked, "scene", None)
+        # A Python scene's controllers run with it (pyscene.py).
+        scene = self.python_scene or getattr(self._checked, "scene", None)
         if getattr(scene, "controllers", None):
             from .pyscene import instantiate
 

@@ -388,7 +388,7 @@ def load_python(
     else:
         compiled = _compile(scene, Diagnostics(), **compile_options)
         warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
-    compiled.python_scene = scene  # type: ignore[attr-defined]  # for later instantiate() calls
+    compiled.python_scene = scene  # for later instantiate() calls
     sim = _start(compiled, scene, scene.controllers)
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
