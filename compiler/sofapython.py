@@ -165,6 +165,8 @@ class Data:
     def writeableArray(self) -> Iterator[np.ndarray]:
         """The value as a writeable array; a compiled field's native buffer itself."""
         array = self._owner._read(self._name, writeable=True)
+        if array is None:
+            raise SofaAPIError(f"{self.getPathName()} has no value yet: set .value first")
         if not isinstance(array, np.ndarray):
             raise SofaAPIError(f"{self.getPathName()} is a single value, not an array: set .value instead")
         yield array
@@ -274,6 +276,8 @@ class _Base:
             view = _compiled_view(sim, self._element, name)
             if view is not None:
                 if writeable:
+                    if f"{self._element.path}.{name}" in sim.spec.pruned:
+                        sim.param(f"{self._element.path}.{name}")  # raises PrunedEffectError
                     return view
                 if view.size == 1 and _is_scalar(self._element, name):
                     return view.item()
@@ -288,6 +292,8 @@ class _Base:
         sim = bound_simulation(self._element)
         where = f"{self._element.path}.{name}"
         if sim is not None:
+            if where in sim.spec.pruned:
+                sim.param(where)  # raises PrunedEffectError: its effect was compiled out (zero gravity)
             view = _compiled_view(sim, self._element, name)
             if view is None:
                 raise SofaAPIError(

@@ -681,3 +681,21 @@ def test_the_example_runs_and_its_scn_gives_the_same_trajectory(tmp_path: Path) 
     assert done.returncode == 0, done.stderr  # 0: the .scn driven through sim.param ends bit for bit equal
     assert "it ends 0 away from the controller's run" in done.stdout
     assert (tmp_path / "pulled_beam.scn").is_file()
+
+
+def test_a_write_to_a_compiled_out_effect_says_how_to_keep_it(tmp_path: Path) -> None:
+    from sofac.loader import PrunedEffectError
+
+    Sofa = sofapython.Sofa
+    root = Sofa.Core.Node("root")
+    load_module(write(tmp_path, "chain.py", CHAIN_PY))["chain"](root)
+    root.gravity = [0, 0, 0]  # no gravity: the compiled step has no code for it
+    Sofa.Simulation.init(root)
+    with pytest.raises(PrunedEffectError, match="recompile=True"):
+        root.gravity.value = [0, -9.81, 0]
+    with pytest.raises(PrunedEffectError, match="recompile=True"), root.gravity.writeableArray():
+        pass
+    assert np.array_equal(root.gravity.value, [0, 0, 0])  # reading it is fine
+    velocity = Sofa.Core.Node("other").addObject("MechanicalObject").velocity
+    with pytest.raises(sofapython.SofaAPIError, match="has no value yet"), velocity.writeableArray():
+        pass
