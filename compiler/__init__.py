@@ -26,6 +26,7 @@ __all__ = [
     "SofacError",
     "__version__",
     "load",
+    "save",
     "sweep",
     "view",
 ]
@@ -39,6 +40,7 @@ _LAZY = {
     "load": "pipeline",
     "sweep": "sweeps.runner",
     "view": "viewer.window",
+    "save": "pyscene.script",
 }
 
 

@@ -55,6 +55,8 @@ CODES: dict[str, CodeInfo] = {
     "W110": _w("unused include override"),
     "W111": _w("element ignored (not allowed at this place)"),
     "E112": _e("root element is not a Node"),
+    "E113": _e("Python scene script failed (exception, no createScene, SofaPython3 API sofac lacks)"),
+    "E114": _e("Python scene not run (--no-exec)"),
     # --- checking (check stage)
     "E200": _e("unknown component"),
     "E201": _e("component name no longer accepted by SOFA"),

@@ -9,6 +9,7 @@ The stages themselves import nothing from here: data flows one way.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -144,7 +145,7 @@ def compile_model(scene: Scene, **options: Any) -> Compiled:
 
 
 def load(
-    path: str | Path,
+    path: str | Path | Any,
     *,
     dt: float | None = None,
     data_roots: Sequence[Path] = (),
@@ -159,7 +160,10 @@ def load(
     (``<state path>.pointForceIndex`` / ``.pointForce`` parameters: how ``sofac view`` pulls).
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
-    record (simulation/warm.py) without being compiled again."""
+    record (simulation/warm.py) without being compiled again.
+
+    ``path`` may also be a ``.py`` SofaPython3 scene script, or a root node built in Python
+    (``sofac.front.model.Node``, ``Sofa.Core.Node``): see sofac.pyscene."""
     from sofac.simulation import warm
     from sofac.simulation.loader import Compiled
 
@@ -171,16 +175,46 @@ def load(
         "threads": threads,
         "interactive": interactive,
     }
-    record = warm.lookup(path, **options)
-    if record is not None:
-        compiled = Compiled(
-            record.spec, record.built, recompute=lambda: compile_scene(path, **options), rebuild=_rebuild
-        )
+    if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() == ".py":
+        sim = _load_python_scene(path, options)
     else:
-        compiled = compile_scene(path, **options)
-        warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
-    sim = compiled.instantiate()
+        record = warm.lookup(path, **options)
+        if record is not None:
+            compiled = Compiled(
+                record.spec, record.built, recompute=lambda: compile_scene(path, **options), rebuild=_rebuild
+            )
+        else:
+            compiled = compile_scene(path, **options)
+            warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
+        sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
         sim.dt = dt
     return sim
+
+
+def _load_python_scene(source: Any, options: dict[str, Any]) -> Simulation:
+    """A SofaPython3 script (run once: its tree is compiled, or taken from its warm record keyed on
+    the script and every file it read) or a tree built in Python, started with its controllers."""
+    from sofac.pyscene import script
+    from sofac.simulation import warm
+    from sofac.simulation.loader import Compiled
+
+    compile_options = {key: options[key] for key in ("prune", "rigid_model", "threads", "interactive")}
+    if not isinstance(source, (str, os.PathLike)):
+        scene, controllers = script.tree_scene(source, options["data_roots"])
+        return script.start(compile_model(scene, **compile_options), scene, controllers)
+    scene = script.execute_script(source, Diagnostics(), data_roots=options["data_roots"])
+    record = warm.lookup(source, **options)
+    if record is not None:
+        compiled = Compiled(
+            record.spec,
+            record.built,
+            recompute=lambda: compile_model(scene, **compile_options),
+            rebuild=_rebuild,
+        )
+    else:
+        compiled = compile_model(scene, **compile_options)
+        warm.store(source, compiled.spec, compiled.built, compiled.checked, **options)
+    compiled.python_scene = scene  # later instantiate() calls run the script again
+    return script.start(compiled, scene, scene.controllers)

@@ -11,9 +11,18 @@ PACKAGE = Path(__file__).resolve().parents[1] / "compiler"
 # The stages in pipeline order; shared code any stage may use; tools that drive the stages.
 STAGES = ("front", "check", "plan", "codegen", "build", "simulation")
 SHARED = {"diagnostics", "resources", "progress", "registry", "geometry", "__init__"}
-TOOLS = {"pipeline", "cli", "accuracy", "render", "sweeps", "regress", "__main__"}
-# The one call from a stage into a tool: ``sim.render()``, a shortcut for ``sofac.render.render(sim)``.
-ALLOWED = {("simulation.loader", "render.picture")}
+TOOLS = {"pipeline", "cli", "accuracy", "render", "sweeps", "regress", "viewer", "pyscene", "__main__"}
+# Calls from a stage into a tool, each on purpose: ``sim.render()``, a shortcut for
+# ``sofac.render.render(sim)``; a ``.py`` scene handed by the parser to the Python front end, which
+# runs the user's script; a Python scene's controllers, started with each instance; and a
+# script's own ``Sofa.Simulation.init(root)``, which compiles its tree. These callbacks are left
+# out of the cycle test: the rest of the graph has no cycle.
+ALLOWED = {
+    ("simulation.loader", "render.picture"),
+    ("front.parse", "pyscene.script"),
+    ("simulation.loader", "pyscene.script"),
+    ("pyscene.sofa_api", "pipeline"),
+}
 
 
 def _module(path: Path) -> str:
@@ -77,6 +86,8 @@ def test_stages_import_only_earlier_stages_and_shared_code() -> None:
 
 def test_no_import_cycles() -> None:
     graph = _graph()
+    for module, callback in ALLOWED:
+        graph[module].discard(callback)
     # Packages stand for their __init__; a module importing its own package's names is no cycle.
     state: dict[str, int] = {}
     cycles: list[list[str]] = []

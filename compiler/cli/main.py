@@ -125,9 +125,14 @@ def _cmd_check(args: argparse.Namespace) -> int:
     results: list[FileResult] = []
     has_errors = False
     for path in files:
-        allow = args.allow_unsupported
-        checked, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=allow)
-        add_compile_refusals(checked, diagnostics)
+        if args.no_exec and path.suffix.lower() == ".py":
+            from sofac.pyscene.script import refused
+
+            diagnostics = refused(path)
+        else:
+            allow = args.allow_unsupported
+            checked, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=allow)
+            add_compile_refusals(checked, diagnostics)
         items: list[Diagnostic] = diagnostics.sorted()
         if args.quiet:
             items = [d for d in items if d.severity is Severity.ERROR]
@@ -249,7 +254,11 @@ def build_parser() -> argparse.ArgumentParser:
     check = commands.add_parser(
         "check",
         help="validate scene files and report problems",
-        description="Parse and check scene files; report every problem with file, line and a hint.",
+        description=(
+            "Parse and check scene files; report every problem with file, line and a hint. A .py "
+            "file is a SofaPython3 scene: checking it RUNS its code (createScene), as SOFA does; "
+            "--no-exec refuses such files instead."
+        ),
         epilog=_EPILOG,
     )
     check.add_argument(
@@ -271,6 +280,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder to search for meshes and included files (repeatable)",
     )
     check.add_argument("--quiet", "-q", action="store_true", help="report errors only, without a summary")
+    check.add_argument(
+        "--no-exec",
+        action="store_true",
+        help="never run code: refuse .py scene scripts (E114) instead of executing them",
+    )
     check.set_defaults(handler=_cmd_check)
 
     inspect = commands.add_parser(

@@ -479,7 +479,12 @@ def parse_scene(
 
     Diagnostics name the file as given (``path`` is not made absolute); included files are named
     relative to the cwd when possible. Raises :class:`SceneError` if the scene cannot be read.
+    A ``.py`` file is a SofaPython3 scene script: it is run (pyscene.py) to build the tree.
     """
+    if Path(path).suffix.lower() == ".py":
+        from sofac.pyscene.script import execute_script
+
+        return execute_script(path, diagnostics, data_roots=data_roots, max_bytes=max_bytes)
     display = str(path)
     given = Path(path)
     errors_before = len(diagnostics.errors)

@@ -224,6 +224,9 @@ class Compiled:
     when the scene was compiled in this process. A scene taken whole from the cache (``warm.py``)
     has only its run spec and library: they are computed again on first use."""
 
+    #: The Python scene this was compiled from, kept by a warm load (sofac.pyscene), else None.
+    python_scene: Any = None
+
     def __init__(
         self,
         spec: RunSpec,
@@ -268,6 +271,12 @@ class Compiled:
         return self._checked
 
     def instantiate(self) -> Simulation:
+        # A Python scene's controllers run with it (sofac.pyscene).
+        scene = self.python_scene or getattr(self._checked, "scene", None)
+        if getattr(scene, "controllers", None):
+            from sofac.pyscene.script import instantiate
+
+            return instantiate(self, scene)
         return Simulation(self)
 
 
