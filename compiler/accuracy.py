@@ -50,7 +50,7 @@ from typing import Any
 
 import numpy as np
 
-from . import registry
+from . import registry, scene_warnings
 from .diagnostics import Diagnostics, SceneError, SofacError
 from .loader import Compiled, Simulation, SimulationDiverged, compile_checked
 from .model import Component, Node, Scene
@@ -367,6 +367,7 @@ def _parse(path: Path, data_roots: Sequence[Path]) -> Scene:
     scene = parse_scene(path, diagnostics, data_roots=data_roots)
     if diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
+    scene_warnings.issue(diagnostics.sorted())
     return scene
 
 
@@ -378,6 +379,7 @@ def compile_variant(scene: Scene, solver: Solver, *, keep_rayleigh: bool) -> Com
     checked = check_scene(with_solver(scene, solver, keep_rayleigh=keep_rayleigh), diagnostics)
     if diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
+    scene_warnings.issue(diagnostics.sorted())
     return compile_checked(checked, diagnostics)
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .diagnostics import SceneError, Severity, SofacError
+from .scene_warnings import StrictSceneError, issue
 
 if TYPE_CHECKING:
     from .loader import SimulationDiverged
@@ -34,6 +35,8 @@ def _reported() -> Iterator[None]:
         for diag in error.diagnostics:
             if diag.severity >= Severity.WARNING:
                 print(format_diagnostic(diag), file=sys.stderr)
+        if isinstance(error, StrictSceneError):
+            print("sofac: error: --strict: the scene's warnings are errors; fix them", file=sys.stderr)
         raise _Failed from None
     except SofacError as error:
         print(f"sofac: error: {error}", file=sys.stderr)
@@ -92,6 +95,7 @@ def cmd_emit(args: argparse.Namespace) -> int:
             checked, diagnostics = check.check_file(_scene(args))
             if checked is None or diagnostics.has_errors():
                 raise SceneError(diagnostics.sorted())
+            issue(diagnostics.sorted())
             sys.stdout.write(generate.render(plan.plan_scene(checked, diagnostics, threads=_threads(args))))
     except _Failed:
         return EXIT_ERRORS
@@ -106,6 +110,7 @@ def cmd_schedule(args: argparse.Namespace) -> int:
             checked, diagnostics = check.check_file(_scene(args))
             if checked is None or diagnostics.has_errors():
                 raise SceneError(diagnostics.sorted())
+            issue(diagnostics.sorted())
             print(plan.format_schedule(plan.plan_scene(checked, diagnostics)))
     except _Failed:
         return EXIT_ERRORS
@@ -122,6 +127,7 @@ def cmd_effects(args: argparse.Namespace) -> int:
             checked, diagnostics = check.check_file(_scene(args))
             if checked is None or diagnostics.has_errors():
                 raise SceneError(diagnostics.sorted())
+            issue(diagnostics.sorted())
             scene_plan = plan.plan_scene(checked, diagnostics)
     except _Failed:
         return EXIT_ERRORS

@@ -19,8 +19,8 @@ from typing import IO, TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from . import build, warm
-from .diagnostics import SceneError, SofacError
+from . import build, scene_warnings, warm
+from .diagnostics import Diagnostic, SceneError, SofacError
 from .runspec import RunSpec
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
@@ -234,8 +234,10 @@ class Compiled:
         source: str | None = None,
         checked: Any = None,
         recompute: Callable[[], Compiled] | None = None,
+        warnings: tuple[Diagnostic, ...] = (),
     ) -> None:
         self.spec = spec
+        self.warnings = warnings  # the scene's warnings (sofac check's W codes), issued by load()
         self.built = built
         self._plan, self._source, self._checked = scene_plan, source, checked
         self._recompute = recompute
@@ -702,13 +704,35 @@ def compile_scene(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    strict: bool = False,
 ) -> Compiled:
-    """Check, plan, generate and build a scene (the build may come from the cache)."""
+    """Check, plan, generate and build a scene (the build may come from the cache). The scene's
+    warnings are issued as SceneWarning; ``strict``: they are errors (StrictSceneError)."""
+    compiled = _compile_scene(
+        path, data_roots=data_roots, prune=prune, rigid_model=rigid_model, threads=threads, strict=strict
+    )
+    scene_warnings.issue(compiled.warnings, strict=strict)
+    return compiled
+
+
+def _compile_scene(
+    path: str | Path,
+    *,
+    data_roots: Sequence[Path] = (),
+    prune: bool = True,
+    rigid_model: str = "sofa",
+    threads: int = 1,
+    strict: bool = False,
+) -> Compiled:
+    """compile_scene() without issuing the warnings (a strict scene with warnings stops before
+    it is built)."""
     from .check import check_file
 
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
+    if strict:
+        scene_warnings.issue(diagnostics, strict=True)
     return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
 
 
@@ -723,7 +747,10 @@ def compile_checked(
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
     built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
-    return Compiled(run_spec(scene_plan), built, scene_plan=scene_plan, source=source, checked=checked)
+    found = scene_warnings.scene_warnings(diagnostics.sorted()) if diagnostics is not None else ()
+    return Compiled(
+        run_spec(scene_plan), built, scene_plan=scene_plan, source=source, checked=checked, warnings=found
+    )
 
 
 def load(
@@ -734,9 +761,14 @@ def load(
     prune: bool = True,
     rigid_model: str = "sofa",
     threads: int = 1,
+    strict: bool = False,
 ) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
     element loops (FEM) on that many OpenMP threads, with the same numbers as one thread.
+
+    The scene's warnings (those ``sofac check`` prints) are issued as ``sofac.SceneWarning``
+    Python warnings, on every load; ``strict=True`` raises StrictSceneError (a SceneError listing
+    them) instead.
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
     record (warm.py) without being compiled again."""
@@ -749,10 +781,18 @@ def load(
     }
     record = warm.lookup(path, **options)
     if record is not None:
-        compiled = Compiled(record.spec, record.built, recompute=lambda: compile_scene(path, **options))
+
+        def recompute() -> Compiled:
+            with scene_warnings.quiet():  # issued below, from the record
+                return _compile_scene(path, **options)
+
+        compiled = Compiled(record.spec, record.built, recompute=recompute, warnings=record.warnings)
     else:
-        compiled = compile_scene(path, **options)
-        warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
+        compiled = _compile_scene(path, strict=strict, **options)
+        warm.store(
+            path, compiled.spec, compiled.built, compiled.checked, warnings=compiled.warnings, **options
+        )
+    scene_warnings.issue(compiled.warnings, strict=strict)
     sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:

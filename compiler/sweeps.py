@@ -261,6 +261,7 @@ _compiled: dict[tuple[str, bool, str, tuple[str, ...]], Any] = {}  # per worker 
 def _compiled_scene(job: Job) -> Any:
     """The scene compiled in this process (built once per node into its cache, under a file lock)."""
     from .loader import compile_scene
+    from .scene_warnings import quiet
 
     key = (job.scene, job.prune, job.rigid_model, job.data_roots)
     if key not in _compiled:
@@ -269,12 +270,13 @@ def _compiled_scene(job: Job) -> Any:
                 f"{job.scene}: no such file on worker host {socket.gethostname()}; workers read the "
                 "scene from the same path as the client (put it on a shared folder)"
             )
-        compiled = compile_scene(
-            job.scene,
-            data_roots=[Path(p) for p in job.data_roots],
-            prune=job.prune,
-            rigid_model=job.rigid_model,
-        )
+        with quiet():  # the client issued them when it planned the sweep
+            compiled = compile_scene(
+                job.scene,
+                data_roots=[Path(p) for p in job.data_roots],
+                prune=job.prune,
+                rigid_model=job.rigid_model,
+            )
         if scene_fingerprint(compiled) != job.fingerprint:
             raise SweepError(f"{job.scene} differs on host {socket.gethostname()} from the client's copy")
         _compiled[key] = compiled

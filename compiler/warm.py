@@ -30,12 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__, build
+from . import __version__, build, scene_warnings
 from .datafiles import default_data_roots
+from .diagnostics import Diagnostic
 from .resources import resource_dir
 from .runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
-FORMAT = 1
+FORMAT = 2  # 2: the scene's warnings are kept, so that a warm load issues them too
 # Environment variables that change what a scene compiles to (see build.py and datafiles.py).
 ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 
@@ -44,6 +45,7 @@ ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 class Record:
     spec: RunSpec
     built: build.Built
+    warnings: tuple[Diagnostic, ...] = ()
 
 
 @functools.cache
@@ -120,14 +122,24 @@ def lookup(path: str | Path, **options: Any) -> Record | None:
                 return None
             arrays = [stored[f"b{i}"] for i in range(len(meta["spec"]["buffers"]))]
         return Record(
-            _spec_from_json(meta["spec"], arrays), build.Built(library, meta["build_key"], True, 0.0)
+            _spec_from_json(meta["spec"], arrays),
+            build.Built(library, meta["build_key"], True, 0.0),
+            scene_warnings.from_json(meta["warnings"]),
         )
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         # No record, or a damaged one: a miss
         return None
 
 
-def store(path: str | Path, spec: RunSpec, built: build.Built, checked: Any, **options: Any) -> None:
+def store(
+    path: str | Path,
+    spec: RunSpec,
+    built: build.Built,
+    checked: Any,
+    *,
+    warnings: Sequence[Diagnostic] = (),
+    **options: Any,
+) -> None:
     """Record a scene just compiled; a failure to write only costs the next load its speed."""
     scene = checked.scene
     dependencies: list[tuple[str, str | None]] = [(str(p), _sha256(p)) for p in scene.sources]
@@ -140,6 +152,7 @@ def store(path: str | Path, spec: RunSpec, built: build.Built, checked: Any, **o
         "build_key": built.key,
         "dependencies": dependencies,
         "spec": _spec_to_json(spec),
+        "warnings": scene_warnings.to_json(warnings),
     }
     arrays = {f"b{i}": b.initial for i, b in enumerate(spec.buffers)}
     target = _file(_key(Path(os.path.realpath(path)), _options(**options)))

@@ -1,0 +1,116 @@
+"""What a new user tripped on (issue #20): each test reproduces one defect of that list."""
+
+from __future__ import annotations
+
+import re
+import warnings
+from pathlib import Path
+
+import pytest
+import sofac
+from sofac.cli import main
+from sofac.resources import bundled_scene
+from sofac.scene_warnings import SceneWarning, StrictSceneError
+
+SPRING = '<SpringForceField template="Vec3d" name="spring" spring="0 1 100 0 1"/>'
+
+
+def oscillator(folder: Path, replace: tuple[str, str] | None = None, name: str = "oscillator.scn") -> Path:
+    """The bundled oscillator (one spring, explicit Euler), with one piece of text replaced."""
+    text = bundled_scene("oscillator.scn").read_text()
+    if replace is not None:
+        assert replace[0] in text
+        text = text.replace(*replace)
+    path = folder / name
+    path.write_text(text)
+    return path
+
+
+def typo_scene(folder: Path) -> Path:
+    """The oscillator with a misspelt attribute (W203) on its spring, at line 31."""
+    return oscillator(folder, (' name="spring" ', ' name="spring" stifness="3" '), "typo.scn")
+
+
+W203 = re.compile(
+    r"typo\.scn:31: warning W203 \[stifness\]: .*'stifness'\n    hint: did you mean 'stiffness'\?"
+)
+
+
+# --- 1. warnings shown by every command, SceneWarning from load, strict ---------------------------
+
+
+def test_load_issues_scene_warnings_cold_and_warm(tmp_path: Path) -> None:
+    path = typo_scene(tmp_path)
+    for _ in range(2):  # compiled, then from the warm record
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            sim = sofac.load(path)
+        found = [w for w in caught if issubclass(w.category, SceneWarning)]
+        assert len(found) == 1
+        assert W203.search(str(found[0].message))
+        assert found[0].message.diagnostic.code == "W203"  # type: ignore[union-attr]
+        assert found[0].filename == __file__  # points at the caller's load()
+    assert sim.compiled.warm
+
+
+def test_load_strict_raises_with_every_warning(tmp_path: Path) -> None:
+    path = typo_scene(tmp_path)
+    with pytest.raises(StrictSceneError) as raised:
+        sofac.load(path, strict=True)
+    assert [d.code for d in raised.value.diagnostics] == ["W203"]
+    assert "strict" in str(raised.value)
+    with pytest.warns(SceneWarning):
+        sofac.load(path)  # compiled and recorded warm
+    with pytest.raises(StrictSceneError):
+        sofac.load(path, strict=True)
+
+
+def test_scene_warning_can_be_an_error_through_the_warnings_module(tmp_path: Path) -> None:
+    path = typo_scene(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SceneWarning)
+        with pytest.raises(SceneWarning):
+            sofac.load(path)
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run", "--steps", "2"],
+        ["compile"],
+        ["emit"],
+        ["inspect", "--schedule"],
+        ["inspect", "--effects"],
+        ["inspect"],
+        ["check"],
+    ],
+)
+def test_every_command_prints_the_warnings_once_and_strict_fails(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]
+) -> None:
+    path = typo_scene(tmp_path)
+    assert main([*command, str(path)]) == 0
+    out, err = capsys.readouterr()
+    assert len(W203.findall(err + out)) == 1, err
+    assert main([*command, str(path), "--strict"]) == 1
+    out, err = capsys.readouterr()
+    assert W203.search(err + out)
+
+
+def test_render_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = typo_scene(tmp_path)
+    assert main(["render", str(path), "--out", str(tmp_path / "a.png"), "--no-progress"]) == 0
+    assert len(W203.findall(capsys.readouterr().err)) == 1
+    assert main(["render", str(path), "--out", str(tmp_path / "b.png"), "--strict"]) == 1
+    assert not (tmp_path / "b.png").exists()
+
+
+def test_sweep_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = typo_scene(tmp_path)
+    args = ["sweep", str(path), "--param", "spring.stiffness=50,100", "--steps", "5", "--no-plot"]
+    args += ["--scheduler", "synchronous", "--no-progress"]
+    assert main([*args, "--out", str(tmp_path / "s.nc")]) == 0
+    assert len(W203.findall(capsys.readouterr().err)) == 1
+    assert main([*args, "--out", str(tmp_path / "t.nc"), "--strict"]) == 1
+    assert W203.search(capsys.readouterr().err)
+    assert not (tmp_path / "t.nc").exists()
