@@ -8,6 +8,7 @@ parameters are numpy views of the native instance: writing into them changes the
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import importlib.util
 import sys
 import time
@@ -19,7 +20,7 @@ from typing import IO, TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from . import build, scene_warnings, warm
+from . import build, param_rules, scene_warnings, warm
 from .diagnostics import Diagnostic, SceneError, SofacError
 from .runspec import RunSpec
 
@@ -315,6 +316,8 @@ class Simulation:
             for f in spec.energy_files
         ]
         self._saving = [f for f in self._energy_files if f.save]
+        # Values set at run time get the rules of their fields (checked when they change).
+        self._param_guard = param_rules.ParamGuard(self.params(), spec.rules)
 
     @property
     def plan(self) -> plan.Plan:
@@ -338,9 +341,14 @@ class Simulation:
 
     @dt.setter
     def dt(self, value: float) -> None:
-        if not np.isfinite(value) or value <= 0:
-            raise ValueError(f"dt must be a positive number, got {value!r}")
-        self.param("/.dt")[0] = value
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise param_rules.InvalidParameter(
+                f"E204: /.dt = {value!r} is not a number", key="/.dt", code="E204"
+            ) from None
+        param_rules.check("/.dt", np.array([number]), self.spec.rules.get("/.dt"))
+        self.param("/.dt")[0] = number
 
     @property
     def steps(self) -> int:
@@ -358,6 +366,7 @@ class Simulation:
             raise ValueError("n must be >= 0")
         if energy_bound is not None and np.isnan(energy_bound):
             raise ValueError("energy_bound must be a number")
+        self._param_guard.check()
         self._check_init_params()
         chunk = max(1, int(self.chunk))
         remaining = int(n)
@@ -584,7 +593,8 @@ class Simulation:
                 )
 
     def reset(self) -> None:
-        """Back to the initial state and time 0 (tuned parameters are kept)."""
+        """Back to the initial state and time 0 (tuned parameters are kept, and checked)."""
+        self._param_guard.check()
         for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.role in ("state", "scratch"):
                 view[:] = buffer.initial
@@ -743,13 +753,14 @@ def compile_checked(
     from .runspec import run_spec
 
     scene_plan = plan.plan_scene(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+    spec = dataclasses.replace(run_spec(scene_plan), rules=param_rules.rules_of(checked, scene_plan.buffers))
     source = generate.render(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
     built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
     found = scene_warnings.scene_warnings(diagnostics.sorted()) if diagnostics is not None else ()
     return Compiled(
-        run_spec(scene_plan), built, scene_plan=scene_plan, source=source, checked=checked, warnings=found
+        spec, built, scene_plan=scene_plan, source=source, checked=checked, warnings=found
     )
 
 

@@ -7,10 +7,12 @@ a stored run spec, without parsing, checking or planning it again (``warm.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .param_rules import ParamRule
 
 if TYPE_CHECKING:
     from .plan import Plan
@@ -80,6 +82,7 @@ class RunSpec:
     pruned: dict[str, str]  # parameter key -> why its effect was compiled out
     threads: int
     rigid_model: str
+    rules: dict[str, ParamRule] = field(default_factory=dict)  # parameter key -> its field's rule
 
     def index(self, key: str) -> int:
         return next(i for i, b in enumerate(self.buffers) if b.key == key)

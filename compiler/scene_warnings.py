@@ -45,9 +45,7 @@ class StrictSceneError(SceneError):
         items = list(diagnostics)
         super().__init__(items)
         more = f" (and {len(items) - 1} more)" if len(items) > 1 else ""
-        self.args = (
-            f"{items[0]}{more}\nstrict: warnings are errors; fix the scene, or load without strict",
-        )
+        self.args = (f"{items[0]}{more}\nstrict: warnings are errors; fix the scene, or load without strict",)
 
 
 def scene_warnings(diagnostics: Iterable[Diagnostic]) -> tuple[Diagnostic, ...]:

@@ -4,7 +4,8 @@
 returns an :class:`xarray.Dataset` with one entry per run along the ``run`` dimension, the swept
 parameters as coordinates of ``run``, the recorded quantities sampled every ``every`` steps along
 ``sample`` (with their times in the ``time`` coordinate), and per run its ``status`` ("ok",
-"diverged", "failed"), ``message``, ``diverged_step`` and ``wall_seconds``.
+"diverged", "failed", or "invalid": a value its field's rule refuses, as in a scene file),
+``message``, ``diverged_step`` and ``wall_seconds``.
 
 Runs are Dask tasks (distributed): an embedded ``LocalCluster`` by default (one single-threaded
 worker process per core, BLAS pinned to one thread), or any scheduler given by address. A task
@@ -44,7 +45,7 @@ import numpy as np
 
 from .diagnostics import SofacError
 
-STATUSES = ("ok", "diverged", "failed")
+STATUSES = ("ok", "diverged", "failed", "invalid")
 FIELDS = ("position", "velocity", "force")
 ENERGY = "energy"
 #: Environment of each worker process: single-threaded BLAS/OpenMP, so that runs neither fight over
@@ -294,6 +295,7 @@ def scene_fingerprint(compiled: Any) -> str:
 def run_one(job: Job, values: Sequence[float]) -> dict[str, Any]:
     """Run one parameter set. Never raises: failures come back as ``status``/``message``."""
     from .loader import SimulationDiverged
+    from .param_rules import InvalidParameter
 
     started = time.perf_counter()
     samples = job.sample_steps()
@@ -318,6 +320,8 @@ def run_one(job: Job, values: Sequence[float]) -> dict[str, Any]:
                 arrays[record.name][index] = _read(sim, record)
     except SimulationDiverged as error:
         out.update(status="diverged", message=str(error).splitlines()[0], diverged_step=error.step)
+    except InvalidParameter as error:  # not run: the others go on
+        out.update(status="invalid", message=str(error))
     except Exception as error:  # recorded, never fatal to the sweep: the other runs go on
         out.update(status="failed", message=_describe(error))
     out["wall_seconds"] = time.perf_counter() - started

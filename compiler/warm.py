@@ -33,6 +33,7 @@ import numpy as np
 from . import __version__, build, scene_warnings
 from .datafiles import default_data_roots
 from .diagnostics import Diagnostic
+from .param_rules import ParamRule
 from .resources import resource_dir
 from .runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
@@ -180,6 +181,7 @@ def _spec_to_json(spec: RunSpec) -> dict[str, Any]:
         "pruned": spec.pruned,
         "threads": spec.threads,
         "rigid_model": spec.rigid_model,
+        "rules": {key: dataclasses.asdict(rule) for key, rule in spec.rules.items()},
     }
 
 
@@ -198,4 +200,5 @@ def _spec_from_json(meta: dict[str, Any], arrays: list[np.ndarray]) -> RunSpec:
         dict(meta["pruned"]),
         int(meta["threads"]),
         str(meta["rigid_model"]),
+        {key: ParamRule(**rule) for key, rule in meta["rules"].items()},
     )

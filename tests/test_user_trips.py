@@ -6,9 +6,11 @@ import re
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 import sofac
 from sofac.cli import main
+from sofac.param_rules import InvalidParameter, ParamRule, check
 from sofac.resources import bundled_scene
 from sofac.scene_warnings import SceneWarning, StrictSceneError
 
@@ -114,3 +116,72 @@ def test_sweep_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixture
     assert main([*args, "--out", str(tmp_path / "t.nc"), "--strict"]) == 1
     assert W203.search(capsys.readouterr().err)
     assert not (tmp_path / "t.nc").exists()
+
+
+# --- 2. values set at run time get the registry's field rules ----------------------------------
+
+
+def test_a_negative_or_zero_dt_set_at_run_time_is_refused(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    sim.param("/.dt")[:] = -0.01
+    with pytest.raises(
+        InvalidParameter, match=r"^E207: /\.dt = -0\.01 must be > 0 \(the root node \(.*:15\)\)"
+    ):
+        sim.step(1)
+    assert sim.steps == 0 and sim.time == 0.0  # nothing ran backwards
+    with pytest.raises(InvalidParameter, match=r"E207: /\.dt = 0 must be > 0"):
+        sim.dt = 0
+    sim.param("/.dt")[:] = 0.002
+    sim.step(2)
+    assert sim.time == pytest.approx(0.004)
+
+
+def test_a_negative_mass_or_a_nan_set_at_run_time_is_refused(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    sim.param("/oscillator/mass.vertexMass")[:] = -1.0
+    with pytest.raises(
+        InvalidParameter, match=r"E207: /oscillator/mass\.vertexMass = -1 must be > 0 \(a mass\)"
+    ):
+        sim.reset()
+    with pytest.raises(InvalidParameter) as raised:
+        sim.step(1)
+    assert raised.value.key == "/oscillator/mass.vertexMass" and raised.value.code == "E207"
+    sim.param("/oscillator/mass.vertexMass")[:] = 2.0
+    sim.param("/oscillator/spring.lengths")[:] = np.nan
+    with pytest.raises(InvalidParameter, match=r"E206: /oscillator/spring\.lengths = nan is not finite"):
+        sim.step(1)
+
+
+def test_the_poisson_ratio_rule_is_the_registry_s() -> None:
+    rule = ParamRule(
+        "HexahedronFEMForceField", "poissonRatio", "HexahedronFEMForceField '/beam/fem' (b.scn:9)"
+    )
+    check("/beam/fem.poissonRatio", np.array([0.3]), rule)
+    with pytest.raises(
+        InvalidParameter, match=r"poissonRatio = 0\.7 must be in \(-1, 0\.5\) \(Hexa.*b\.scn:9\)\)"
+    ):
+        check("/beam/fem.poissonRatio", np.array([0.7]), rule)
+    many = np.full(5, 1e5)
+    many[3] = -2.0
+    young = ParamRule("HexahedronFEMForceField", "youngModulus", "x")
+    with pytest.raises(InvalidParameter, match=r"youngModulus\[3\] = -2 must be > 0"):
+        check("/beam/fem.youngModulus", many, young)
+
+
+def test_a_sweep_records_invalid_runs_and_goes_on(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = oscillator(tmp_path)
+    dataset = sofac.sweep(
+        path,
+        {"/.dt": [-0.001, 0.001], "mass.vertexMass": [-1.0, 1.0]},
+        steps=10,
+        scheduler="synchronous",
+    )
+    statuses = [str(s) for s in dataset["status"].values]
+    assert statuses == ["invalid", "invalid", "invalid", "ok"]
+    messages = [str(m) for m in dataset["message"].values]
+    assert messages[0].startswith("E207: /.dt = -0.001 must be > 0")
+    assert messages[2].startswith("E207: /oscillator/mass.vertexMass = -1 must be > 0")
+    assert dataset["time"].values[3][-1] == pytest.approx(0.01)
+    args = ["sweep", str(path), "--param", "/.dt=-0.001,0.001", "--steps", "5", "--no-plot"]
+    assert main([*args, "--scheduler", "synchronous", "--no-progress", "--out", str(tmp_path / "s.nc")]) == 1
+    assert "1 ok, 1 invalid" in capsys.readouterr().err
