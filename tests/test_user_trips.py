@@ -185,3 +185,86 @@ def test_a_sweep_records_invalid_runs_and_goes_on(tmp_path: Path, capsys: pytest
     args = ["sweep", str(path), "--param", "/.dt=-0.001,0.001", "--steps", "5", "--no-plot"]
     assert main([*args, "--scheduler", "synchronous", "--no-progress", "--out", str(tmp_path / "s.nc")]) == 1
     assert "1 ok, 1 invalid" in capsys.readouterr().err
+
+
+# --- 3. the last finite state: its real step, restored on request, a hint that fits ---------------
+
+STIFF = ('spring="0 1 100 0 1"', 'spring="0 1 1e6 0 1"')  # unstable for explicit Euler at dt = 0.01
+DOFS = "/oscillator/dofs"
+
+
+def diverging(tmp_path: Path) -> sofac.Simulation:
+    sim = sofac.load(oscillator(tmp_path, STIFF, "wild.scn"))
+    sim.dt = 0.01
+    return sim
+
+
+def positions_after(tmp_path: Path, steps: int) -> np.ndarray:
+    """The state after ``steps`` steps, from a fresh instance stepped one step at a time."""
+    sim = diverging(tmp_path)
+    for _ in range(steps):
+        sim.step(1)
+    return sim[DOFS].position.copy()
+
+
+@pytest.mark.parametrize("chunk", [1000, 30])
+def test_the_last_finite_state_is_the_step_before_the_failure(tmp_path: Path, chunk: int) -> None:
+    sim = diverging(tmp_path)
+    sim.chunk = chunk
+    with pytest.raises(sofac.SimulationDiverged) as raised:
+        sim.step(1000)
+    error = raised.value
+    assert error.step == 79 and error.last_finite_step == 78
+    assert error.last_finite_time == pytest.approx(0.78)
+    assert "last finite state: step 78 (t=0.78)" in str(error)
+    expected = positions_after(tmp_path, 78)
+    assert np.isfinite(expected).all() and abs(expected[1, 0]) > 1e100
+    assert error.last_finite is not None
+    assert np.array_equal(error.last_finite[DOFS][0], expected)
+    assert not np.isfinite(sim[DOFS].position).all()  # the live arrays keep the failing step
+    assert sim.restore_last_finite() == 78
+    assert sim.steps == 78 and sim.time == pytest.approx(0.78)
+    assert np.array_equal(sim[DOFS].position, expected)
+
+
+def test_the_last_state_within_the_energy_bound(tmp_path: Path) -> None:
+    probe = diverging(tmp_path)
+    energies = []
+    for _ in range(60):
+        probe.step(1)
+        energies.append(probe.energy().total)
+    bound = energies[40]  # steps 1..41 stay within it, step 42 passes it
+    assert energies[41] > bound
+    sim = diverging(tmp_path)
+    with pytest.raises(sofac.SimulationDiverged) as raised:
+        sim.step(60, energy_bound=bound)
+    assert raised.value.reason == "energy" and raised.value.step == 60
+    assert raised.value.last_finite_step == 41
+    sim.restore_last_finite()
+    assert sim.energy().total == bound
+
+
+def test_a_state_broken_before_the_call_gets_a_hint_that_fits(tmp_path: Path) -> None:
+    sim = diverging(tmp_path)
+    sim[DOFS].position[1, 0] = np.nan
+    with pytest.raises(sofac.SimulationDiverged) as raised:
+        sim.step(5)
+    assert "smaller dt" not in raised.value.hint
+    assert "already not finite before this call" in raised.value.hint
+    assert raised.value.last_finite is None
+    with pytest.raises(sofac.SofacError, match="no finite state is kept"):
+        sim.restore_last_finite()
+
+
+def test_a_nan_dt_is_refused_not_reported_as_a_divergence(tmp_path: Path) -> None:
+    sim = diverging(tmp_path)
+    sim.param("/.dt")[:] = np.nan
+    with pytest.raises(InvalidParameter, match=r"E206: /\.dt = nan is not finite"):
+        sim.step(5)
+
+
+def test_run_reports_the_real_last_finite_step(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = oscillator(tmp_path, STIFF, "wild.scn")
+    assert main(["run", str(path), "--dt", "0.01", "--steps", "1000"]) == 1
+    err = capsys.readouterr().err
+    assert "diverged at step 79" in err and "sofac: the last finite state (step 78, t=0.78):" in err
