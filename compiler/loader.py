@@ -433,14 +433,14 @@ class Simulation:
             self._energy_guard = None
             return
         if not (np.isfinite(factor) and factor > 0):
-            raise ValueError(f"factor must be a positive number, got {factor!r}")
+            raise ValueError(f"factor must be a positive number, got {factor!s}")
         energy = self.energy()
         if scale is None:
             scale = abs(energy.kinetic) + abs(energy.potential)
             if not (np.isfinite(scale) and scale > 0):
                 raise ValueError(f"the energy scale is {scale:g} now; give guard_energy(factor, scale=...)")
         elif not (np.isfinite(scale) and scale > 0):
-            raise ValueError(f"scale must be a positive number, got {scale!r}")
+            raise ValueError(f"scale must be a positive number, got {scale!s}")
         self._energy_guard = _EnergyGuard(float(factor), float(scale), energy.total)
 
     # --- the divergence guard ------------------------------------------------------------------

@@ -359,6 +359,8 @@ class _Planner:
         groups = self._groups()
         if self.diags.has_errors():
             raise SceneError(self.diags.sorted())
+        solving = {id(g.linear_solver) for g in groups if g.linear_solver is not None}  # in the step
+        self.ignored = [(component, why) for component, why in self.ignored if id(component) not in solving]
         return Plan(
             scene_file=str(self.checked.scene.file),
             dt=self.dt,
@@ -408,6 +410,9 @@ class _Planner:
                 else group.scheme
             )
             effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
+            linear = group.linear_solver
+            if linear is not None and all(linear is not c for c in self.lowered):
+                effects.append(("linear_solve", origin_of(linear), f"solves the system of {states}"))
         if self.gravity.key not in self.pruned:
             effects.append(
                 ("gravity", "root node", f"g = {self.gravity.initial.tolist()}, applied by the masses")
@@ -3720,7 +3725,7 @@ def format_schedule(plan: Plan) -> str:
     """The plan as text, for ``sofac inspect --schedule``."""
     lines = [
         f"scene {plan.scene_file}",
-        f"dt = {plan.dt.initial[0]!r}, gravity = {plan.gravity.initial.tolist()}",
+        f"dt = {float(plan.dt.initial[0])!r}, gravity = {plan.gravity.initial.tolist()}",
     ]
     for group in plan.groups:
         scheme = {

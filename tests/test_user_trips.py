@@ -268,3 +268,67 @@ def test_run_reports_the_real_last_finite_step(tmp_path: Path, capsys: pytest.Ca
     assert main(["run", str(path), "--dt", "0.01", "--steps", "1000"]) == 1
     err = capsys.readouterr().err
     assert "diverged at step 79" in err and "sofac: the last finite state (step 78, t=0.78):" in err
+
+
+# --- 5. inspect agrees with itself; no numpy repr in what a user reads ---------------------------
+
+
+def test_effects_and_schedule_agree_on_the_linear_solver(capsys: pytest.CaptureFixture[str]) -> None:
+    liver = str(bundled_scene("liver.scn"))
+    assert main(["inspect", liver, "--effects"]) == 0
+    effects = capsys.readouterr().out
+    assert re.search(
+        r"^linear_solve +CGLinearSolver '/Liver/linearsolver' \(.*liver\.scn:42\)", effects, re.M
+    )
+    assert "CGLinearSolver '/Liver/linearsolver'" not in "".join(
+        line for line in effects.splitlines() if line.startswith("kept out")
+    )
+    assert main(["inspect", liver, "--schedule"]) == 0
+    schedule = capsys.readouterr().out
+    assert "with CGLinearSolver '/Liver/linearsolver'" in schedule
+    assert "kept out of the step: CGLinearSolver" not in schedule
+    assert "\ndt = 0.02, gravity = [0.0, -9.81, 0.0]\n" in schedule
+
+
+SWEEP_OPTIONS = ("--no-plot", "--scheduler", "synchronous", "--no-progress")
+NUMPY_REPR = re.compile(r"\bnp\.\w+\(|\barray\(|\bdtype=")
+
+
+def test_no_numpy_repr_reaches_any_command_output(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = str(oscillator(tmp_path))
+    liver = str(bundled_scene("liver.scn"))
+    commands = [
+        ["check", scene],
+        ["check", scene, "--format", "json"],
+        ["inspect", liver],
+        ["inspect", liver, "--format", "json"],
+        ["inspect", liver, "--schedule"],
+        ["inspect", liver, "--effects"],
+        ["inspect", liver, "--effects", "--format", "json"],
+        ["compile", scene],
+        ["run", scene, "--steps", "3"],
+        ["run", scene, "--steps", "3", "--dt", "1e-4"],
+        ["render", scene, "--out", str(tmp_path / "o.png"), "--no-progress"],
+        [
+            "sweep",
+            scene,
+            "--param",
+            "spring.stiffness=50,100",
+            "--steps",
+            "3",
+            *SWEEP_OPTIONS,
+            f"--out={tmp_path}/s.nc",
+        ],
+    ]
+    for command in commands:
+        assert main(command) == 0, command
+        out, err = capsys.readouterr()
+        assert not NUMPY_REPR.search(out + err), (command, NUMPY_REPR.search(out + err))
+    sim = sofac.load(scene)
+    for bad in (
+        lambda: sim.guard_energy(np.float64(-1.0)),
+        lambda: sim.guard_energy(1.0, scale=np.float64(-2)),
+    ):
+        with pytest.raises(ValueError) as raised:
+            bad()
+        assert not NUMPY_REPR.search(str(raised.value))
