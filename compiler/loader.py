@@ -20,7 +20,7 @@ from typing import IO, TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from . import build, param_rules, scene_warnings, warm
+from . import build, param_rules, paths, scene_warnings, warm
 from .diagnostics import Diagnostic, SceneError, SofacError
 from .runspec import RunSpec
 
@@ -677,13 +677,9 @@ class Simulation:
         return [s.info for s in self._states.values()]
 
     def __getitem__(self, path: str) -> State:
-        key = path if path.startswith("/") else "/" + path
-        if key in self._states:
-            return self._states[key]
-        named = [s for s in self._states.values() if s.info.name == path]
-        if len(named) == 1:
-            return named[0]
-        raise KeyError(f"no MechanicalObject {path!r}; the scene has: {', '.join(self._states)}")
+        """A MechanicalObject by its path (``"/pendulum/dofs"``, ``"pendulum/dofs"``, or its unique
+        end, ``"dofs"``: see sofac.paths)."""
+        return self._states[paths.resolve(path, self._states, "MechanicalObject")]
 
     def param(self, key: str, *, recompile: bool = False) -> np.ndarray:
         """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
@@ -694,7 +690,10 @@ class Simulation:
         ``reset()``, and ``step()`` raises ParameterNeedsReset if one was changed without it.
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity),
         unless ``recompile``: then the scene is recompiled with every effect kept and the
-        simulation goes on from where it is (see ``recompile()``)."""
+        simulation goes on from where it is (see ``recompile()``). ``key`` may also be written
+        without its leading slash, or by its unique end (``"spring.stiffness"``: see sofac.paths)."""
+        params = [b.key for b in self.spec.buffers if b.role == "param"]
+        key = paths.resolve(key, [*params, *(k for k in self.spec.pruned if k not in params)], "parameter")
         if key in self.spec.pruned:
             if not recompile:
                 raise PrunedEffectError(
@@ -703,11 +702,11 @@ class Simulation:
                     "(the state carries over), or load the scene with sofac.load(path, prune=False)"
                 )
             self.recompile(prune=False)
-        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
-            if buffer.key == key and buffer.role == "param":
-                return view
-        names = ", ".join(b.key for b in self.spec.buffers if b.role == "param")
-        raise KeyError(f"no parameter {key!r}; parameters: {names}")
+        return next(
+            view
+            for buffer, view in zip(self.spec.buffers, self._views, strict=True)
+            if buffer.key == key and buffer.role == "param"
+        )
 
     def recompile(self, *, prune: bool = False) -> None:
         """Recompile the scene (``prune=False``: with the effects it compiled out, such as a zero
@@ -737,14 +736,12 @@ class Simulation:
 
     def output(self, key: str) -> np.ndarray:
         """A read-only view of a value the step computes, such as a VariationalSymplecticSolver's
-        ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included)."""
-        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
-            if buffer.key == key and buffer.role == "state":
-                out = view.view()
-                out.flags.writeable = False
-                return out
-        names = ", ".join(b.key for b in self.spec.buffers if b.role == "state")
-        raise KeyError(f"no output {key!r}; outputs: {names}")
+        ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included; the
+        path as sofac.paths reads it)."""
+        outputs = {b.key: v for b, v in zip(self.spec.buffers, self._views, strict=True) if b.role == "state"}
+        out = outputs[paths.resolve(key, outputs, "output")].view()
+        out.flags.writeable = False
+        return out
 
     def params(self) -> dict[str, np.ndarray]:
         return {b.key: v for b, v in zip(self.spec.buffers, self._views, strict=True) if b.role == "param"}

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from . import paths
 from .diagnostics import SofacError
 
 STATUSES = ("ok", "diverged", "failed", "invalid")
@@ -164,18 +165,13 @@ def resolve_parameter(text: str, sizes: Mapping[str, int | None]) -> Parameter:
     component's name is unique) among the scene's tunable parameters ``sizes`` ({key: length})."""
     match = _COMPONENT.match(text.strip())
     base, component = (match.group(1), int(match.group(2))) if match else (text.strip(), None)
-    candidates = [k for k in sizes if k == base or k == "/" + base.lstrip("/")]
-    if not candidates:
-        candidates = [k for k in sizes if k.endswith("/" + base.lstrip("/"))]
-    if len(candidates) != 1:
-        listing = ", ".join(sizes)
-        problem = "is ambiguous" if candidates else "is not a tunable parameter of this scene"
+    try:
+        key = paths.resolve(base, sizes, "tunable parameter")
+    except paths.UnknownPath as error:
         raise SweepError(
-            f"--param {text}: {problem}; give one of: {listing} (fields computed when the scene is "
-            "compiled, such as meshes or masses from a density, need one compilation per value: "
-            "sweep over scene files instead)"
-        )
-    key = candidates[0]
+            f"--param {text}: {error} (fields computed when the scene is compiled, such as meshes or "
+            "masses from a density, need one compilation per value: sweep over scene files instead)"
+        ) from None
     size = sizes[key]
     if size is None:  # a parameter compiled out (the caller says so): nothing to check its index against
         return Parameter(key, component)
@@ -221,17 +217,17 @@ def resolve_record(text: str, states: Mapping[str, int]) -> Record:
             f"--record {text}: use PATH.FIELD with FIELD one of {', '.join(FIELDS)} (PATH a "
             f"MechanicalObject: {', '.join(states)}), optionally [DOF,...], or 'energy'"
         )
-    found = [s for s in states if s == path or s == "/" + path.lstrip("/") or s.endswith("/" + path)]
-    if len(found) != 1:
-        problem = "is ambiguous" if found else "is not a MechanicalObject of this scene"
-        raise SweepError(f"--record {text}: {path} {problem}; the scene has: {', '.join(states)}")
+    try:
+        found = paths.resolve(path, states, "MechanicalObject")
+    except paths.UnknownPath as error:
+        raise SweepError(f"--record {text}: {error}") from None
     selected = None
     if dofs is not None:
         selected = tuple(int(d) for d in dofs.replace(",", " ").split())
-        bad = [d for d in selected if d >= states[found[0]]]
+        bad = [d for d in selected if d >= states[found]]
         if bad or not selected:
-            raise SweepError(f"--record {text}: {found[0]} has DOFs 0 to {states[found[0]] - 1}")
-    return Record(found[0], name, selected)
+            raise SweepError(f"--record {text}: {found} has DOFs 0 to {states[found] - 1}")
+    return Record(found, name, selected)
 
 
 # --- one run -------------------------------------------------------------------------------------

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
+from sofac import sweeps
 from sofac.cli import main
 from sofac.param_rules import InvalidParameter, ParamRule, check
 from sofac.resources import bundled_scene
@@ -332,3 +333,39 @@ def test_no_numpy_repr_reaches_any_command_output(tmp_path: Path, capsys: pytest
         with pytest.raises(ValueError) as raised:
             bad()
         assert not NUMPY_REPR.search(str(raised.value))
+
+
+# --- 8. one path rule for states, parameters, outputs, sweep and record keys ---------------------
+
+
+def test_every_path_takes_the_same_forms(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    for form in ("/oscillator/spring.stiffness", "oscillator/spring.stiffness", "spring.stiffness"):
+        assert sim.param(form) is sim.param("/oscillator/spring.stiffness"), form
+    for form in ("/oscillator/dofs", "oscillator/dofs", "dofs"):
+        assert sim[form] is sim["/oscillator/dofs"], form
+    for form in ("/.dt", ".dt"):
+        assert sim.param(form)[0] == 0.001
+    assert sim.output("dofs.position").shape == (6,)  # output keys: "<state path>.position"
+    assert sweeps.resolve_parameter("spring.stiffness", {k: 1 for k in sim.params()}).key == (
+        "/oscillator/spring.stiffness"
+    )
+    record = sweeps.resolve_record("oscillator/dofs.position", {"/oscillator/dofs": 2})
+    assert record.state == "/oscillator/dofs"
+
+
+def test_a_missed_path_says_what_was_meant(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    with pytest.raises(KeyError) as raised:
+        sim.param("sprung.stiffness")
+    message = str(raised.value)
+    assert message.startswith("no parameter 'sprung.stiffness'; did you mean '/oscillator/spring.stiffness'?")
+    assert "the scene has: /.dt, /.gravity, /oscillator/mass.vertexMass" in message
+    with pytest.raises(KeyError, match=r"did you mean '/oscillator/dofs'\?"):
+        sim["oscillator/dof"]
+    with pytest.raises(
+        KeyError, match=r"^no output 'dofs.positio'; did you mean '/oscillator/dofs.position'\?"
+    ):
+        sim.output("dofs.positio")
+    with pytest.raises(sweeps.SweepError, match=r"no tunable parameter 'sprung.stiffness'; did you mean"):
+        sweeps.resolve_parameter("sprung.stiffness", {k: 1 for k in sim.params()})
