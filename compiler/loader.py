@@ -11,6 +11,7 @@ import contextlib
 import dataclasses
 import importlib.util
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -324,6 +325,7 @@ class Simulation:
         self._saving = [f for f in self._energy_files if f.save]
         # Values set at run time get the rules of their fields (checked when they change).
         self._param_guard = param_rules.ParamGuard(self.params(), spec.rules)
+        self._lock = threading.Lock()  # one step (reset...) of this instance at a time
 
     @property
     def plan(self) -> plan.Plan:
@@ -363,12 +365,21 @@ class Simulation:
         return self._steps
 
     def step(self, n: int = 1, *, energy_bound: float | None = None) -> None:
-        """Advance ``n`` steps, in chunks of at most ``chunk`` steps.
+        """Advance ``n`` steps (a whole number), in chunks of at most ``chunk`` steps.
 
         Raises SimulationDiverged when an independent state stops being finite (the compiled step
         checks every step and stops right after the failing one, whose values the arrays then
         hold), or, checked between chunks and at the end, when the total energy exceeds
-        ``energy_bound`` or the bound set by ``guard_energy()``."""
+        ``energy_bound`` or the bound set by ``guard_energy()``.
+
+        Calls from several threads on one instance run one after the other (the native step
+        releases the GIL: two at once would corrupt the state); separate instances step in parallel."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+            raise TypeError(f"step(n): n is a whole number of steps, got {type(n).__name__} {n!r}")
+        with self._lock:
+            self._step(int(n), energy_bound)
+
+    def _step(self, n: int, energy_bound: float | None) -> None:
         if n < 0:
             raise ValueError("n must be >= 0")
         if energy_bound is not None and np.isnan(energy_bound):
@@ -515,10 +526,11 @@ class Simulation:
                 "not finite before the failing call, or keep_last_finite is off; reset() restarts it"
             )
         copies, step, time = self._kept
-        for view, copy in zip(self._carried, copies, strict=True):
-            np.copyto(view, copy)
-        self._native.time = time
-        self._steps = step
+        with self._lock:
+            for view, copy in zip(self._carried, copies, strict=True):
+                np.copyto(view, copy)
+            self._native.time = time
+            self._steps = step
         return step
 
     def _solver_and_hint(self, path: str, energy: bool = False) -> tuple[str, str]:
@@ -658,6 +670,10 @@ class Simulation:
 
     def reset(self) -> None:
         """Back to the initial state and time 0 (tuned parameters are kept, and checked)."""
+        with self._lock:
+            self._reset()
+
+    def _reset(self) -> None:
         self._param_guard.check()
         for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.role in ("state", "scratch"):
@@ -800,12 +816,23 @@ def _compile_scene(
     it is built)."""
     from .check import check_file
 
+    _check_data_roots(data_roots)
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if checked is None or diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
     if strict:
         scene_warnings.issue(diagnostics, strict=True)
     return compile_checked(checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads)
+
+
+def _check_data_roots(data_roots: Sequence[Path]) -> None:
+    """The command line refuses a data root that is no folder (--data-path); so does the API."""
+    if isinstance(data_roots, (str, Path)):
+        shown = repr(str(data_roots))
+        raise SofacError(f"data_roots={shown}: give a list of folders, such as [{shown}]")
+    for root in data_roots:
+        if not Path(root).is_dir():
+            raise SofacError(f"data_roots: {root}: no such folder (each data root is a folder to search)")
 
 
 def compile_checked(
@@ -852,6 +879,7 @@ def load(
         "rigid_model": rigid_model,
         "threads": threads,
     }
+    _check_data_roots(data_roots)
     record = warm.lookup(path, **options)
     if record is not None:
 

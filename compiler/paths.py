@@ -38,14 +38,11 @@ def matches(text: str, keys: Iterable[str]) -> list[str]:
 
 def resolve(text: object, keys: Iterable[str], what: str) -> str:
     """The one key of ``keys`` that ``text`` names; raises UnknownPath (``what``: "MechanicalObject",
-    "parameter"...) with the closest keys and the whole list otherwise."""
+    "parameter"...) with the closest keys and the whole list otherwise, TypeError for a non-string."""
     keys = list(keys)
     if not isinstance(text, str):
-        raise UnknownPath(
-            f"a {what} is named by its path, a string such as {keys[0]!r}, not {type(text).__name__} "
-            f"{text!r}" if keys else f"the scene has no {what}",
-            text,
-        )
+        example = f", such as {keys[0]!r}" if keys else ""
+        raise TypeError(f"a {what} is named by its path, a string{example}; got {type(text).__name__}")
     found = matches(text, keys)
     if len(found) == 1:
         return found[0]

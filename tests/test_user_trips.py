@@ -369,3 +369,47 @@ def test_a_missed_path_says_what_was_meant(tmp_path: Path) -> None:
         sim.output("dofs.positio")
     with pytest.raises(sweeps.SweepError, match=r"no tunable parameter 'sprung.stiffness'; did you mean"):
         sweeps.resolve_parameter("sprung.stiffness", {k: 1 for k in sim.params()})
+
+
+# --- 10. threads stepping one instance are serialised ------------------------------------------
+
+
+def test_threads_stepping_one_instance_get_the_serial_result() -> None:
+    import threading
+
+    liver = bundled_scene("liver.scn")
+    serial = sofac.load(liver)
+    serial.step(200)
+    shared = sofac.load(liver)
+    threads = [threading.Thread(target=lambda: [shared.step(1) for _ in range(50)]) for _ in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert shared.steps == 200 and shared.time == pytest.approx(serial.time)
+    assert np.array_equal(shared["/Liver/dofs"].position, serial["/Liver/dofs"].position)
+    assert np.array_equal(shared["/Liver/dofs"].velocity, serial["/Liver/dofs"].velocity)
+
+
+# --- 16. small things: non-integer steps, missing data roots, a non-string path -------------------
+
+
+def test_step_refuses_a_fraction_of_a_step(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    with pytest.raises(TypeError, match=r"n is a whole number of steps, got float 1\.5"):
+        sim.step(1.5)  # type: ignore[arg-type]
+    sim.step(np.int64(2))
+    assert sim.steps == 2
+
+
+def test_load_refuses_a_missing_data_root(tmp_path: Path) -> None:
+    with pytest.raises(sofac.SofacError, match=r"data_roots: /nonexistent: no such folder"):
+        sofac.load(oscillator(tmp_path), data_roots=[Path("/nonexistent")])
+
+
+def test_a_state_is_named_by_a_string(tmp_path: Path) -> None:
+    sim = sofac.load(oscillator(tmp_path))
+    with pytest.raises(
+        TypeError, match=r"a MechanicalObject is named by its path, a string, such as '/oscillator/dofs'"
+    ):
+        sim[None]  # type: ignore[index]
