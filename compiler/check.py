@@ -1134,7 +1134,9 @@ class _Checker:
                 f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
                 f"file {value!r} not found (searched {base} and the data roots: {roots})"
                 + ("; nothing reads this loader's outputs" if unused else ""),
-                "fix the path, or add the folder holding it with --data-path",
+                "a file or folder name has at most 255 bytes: shorten it"
+                if any(len(part.encode()) > 255 for part in Path(str(value)).parts)
+                else "fix the path, or add the folder holding it with --data-path",
             )
         return path
 

@@ -123,8 +123,8 @@ class ParamGuard:
         self._fast = [(memoryview(view), memoryview(last)) for _, view, last, _ in self._watched]
 
     def check(self) -> None:
-        for (key, view, last, rule), (now, before) in zip(self._watched, self._fast, strict=True):
-            if now == before:
-                continue
-            check(key, view, rule)
-            np.copyto(last, view)
+        for index, (now, before) in enumerate(self._fast):
+            if now != before:
+                key, view, last, rule = self._watched[index]
+                check(key, view, rule)
+                np.copyto(last, view)

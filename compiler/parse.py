@@ -23,6 +23,7 @@ from .datafiles import (
     DataFileLookup,
     default_data_roots,
     find_data_file,
+    is_file,
     real_path,
     resolve_data_file,
 )
@@ -521,7 +522,7 @@ def parse_string(
         raise SceneError(diagnostics)
     # A string that names a real file can still be part of a cycle; otherwise it has no path.
     candidate = directory / filename
-    real = real_path(candidate) if not filename.startswith("<") and candidate.is_file() else None
+    real = real_path(candidate) if not filename.startswith("<") and is_file(candidate) else None
     f = builder.load_bytes(text, filename, real, directory, from_disk=False)
     if f is None:
         raise SceneError(diagnostics)

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from . import __version__, build, scene_warnings
-from .datafiles import default_data_roots
+from .datafiles import default_data_roots, is_file
 from .diagnostics import Diagnostic
 from .param_rules import ParamRule
 from .resources import resource_dir
@@ -96,7 +96,7 @@ def _sha256(path: Path) -> str | None:
 
 def _unchanged(path: Path, digest: str | None) -> bool:
     """A file read before still has its content; a candidate absent before is still absent."""
-    return _sha256(path) == digest if digest is not None else not path.is_file()
+    return _sha256(path) == digest if digest is not None else not is_file(path)
 
 
 def _options(data_roots: Sequence[Path], prune: bool, rigid_model: str, threads: int) -> dict[str, Any]:

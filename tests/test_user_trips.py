@@ -413,3 +413,21 @@ def test_a_state_is_named_by_a_string(tmp_path: Path) -> None:
         TypeError, match=r"a MechanicalObject is named by its path, a string, such as '/oscillator/dofs'"
     ):
         sim[None]  # type: ignore[index]
+
+
+# --- 11. a file name longer than the system allows ------------------------------------------------
+
+
+def test_a_mesh_name_longer_than_255_bytes_is_a_missing_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    long_name = "m" * 300 + ".msh"
+    path = tmp_path / "long.scn"
+    path.write_text(bundled_scene("liver.scn").read_text().replace("liver.msh", long_name))
+    line = next(i for i, text in enumerate(path.read_text().splitlines(), 1) if "<MeshGmshLoader" in text)
+    assert main(["check", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert f"long.scn:{line}: error E219 [filename]: MeshGmshLoader 'meshLoader': file '{long_name}'" in out
+    assert "hint: a file or folder name has at most 255 bytes: shorten it" in out
+    with pytest.raises(sofac.SceneError, match="E219"):
+        sofac.load(path)
