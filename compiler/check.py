@@ -419,6 +419,14 @@ class _Checker:
         checked = self.checked.components.get(id(component))
         return checked is not None and checked.category is category
 
+    def _broken_link(self, checked: CheckedComponent, name: str, path: Any) -> bool:
+        """A Data link (of field ``name``) that points to nothing, or to a component without that Data."""
+        target = links.resolve(path, checked.component)
+        if target is None or isinstance(target, Node):
+            return True
+        source = self.checked.components.get(id(target))
+        return source is not None and source.spec is not None and source.spec.field(path.data or name) is None
+
     def _check_data_links(self, checked: CheckedComponent) -> None:
         assert checked.spec is not None
         for name, (path, loc) in checked.data_links.items():
@@ -614,6 +622,8 @@ class _Checker:
         assert checked.spec is not None
         evaluator = evaluate.EVALUATORS[checked.spec.compute]
         checked.outputs = {}  # guards against cycles while evaluating
+        if any(self._broken_link(checked, name, path) for name, (path, _) in checked.data_links.items()):
+            return checked.outputs  # nothing to compute from; _check_data_links reports it (E213)
         try:
             checked.outputs = evaluator(_EvalContext(self, checked))
         except evaluate.UnknownInput:

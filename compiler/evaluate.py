@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from . import meshes
+from . import limits, meshes
 
 
 class EvaluationError(Exception):
@@ -89,6 +89,9 @@ def string_mesh(ctx: Context) -> Outputs:
     count = int(ctx.value("resolution"))
     if count < 2:
         raise EvaluationError("resolution must be >= 2", "resolution")
+    refused = limits.too_many_points([count])
+    if refused:
+        raise EvaluationError(f"resolution: {refused}", "resolution", code="E207")
     points = np.zeros((count, 3))
     points[:, 0] = [(x * 1.0) / (count - 1) for x in range(count)]
     edges = np.array([[e - 1, e] for e in range(1, count)], dtype=np.int64)
@@ -128,6 +131,11 @@ def grid(ctx: Context) -> Outputs:
         high = np.asarray(ctx.value("max"), dtype=float)
     if (counts < 1).any():
         raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
+    refused = limits.too_many_points(counts.tolist())
+    if refused:
+        legacy = any(ctx.is_set(name) for name in legacy_counts)
+        attribute = legacy_counts[int(np.argmax(counts))] if legacy else "n"
+        raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from .barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
@@ -374,6 +382,8 @@ def transform_engine(ctx: Context) -> Outputs:
     value = ctx.value("input_position")
     if value is None or not np.size(value):
         raise UnknownInput("input_position is not known at compile time")
+    if np.size(value) % 3:  # not points: the count check reports it (E205)
+        raise UnknownInput("input_position is not a list of x y z points")
     points = np.asarray(value, dtype=float).reshape(-1, 3).copy()
     scale = np.asarray(ctx.value("scale"), dtype=float)
     translation = np.asarray(ctx.value("translation"), dtype=float)

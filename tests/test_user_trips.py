@@ -431,3 +431,114 @@ def test_a_mesh_name_longer_than_255_bytes_is_a_missing_file(
     assert "hint: a file or folder name has at most 255 bytes: shorten it" in out
     with pytest.raises(sofac.SceneError, match="E219"):
         sofac.load(path)
+
+
+# --- 12. sizes read from a scene are bounded before anything is allocated -----------------------
+
+BEAM_GRID = 'n="11 3 3"'
+
+
+def beam(folder: Path, replace: tuple[str, str]) -> Path:
+    text = bundled_scene("beam.scn").read_text()
+    assert replace[0] in text
+    path = folder / "beam.scn"
+    path.write_text(text.replace(*replace))
+    return path
+
+
+def grid_line(path: Path) -> int:
+    return next(i for i, t in enumerate(path.read_text().splitlines(), 1) if "<RegularGridTopology" in t)
+
+
+def check_output(path: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    """``sofac check`` on ``path`` (address space capped at 4 GiB: a 16 GiB allocation fails)."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+    resource.setrlimit(resource.RLIMIT_AS, (4 << 30, hard))
+    try:
+        assert main(["check", str(path)]) == 1
+    finally:
+        resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+    return capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("grid", "attribute", "points"),
+    [
+        ('nx="11" ny="3" nz="2147483648"', "nz", "11 x 3 x 2147483648 = 70866960384 points"),
+        ('n="2147483647 2147483647 3"', "n", "2147483647 x 2147483647 x 3 = 13835058042397261827 points"),
+    ],
+)
+def test_a_huge_grid_is_refused_before_it_is_allocated(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], grid: str, attribute: str, points: str
+) -> None:
+    path = beam(tmp_path, (BEAM_GRID, grid))
+    out = check_output(path, capsys)
+    assert (
+        f"beam.scn:{grid_line(path)}: error E207 [{attribute}]: RegularGridTopology 'grid': grid resolution "
+        f"{points} is more than sofac generates (10000000); lower the resolution"
+    ) in out
+
+
+def test_a_huge_state_size_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = oscillator(tmp_path, (' position="0 0 0  1.1 0 0" velocity="0 0 0  0 0 0"', ' size="2147483648"'))
+    out = check_output(path, capsys)
+    assert (
+        "oscillator.scn:28: error E207 [size]: MechanicalObject 'dofs': size='2147483648' must be at most"
+        in out
+    )
+
+
+# --- 13. broken links in computed values, a scalar where points are expected --------------------
+
+
+@pytest.mark.parametrize(
+    ("replace", "message"),
+    [
+        (
+            ('min="0 0 0"', 'min="@../x"'),
+            "error E213 [min]: RegularGridTopology 'grid': min=@../x points to nothing",
+        ),
+        (
+            (BEAM_GRID, 'n="@nothere.n"'),
+            "error E213 [n]: RegularGridTopology 'grid': n=@nothere.n points to nothing",
+        ),
+        (
+            (BEAM_GRID, 'n="@dofs.nothing"'),
+            "error E213 [n]: RegularGridTopology 'grid': n links to MechanicalObject 'dofs'",
+        ),
+    ],
+)
+def test_a_broken_link_in_a_grid_is_reported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], replace: tuple[str, str], message: str
+) -> None:
+    path = beam(tmp_path, replace)
+    out = check_output(path, capsys)
+    assert f"beam.scn:{grid_line(path)}: {message}" in out
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (
+            "0",
+            "error E205 [input_position]: TransformEngine 't': input_position: 1 numbers is not a multiple",
+        ),
+        (
+            "@nothere.position",
+            "error E213 [input_position]: TransformEngine 't': input_position=@nothere.position",
+        ),
+    ],
+)
+def test_transform_engine_input_that_is_no_points(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], value: str, message: str
+) -> None:
+    path = tmp_path / "t.scn"
+    path.write_text(
+        '<Node name="root" dt="0.01">\n  <Node name="n">\n'
+        f'    <TransformEngine name="t" input_position="{value}" translation="1 0 0"/>\n'
+        '    <MechanicalObject name="dofs" position="@t.output_position"/>\n  </Node>\n</Node>\n'
+    )
+    out = check_output(path, capsys)
+    assert f"t.scn:3: {message}" in out
