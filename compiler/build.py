@@ -14,6 +14,7 @@ the kernels only) and the host extension module (pybind11), once per installatio
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import json
@@ -30,6 +31,7 @@ from pathlib import Path
 import platformdirs
 
 from . import __version__
+from .cache_errors import CacheNotWritable
 from .diagnostics import SofacError
 from .resources import resource_dir
 
@@ -168,7 +170,23 @@ def build(
     includes: tuple[Path, ...],
     libraries: tuple[str, ...] = (),
 ) -> Built:
-    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry)."""
+    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry, which needs no write).
+    Raises CacheNotWritable when the cache folder cannot take the build."""
+    try:
+        return _build(source, kind=kind, name=name, flags=flags, includes=includes, libraries=libraries)
+    except OSError as error:  # the compiler's own failures are BuildErrors: this is the folder
+        raise CacheNotWritable(cache_dir(), error) from None
+
+
+def _build(
+    source: str,
+    *,
+    kind: str,
+    name: str,
+    flags: tuple[str, ...],
+    includes: tuple[Path, ...],
+    libraries: tuple[str, ...] = (),
+) -> Built:
     command = compiler()
     identity = {
         "source": hashlib.sha256(source.encode()).hexdigest(),
@@ -201,6 +219,8 @@ def build(
                 )
             except (OSError, subprocess.TimeoutExpired) as error:
                 raise BuildError(f"the C++ compiler could not run: {error}") from None
+            if result.returncode != 0 and "No space left on device" in result.stderr:
+                raise OSError(errno.ENOSPC, "No space left on device", str(staging))
             if result.returncode != 0:
                 log = root / "logs" / f"{key}.log"
                 log.parent.mkdir(parents=True, exist_ok=True)

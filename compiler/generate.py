@@ -6,6 +6,7 @@ counters and comments are reduced to printable ASCII, so no scene text can chang
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import re
 from typing import Any
@@ -29,6 +30,15 @@ def _size(buffer: Buffer) -> str:
     return f"Index(S.{buffer.ident}.size())"
 
 
+class _BestEffortBytecodeCache(jinja2.FileSystemBytecodeCache):
+    """Compiled templates kept when the folder takes them: a full disk only costs the next load
+    its speed."""
+
+    def dump_bytecode(self, bucket: jinja2.bccache.Bucket) -> None:
+        with contextlib.suppress(OSError):
+            super().dump_bytecode(bucket)
+
+
 def _bytecode_cache() -> jinja2.BytecodeCache | None:
     from .build import cache_dir
 
@@ -37,7 +47,7 @@ def _bytecode_cache() -> jinja2.BytecodeCache | None:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None  # a read-only cache folder: compile the templates each time
-    return jinja2.FileSystemBytecodeCache(str(folder))
+    return _BestEffortBytecodeCache(str(folder))
 
 
 @functools.lru_cache(maxsize=1)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 import re
 import warnings
 from pathlib import Path
@@ -10,6 +12,7 @@ import numpy as np
 import pytest
 import sofac
 from sofac import sweeps
+from sofac.cache_errors import CacheNotWritable
 from sofac.cli import main
 from sofac.param_rules import InvalidParameter, ParamRule, check
 from sofac.resources import bundled_scene
@@ -542,3 +545,60 @@ def test_transform_engine_input_that_is_no_points(
     )
     out = check_output(path, capsys)
     assert f"t.scn:3: {message}" in out
+
+
+# --- 14. a cache folder that cannot be written -------------------------------------------------
+
+
+def fresh_scene(folder: Path, tag: int) -> Path:
+    """An oscillator no cache holds yet (its own dt, hence its own C++)."""
+    return oscillator(folder, ('dt="0.001"', f'dt="0.00{tag}7"'), f"fresh{tag}.scn")
+
+
+def refuse(error_number: int) -> object:
+    def fail(*args: object, **kwargs: object) -> None:
+        raise OSError(error_number, os.strerror(error_number), str(args[0]) if args else None)
+
+    return fail
+
+
+def test_a_full_cache_names_the_folder_and_the_fix(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from sofac import build
+
+    monkeypatch.setattr(build.tempfile, "mkdtemp", refuse(errno.ENOSPC))
+    path = fresh_scene(tmp_path, 1)
+    with pytest.raises(
+        CacheNotWritable, match=r"cannot write the compile cache .*: the disk is full"
+    ) as raised:
+        sofac.load(path)
+    assert raised.value.folder == build.cache_dir()
+    assert main(["run", str(path), "--steps", "1"]) == 1
+    err = capsys.readouterr().err
+    assert f"sofac: error: cannot write the compile cache {build.cache_dir()}: the disk is full" in err
+    assert "set SOFAC_CACHE_DIR to a writable folder" in err and "internal error" not in err
+
+
+def test_a_cache_path_that_is_a_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    blocker = tmp_path / "cache"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv("SOFAC_CACHE_DIR", str(blocker))
+    with pytest.raises(CacheNotWritable, match=r"a file stands where a folder should be"):
+        sofac.load(fresh_scene(tmp_path, 2))
+
+
+def test_a_read_only_cache_still_runs_a_scene_loaded_before(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import pathlib
+    import tempfile
+
+    path = oscillator(tmp_path)
+    sofac.load(path).step(3)
+    for owner, name in ((tempfile, "mkdtemp"), (tempfile, "mkstemp"), (pathlib.Path, "mkdir")):
+        monkeypatch.setattr(owner, name, refuse(errno.EROFS))
+    sim = sofac.load(path)
+    assert sim.compiled.warm
+    sim.step(3)
+    assert sim.time == pytest.approx(0.003)
