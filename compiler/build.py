@@ -30,7 +30,7 @@ from pathlib import Path
 
 import platformdirs
 
-from . import __version__
+from . import __version__, build_guard
 from .cache_errors import CacheNotWritable
 from .diagnostics import SofacError
 from .resources import resource_dir
@@ -209,14 +209,13 @@ def _build(
         if valid_entry(entry, key, name):  # built by another process meanwhile
             return Built(entry / name, key, True, 0.0)
         started = time.perf_counter()
-        staging = Path(tempfile.mkdtemp(prefix="build-", dir=root))
+        _remove_stale_builds(root, key)
+        staging = Path(tempfile.mkdtemp(prefix=f"build-{key[:16]}-", dir=root))
         try:
             (staging / "source.cpp").write_text(source)
             arguments = [command, *flags, *(f"-I{p}" for p in includes), "source.cpp", "-o", name, *libraries]
             try:
-                result = subprocess.run(
-                    arguments, cwd=staging, capture_output=True, text=True, timeout=900, check=False
-                )
+                result = build_guard.run(arguments, cwd=staging, timeout=BUILD_TIMEOUT)
             except (OSError, subprocess.TimeoutExpired) as error:
                 raise BuildError(f"the C++ compiler could not run: {error}") from None
             if result.returncode != 0 and "No space left on device" in result.stderr:
@@ -237,6 +236,22 @@ def _build(
             if staging.exists():
                 shutil.rmtree(staging, ignore_errors=True)
         return Built(entry / name, key, False, time.perf_counter() - started)
+
+
+BUILD_TIMEOUT = 900.0  # seconds a compiler run may take
+
+
+def _remove_stale_builds(root: Path, key: str) -> None:
+    """Private build folders left by a build that was killed: those of ``key`` (whose lock this
+    process holds, so no one else is building it), and any older than two build timeouts."""
+    now = time.time()
+    for folder in root.glob("build-*"):
+        try:
+            old = now - folder.stat().st_mtime > 2 * BUILD_TIMEOUT
+        except OSError:
+            continue  # removed meanwhile
+        if old or folder.name.startswith(f"build-{key[:16]}-"):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 SUITESPARSE_INCLUDE = Path("/usr/include/suitesparse")

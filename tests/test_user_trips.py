@@ -14,6 +14,7 @@ import sofac
 from sofac import sweeps
 from sofac.cache_errors import CacheNotWritable
 from sofac.cli import main
+from sofac.loader import compile_scene
 from sofac.param_rules import InvalidParameter, ParamRule, check
 from sofac.resources import bundled_scene
 from sofac.scene_warnings import SceneWarning, StrictSceneError
@@ -602,3 +603,50 @@ def test_a_read_only_cache_still_runs_a_scene_loaded_before(
     assert sim.compiled.warm
     sim.step(3)
     assert sim.time == pytest.approx(0.003)
+
+
+# --- 15. a killed compile leaves no compiler running and no build folder for long -------------
+
+
+def processes_in(folder: Path) -> list[str]:
+    """The processes whose working directory is inside ``folder`` (Linux /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and Path(os.readlink(entry / "cwd")).is_relative_to(folder):
+                found.append((entry / "comm").read_text().strip())
+        except OSError:
+            continue
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/cwd").exists(), reason="needs Linux /proc")
+def test_kill_9_during_a_build_ends_the_compiler_and_the_next_build_cleans_up(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cache = tmp_path / "cache"
+    scene = oscillator(tmp_path)
+    environment = {**os.environ, "SOFAC_CACHE_DIR": str(cache)}
+    child = subprocess.Popen([sys.executable, "-m", "sofac", "compile", str(scene)], env=environment)
+    deadline = time.monotonic() + 120
+    while "cc1plus" not in processes_in(cache) and time.monotonic() < deadline:
+        assert child.poll() is None, "the build ended before cc1plus was seen"
+        time.sleep(0.05)
+    assert "cc1plus" in processes_in(cache)
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait()
+    deadline = time.monotonic() + 3  # cc1plus alone would run on for seconds
+    while processes_in(cache) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert processes_in(cache) == []
+    left = list((cache / "scenes").glob("build-*"))
+    assert len(left) == 1  # killed half-way: its private folder stays until the next build
+    monkeypatch.setenv("SOFAC_CACHE_DIR", str(cache))
+    compiled = compile_scene(scene)
+    assert compiled.built.library.is_file() and not compiled.built.cached
+    assert not left[0].exists() and list((cache / "scenes").glob("build-*")) == []
