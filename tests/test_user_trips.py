@@ -640,7 +640,7 @@ def test_kill_9_during_a_build_ends_the_compiler_and_the_next_build_cleans_up(
     assert "cc1plus" in processes_in(cache)
     os.kill(child.pid, signal.SIGKILL)
     child.wait()
-    deadline = time.monotonic() + 3  # cc1plus alone would run on for seconds
+    deadline = time.monotonic() + 5  # cc1plus alone would run on for seconds
     while processes_in(cache) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert processes_in(cache) == []
@@ -650,3 +650,35 @@ def test_kill_9_during_a_build_ends_the_compiler_and_the_next_build_cleans_up(
     compiled = compile_scene(scene)
     assert compiled.built.library.is_file() and not compiled.built.cached
     assert not left[0].exists() and list((cache / "scenes").glob("build-*")) == []
+
+
+# --- 4. never a blank picture without a word -------------------------------------------------------
+
+NO_STYLE = ('<VisualStyle displayFlags="showBehaviorModels showForceFields"/>', "")
+
+
+def test_render_without_visual_models_draws_the_dofs_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import imageio.v3 as iio
+
+    path = oscillator(tmp_path, NO_STYLE)
+    out = tmp_path / "o.png"
+    assert main(["render", str(path), "--out", str(out), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "nothing in the scene would be drawn" in err and "choose the layers with --show" in err
+    picture = iio.imread(out)
+    assert len(np.unique(picture.reshape(-1, 3), axis=0)) > 1  # not one colour
+    with pytest.warns(UserWarning, match="drawing the behavior models"):
+        image = sofac.load(path).render(160, 120)
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 1
+
+
+def test_render_with_every_layer_hidden_fails_instead_of_a_blank_picture(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = oscillator(tmp_path, NO_STYLE)
+    out = tmp_path / "o.png"
+    assert main(["render", str(path), "--out", str(out), "--hide", "behaviormodels", "--no-progress"]) == 1
+    assert "sofac: error: nothing to draw:" in capsys.readouterr().err
+    assert not out.exists()
