@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import io
 import os
 import re
 import warnings
@@ -682,3 +683,80 @@ def test_render_with_every_layer_hidden_fails_instead_of_a_blank_picture(
     assert main(["render", str(path), "--out", str(out), "--hide", "behaviormodels", "--no-progress"]) == 1
     assert "sofac: error: nothing to draw:" in capsys.readouterr().err
     assert not out.exists()
+
+
+# --- 6. long runs say where they are; Ctrl-C says where they stopped -----------------------------
+
+
+class Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_the_run_bar_shows_steps_time_speed_and_eta() -> None:
+    from sofac.run_progress import StepBar
+
+    bar = StepBar(1000, enabled=True, stream=Terminal())
+    bar.started -= 2.0  # as if 2 s had passed
+    line = bar.line(250, 5.0, 0.0)
+    step, _, rest = line.partition(" t=5 ")
+    assert step == "step 250/1000 (25%)"
+    per_step, _, rest = rest.partition(" ms/step ")
+    assert float(per_step) == pytest.approx(8.0, rel=0.01)  # 2 s / 250 steps
+    assert rest.startswith("2.5x real time ETA 6s") or rest.startswith("2.49x real time ETA 6s")
+    assert not StepBar(10, enabled=True, stream=io.StringIO()).enabled  # not a terminal: no bar
+    assert not StepBar(10, enabled=False, stream=Terminal()).enabled  # --no-progress
+
+
+def test_slices_grow_to_a_fifth_of_a_second_and_stop_on_request() -> None:
+    import threading
+
+    from sofac.run_progress import Slicer, StepBar, run_in_slices
+
+    slicer = Slicer()
+    sizes = []
+    for _ in range(8):
+        sizes.append(slicer.next(10**9))
+        slicer.took(sizes[-1], sizes[-1] * 1e-3)  # 1 ms a step
+    assert sizes == [1, 4, 16, 64, 200, 200, 200, 200]
+    calls: list[int] = []
+    stop = threading.Event()
+
+    def step(count: int) -> None:
+        calls.append(count)
+        if sum(calls) >= 5:
+            stop.set()  # as Ctrl-C does, between two slices
+
+    done = run_in_slices(step, 10**6, now=lambda: 0.0, bar=StepBar(10**6, False), stop=stop)
+    assert done == sum(calls) >= 5 and done < 10**6
+
+
+def test_ctrl_c_says_which_step_was_reached_and_what_was_written(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    scene = oscillator(tmp_path)
+    sofac.load(scene)  # compiled: the child loads it warm
+    out = tmp_path / "states"
+    command = [sys.executable, "-m", "sofac", "run", str(scene), "--steps", "1000000000", "--every", "100000"]
+    child = subprocess.Popen(
+        [*command, "--export-states", str(out)],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not list(out.glob("*_mstate.txt.gz")) and time.monotonic() < deadline:
+        assert child.poll() is None
+        time.sleep(0.05)
+    time.sleep(0.5)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=60)
+    assert child.returncode == 130, err
+    found = re.search(
+        r"sofac: interrupted at step (\d+) of 1000000000 \(t=([\d.e+-]+)\); the state files in", err
+    )
+    assert found, err
+    assert int(found.group(1)) > 0 and float(found.group(2)) == pytest.approx(int(found.group(1)) * 0.001)
+    assert f"the state files in {out} (1) hold the records up to there" in err
