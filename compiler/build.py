@@ -22,9 +22,11 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import sysconfig
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -169,11 +171,21 @@ def build(
     flags: tuple[str, ...],
     includes: tuple[Path, ...],
     libraries: tuple[str, ...] = (),
+    announce: Callable[[], None] | None = None,
 ) -> Built:
-    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry, which needs no write).
-    Raises CacheNotWritable when the cache folder cannot take the build."""
+    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry, which needs no write);
+    ``announce`` is called just before the compiler runs. Raises CacheNotWritable when the cache
+    folder cannot take the build."""
     try:
-        return _build(source, kind=kind, name=name, flags=flags, includes=includes, libraries=libraries)
+        return _build(
+            source,
+            kind=kind,
+            name=name,
+            flags=flags,
+            includes=includes,
+            libraries=libraries,
+            announce=announce,
+        )
     except OSError as error:  # the compiler's own failures are BuildErrors: this is the folder
         raise CacheNotWritable(cache_dir(), error) from None
 
@@ -186,6 +198,7 @@ def _build(
     flags: tuple[str, ...],
     includes: tuple[Path, ...],
     libraries: tuple[str, ...] = (),
+    announce: Callable[[], None] | None = None,
 ) -> Built:
     command = compiler()
     identity = {
@@ -210,6 +223,8 @@ def _build(
             return Built(entry / name, key, True, 0.0)
         started = time.perf_counter()
         _remove_stale_builds(root, key)
+        if announce is not None:
+            announce()
         staging = Path(tempfile.mkdtemp(prefix=f"build-{key[:16]}-", dir=root))
         try:
             (staging / "source.cpp").write_text(source)
@@ -282,12 +297,24 @@ def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0, o
     )
 
 
-def build_host() -> Built:
-    """The pybind11 host module, compiled once per installation (per compiler and Python)."""
+def build_host(*, quiet: bool = False) -> Built:
+    """The pybind11 host module, compiled once per installation (per compiler and Python; setup.sh
+    builds it). Its compilation takes a while, so it is announced on stderr unless ``quiet``."""
     import pybind11
 
     source = (resource_dir("runtime") / "host" / "host.cpp").read_text()
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     includes = (Path(pybind11.get_include()), Path(sysconfig.get_paths()["include"]))
     flags = ("-std=c++17", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-DNDEBUG", "-ldl")
-    return build(source, kind="host", name=f"_sofac_host{suffix}", flags=flags, includes=includes)
+    def announce() -> None:
+        if not quiet:
+            print(
+                "sofac: building the Python bridge to compiled scenes (once per installation and "
+                f"compiler, 10-30 s) in {cache_dir() / 'host'}; `bash scripts/setup.sh` builds it ahead",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return build(
+        source, kind="host", name=f"_sofac_host{suffix}", flags=flags, includes=includes, announce=announce
+    )

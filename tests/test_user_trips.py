@@ -760,3 +760,44 @@ def test_ctrl_c_says_which_step_was_reached_and_what_was_written(tmp_path: Path)
     assert found, err
     assert int(found.group(1)) > 0 and float(found.group(2)) == pytest.approx(int(found.group(1)) * 0.001)
     assert f"the state files in {out} (1) hold the records up to there" in err
+
+
+# --- 7. the one-time host build says what it is, while it happens ---------------------------------
+
+
+def test_a_build_is_announced_only_when_the_compiler_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from sofac import build
+
+    monkeypatch.setenv("SOFAC_CACHE_DIR", str(tmp_path))
+    calls: list[str] = []
+    source = 'extern "C" int sofac_test_answer() { return 42; }\n'
+    options = {"kind": "test", "name": "answer.so", "flags": ("-shared", "-fPIC"), "includes": ()}
+    first = build.build(source, announce=lambda: calls.append("built"), **options)  # type: ignore[arg-type]
+    again = build.build(source, announce=lambda: calls.append("again"), **options)  # type: ignore[arg-type]
+    assert calls == ["built"] and not first.cached and again.cached
+
+
+def test_the_host_build_names_itself_and_the_setup_script(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from sofac import build
+
+    def fake_build(source: str, **options: object) -> str:
+        announce = options["announce"]
+        assert callable(announce)
+        announce()
+        return "built"
+
+    monkeypatch.setattr(build, "build", fake_build)
+    assert build.build_host() == "built"
+    err = capsys.readouterr().err
+    assert err.startswith("sofac: building the Python bridge to compiled scenes (once per installation")
+    assert "bash scripts/setup.sh` builds it ahead" in err
+    assert build.build_host(quiet=True) == "built" and capsys.readouterr().err == ""
+
+
+def test_setup_builds_the_host_module() -> None:
+    setup = (Path(__file__).resolve().parents[1] / "scripts" / "setup.sh").read_text()
+    assert "build.build_host(quiet=True)" in setup
