@@ -55,6 +55,7 @@ CODES: dict[str, CodeInfo] = {
     "W110": _w("unused include override"),
     "W111": _w("element ignored (not allowed at this place)"),
     "E112": _e("root element is not a Node"),
+    "E113": _e("Python scene (sofac reads XML scenes)"),
     # --- checking (check stage)
     "E200": _e("unknown component"),
     "E201": _e("component name no longer accepted by SOFA"),

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from . import python_scenes
 from .datafiles import (
     DataFileLookup,
     default_data_roots,
@@ -483,6 +484,8 @@ def parse_scene(
     """
     display = str(path)
     given = Path(path)
+    if python_scenes.refuse(given, display, diagnostics):
+        raise SceneError(diagnostics)
     errors_before = len(diagnostics.errors)
     scene_dir = Path(os.path.abspath(given)).parent
     scene = Scene(

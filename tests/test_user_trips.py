@@ -801,3 +801,18 @@ def test_the_host_build_names_itself_and_the_setup_script(
 def test_setup_builds_the_host_module() -> None:
     setup = (Path(__file__).resolve().parents[1] / "scripts" / "setup.sh").read_text()
     assert "build.build_host(quiet=True)" in setup
+
+
+# --- 9. a Python scene is said to be one ------------------------------------------------------------
+
+
+def test_a_python_scene_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "scene.py"
+    path.write_text('def createScene(root):\n    root.addObject("MechanicalObject")\n')
+    assert main(["check", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert f"{path}: error E113: {path} is a Python scene (SofaPython3's createScene)" in out
+    assert "E101" not in out and "hint: write the scene as an XML .scn file" in out
+    with pytest.raises(sofac.SceneError) as raised:
+        sofac.load(path)
+    assert [d.code for d in raised.value.diagnostics] == ["E113"]
