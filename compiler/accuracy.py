@@ -668,6 +668,8 @@ class _Setup:
         if solver not in self.compiled:
             try:
                 self.compiled[solver] = compile_variant(self.model, solver, keep_rayleigh=self.keep_rayleigh)
+            except scene_warnings.StrictSceneError:
+                raise  # the scene's own warnings under --strict: no configuration can run
             except SofacError as exc:
                 self.compiled[solver] = f"{type(exc).__name__}: {exc}"
         return self.compiled[solver]

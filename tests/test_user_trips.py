@@ -188,6 +188,10 @@ def test_a_sweep_records_invalid_runs_and_goes_on(tmp_path: Path, capsys: pytest
     assert messages[0].startswith("E207: /.dt = -0.001 must be > 0")
     assert messages[2].startswith("E207: /oscillator/mass.vertexMass = -1 must be > 0")
     assert dataset["time"].values[3][-1] == pytest.approx(0.01)
+    table = sofac.sweep(
+        path, table=[{"mass.vertexMass": 0.0}, {"mass.vertexMass": 2.0}], steps=5, scheduler="synchronous"
+    )
+    assert [str(s) for s in table["status"].values] == ["invalid", "ok"]
     args = ["sweep", str(path), "--param", "/.dt=-0.001,0.001", "--steps", "5", "--no-plot"]
     assert main([*args, "--scheduler", "synchronous", "--no-progress", "--out", str(tmp_path / "s.nc")]) == 1
     assert "1 ok, 1 invalid" in capsys.readouterr().err
@@ -816,3 +820,13 @@ def test_a_python_scene_is_named_as_such(tmp_path: Path, capsys: pytest.CaptureF
     with pytest.raises(sofac.SceneError) as raised:
         sofac.load(path)
     assert [d.code for d in raised.value.diagnostics] == ["E113"]
+
+
+def test_accuracy_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = typo_scene(tmp_path)
+    args = ["accuracy", str(path), "--solvers", "symplectic", "--dt", "0.01", "--duration", "0.1"]
+    args += ["--no-plots", "--no-progress", "--out", str(tmp_path / "acc")]
+    assert main(args) == 0
+    assert len(W203.findall(capsys.readouterr().err)) == 1
+    assert main([*args, "--strict"]) == 1
+    assert W203.search(capsys.readouterr().err)
