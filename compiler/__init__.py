@@ -18,10 +18,13 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ContactNotCompiled",
+    "InvalidParameter",
     "SceneError",
+    "SceneWarning",
     "Simulation",
     "SimulationDiverged",
     "SofacError",
+    "StrictSceneError",
     "__version__",
     "load",
     "sweep",
@@ -30,6 +33,9 @@ __all__ = [
 _LAZY = {
     "SceneError": "diagnostics",
     "SofacError": "diagnostics",
+    "SceneWarning": "scene_warnings",
+    "StrictSceneError": "scene_warnings",
+    "InvalidParameter": "param_rules",
     "ContactNotCompiled": "loader",
     "Simulation": "loader",
     "SimulationDiverged": "loader",
