@@ -20,8 +20,5 @@ def too_many_points(counts: Sequence[int]) -> str | None:
         total *= max(int(count), 1)  # Python integers: no overflow on the way
     if total <= MAX_GENERATED_POINTS:
         return None
-    shown = " x ".join(str(int(c)) for c in counts)
-    return (
-        f"{shown} = {total} points is more than sofac generates ({MAX_GENERATED_POINTS}); "
-        "lower the resolution"
-    )
+    shown = " x ".join(str(int(c)) for c in counts) + f" = {total}" if len(counts) > 1 else str(total)
+    return f"{shown} points is more than sofac generates ({MAX_GENERATED_POINTS}); lower the resolution"

@@ -315,6 +315,7 @@ def test_no_numpy_repr_reaches_any_command_output(tmp_path: Path, capsys: pytest
         ["inspect", liver, "--schedule"],
         ["inspect", liver, "--effects"],
         ["inspect", liver, "--effects", "--format", "json"],
+        ["inspect", "--components"],
         ["compile", scene],
         ["run", scene, "--steps", "3"],
         ["run", scene, "--steps", "3", "--dt", "1e-4"],
@@ -827,7 +828,9 @@ def test_accuracy_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixt
     args = ["accuracy", str(path), "--solvers", "symplectic", "--dt", "0.01", "--duration", "0.1"]
     args += ["--no-plots", "--no-progress", "--out", str(tmp_path / "acc")]
     assert main(args) == 0
-    assert len(W203.findall(capsys.readouterr().err)) == 1
+    out, err = capsys.readouterr()
+    assert len(W203.findall(err)) == 1
+    assert not NUMPY_REPR.search(out + err)
     assert main([*args, "--strict"]) == 1
     assert W203.search(capsys.readouterr().err)
 
@@ -844,3 +847,29 @@ def test_the_running_page_examples_run(monkeypatch: pytest.MonkeyPatch) -> None:
     namespace: dict[str, object] = {}
     for block in blocks:
         exec(compile(block, "docs/running.md", "exec"), namespace)  # the page's own examples
+
+
+def test_a_huge_string_of_points_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "s.scn"
+    path.write_text(
+        '<Node name="root" dt="0.01">\n  <Node name="n">\n'
+        '    <StringMeshCreator name="s" resolution="2147483648"/>\n'
+        '    <MechanicalObject name="dofs" position="@s.position"/>\n  </Node>\n</Node>\n'
+    )
+    out = check_output(path, capsys)
+    assert (
+        "s.scn:3: error E207 [resolution]: StringMeshCreator 's': resolution: 2147483648 points is more"
+        in out
+    )
+
+
+def test_render_progress_without_a_terminal_prints_at_least_every_second() -> None:
+    from sofac.render_cli import _Progress
+
+    stream = io.StringIO()
+    bar = _Progress(1000, "simulate", True, stream)
+    bar.advance(10)  # 1 %: no quarter reached, no second passed
+    assert stream.getvalue() == ""
+    bar._printed -= 1.5  # as if 1.5 s had passed since the last line
+    bar.advance(10)
+    assert stream.getvalue() == "simulate: 20/1000\n"
