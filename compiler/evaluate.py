@@ -114,21 +114,48 @@ def sphere_loader(ctx: Context) -> Outputs:
     return {"position": spheres.centers.ravel(), "listRadius": spheres.radii}
 
 
+def _numbers(ctx: Context, name: str, count: int, *, integer: bool = False) -> np.ndarray:
+    """``count`` finite numbers of field ``name`` (integers if ``integer``), checked here because
+    a linked value can be anything (written values are checked when they are parsed)."""
+    value = ctx.value(name)
+    if value is None:
+        raise EvaluationError(
+            f"{name} has no value known when the scene is compiled (a link cycle, or a Data computed at "
+            "run time); give the numbers",
+            name,
+            code="E213",
+        )
+    try:
+        numbers = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise EvaluationError(f"{name} is not a list of numbers", name, code="E204") from None
+    if numbers.size != count:
+        raise EvaluationError(f"{name} needs {count} numbers, its value has {numbers.size}", name, "E205")
+    if not np.isfinite(numbers).all():
+        raise EvaluationError(f"{name} has a value that is not finite", name, code="E206")
+    if integer and (numbers != np.round(numbers)).any():
+        raise EvaluationError(f"{name} needs whole numbers, got {numbers.tolist()}", name, code="E204")
+    return numbers
+
+
 def grid(ctx: Context) -> Outputs:
     """RegularGridTopology / GridTopology points: index = x + nx (y + ny z)."""
     legacy_counts = ("nx", "ny", "nz")
     if any(ctx.is_set(name) for name in legacy_counts):
-        counts = np.array([int(ctx.value(name) or 1) for name in legacy_counts], dtype=np.int64)
+        counts = np.array(
+            [int(_numbers(ctx, n, 1, integer=True)[0]) if ctx.is_set(n) else 1 for n in legacy_counts],
+            dtype=np.int64,
+        )
     else:
-        counts = np.asarray(ctx.value("n"), dtype=np.int64)
+        counts = np.array([int(c) for c in _numbers(ctx, "n", 3, integer=True)], dtype=np.int64)
     legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
     if all(ctx.is_set(name) for name in legacy_bounds):
         # SOFA reads the legacy bounds as single-precision floats.
-        bounds = np.array([float(np.float32(ctx.value(name))) for name in legacy_bounds])
+        bounds = np.array([float(np.float32(_numbers(ctx, name, 1)[0])) for name in legacy_bounds])
         low, high = bounds[:3], bounds[3:]
     else:
-        low = np.asarray(ctx.value("min"), dtype=float)
-        high = np.asarray(ctx.value("max"), dtype=float)
+        low = _numbers(ctx, "min", 3)
+        high = _numbers(ctx, "max", 3)
     if (counts < 1).any():
         raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
     refused = limits.too_many_points(counts.tolist())

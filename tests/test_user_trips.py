@@ -518,6 +518,15 @@ def test_a_huge_state_size_is_refused(tmp_path: Path, capsys: pytest.CaptureFixt
             (BEAM_GRID, 'n="@dofs.nothing"'),
             "error E213 [n]: RegularGridTopology 'grid': n links to MechanicalObject 'dofs'",
         ),
+        ((BEAM_GRID, 'n="@grid.n"'), "error E213 [n]: RegularGridTopology 'grid': n has no value known when"),
+        (
+            (BEAM_GRID, 'n="@mass.totalMass"'),
+            "error E205 [n]: RegularGridTopology 'grid': n needs 3 numbers, its",
+        ),
+        (
+            ('min="0 0 0"', 'min="@clamped.indices"'),
+            "error E213 [min]: RegularGridTopology 'grid': min has no",
+        ),
     ],
 )
 def test_a_broken_link_in_a_grid_is_reported(
