@@ -260,6 +260,14 @@ class _Checker:
                     path = links.parse_link(attribute.value)
                     assert path is not None
                     checked.data_links[field_spec.name] = (path, attribute.loc)
+                elif isinstance(element, Node):
+                    self.diags.add(
+                        "E222",
+                        attribute.loc,
+                        f"{owner}: {name}={attribute.value.strip()[:40]!r}: sofac does not follow links "
+                        "on a node's Data yet",
+                        "write the value itself",
+                    )
                 continue
             try:
                 value = field_spec.type.parse(attribute.value)

@@ -151,7 +151,8 @@ def grid(ctx: Context) -> Outputs:
     legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
     if all(ctx.is_set(name) for name in legacy_bounds):
         # SOFA reads the legacy bounds as single-precision floats.
-        bounds = np.array([float(np.float32(_numbers(ctx, name, 1)[0])) for name in legacy_bounds])
+        with np.errstate(over="ignore"):  # a bound past the float range: the points check reports it
+            bounds = np.array([float(np.float32(_numbers(ctx, name, 1)[0])) for name in legacy_bounds])
         low, high = bounds[:3], bounds[3:]
     else:
         low = _numbers(ctx, "min", 3)
@@ -166,8 +167,18 @@ def grid(ctx: Context) -> Outputs:
     from .barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    with np.errstate(all="ignore"):  # bounds near the float range: said below, not warned about
+        points = lattice.points()
+    if not np.isfinite(points).all():
+        legacy = all(ctx.is_set(name) for name in legacy_bounds)
+        raise EvaluationError(
+            "the grid's points are not finite: its bounds are too large"
+            + (" for the single-precision numbers SOFA reads xmin..zmax as" if legacy else ""),
+            "xmin" if legacy else "min",
+            code="E206",
+        )
     return {
-        "position": lattice.points().ravel(),
+        "position": points.ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
         **_grid_cells(counts),

@@ -882,3 +882,46 @@ def test_render_progress_without_a_terminal_prints_at_least_every_second() -> No
     bar._printed -= 1.5  # as if 1.5 s had passed since the last line
     bar.advance(10)
     assert stream.getvalue() == "simulate: 20/1000\n"
+
+
+# --- 13 (fuzzing, continued): values the planner met unchecked ---------------------------------
+
+
+def test_a_link_on_a_node_data_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = oscillator(tmp_path, ('gravity="0 0 0"', 'gravity="@."'))
+    assert main(["emit", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert (
+        "oscillator.scn:15: error E222 [gravity]: node '/': gravity='@.': sofac does not follow links" in err
+    )
+
+
+def test_mesh_springs_over_a_topology_larger_than_the_state(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "cube.scn"
+    path.write_text(
+        '<Node name="root" dt="0.01">\n  <Node name="Cube">\n    <EulerExplicitSolver/>\n'
+        '    <MechanicalObject name="Particles" position="0 0 0"/>\n'
+        '    <MeshTopology name="Topology" hexas="0 4 6 2 1 5 7 3"/>\n    <UniformMass vertexMass="1"/>\n'
+        '    <MeshSpringForceField name="Springs" stiffness="100" damping="1"/>\n  </Node>\n</Node>\n'
+    )
+    assert main(["emit", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "cube.scn:7: error E218: MeshSpringForceField '/Cube/Springs' (" in err
+    assert "its topology's hexahedra use point 7, but /Cube/Particles has 1 points" in err
+
+
+@pytest.mark.parametrize(
+    ("grid", "attribute"),
+    [
+        ('n="11 3 3" min="-1e308 0 0" max="1e308 0.2 0.2"', "min"),
+        ('n="11 3 3" xmin="0" ymin="0" zmin="0" xmax="1e300" ymax="0.2" zmax="0.2"', "xmin"),
+    ],
+)
+def test_grid_bounds_too_large_for_finite_points(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], grid: str, attribute: str
+) -> None:
+    path = beam(tmp_path, ('n="11 3 3" min="0 0 0" max="1 0.2 0.2"', grid))
+    out = check_output(path, capsys)
+    assert f"error E206 [{attribute}]: RegularGridTopology 'grid': the grid's points are not finite" in out
