@@ -1210,6 +1210,8 @@ class _EvalContext:
             if value is None:
                 return None
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
+            if np.size(value) % datatype.coord_size:  # not points: the count check reports it (E205)
+                raise evaluate.UnknownInput(f"position is not a list of {datatype.name} points")
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)
         if state is None:

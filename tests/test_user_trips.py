@@ -925,3 +925,14 @@ def test_grid_bounds_too_large_for_finite_points(
     path = beam(tmp_path, ('n="11 3 3" min="0 0 0" max="1 0.2 0.2"', grid))
     out = check_output(path, capsys)
     assert f"error E206 [{attribute}]: RegularGridTopology 'grid': the grid's points are not finite" in out
+
+
+def test_box_roi_positions_that_are_no_points(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "box.scn"
+    path.write_text(
+        '<Node name="root" dt="0.02">\n  <Node name="n">\n    <RegularGridTopology min="0 0 0" max="1 1 1"/>\n'
+        '    <MechanicalObject/>\n    <BoxROI name="box" box="0 0.75 0 1 1 1" position="0"/>\n'
+        '    <FixedProjectiveConstraint indices="@box.indices"/>\n  </Node>\n</Node>\n'
+    )
+    out = check_output(path, capsys)
+    assert "box.scn:5: error E205 [position]: BoxROI 'box': position: 1 numbers is not a multiple of 3" in out
