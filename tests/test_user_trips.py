@@ -930,7 +930,8 @@ def test_grid_bounds_too_large_for_finite_points(
 def test_box_roi_positions_that_are_no_points(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "box.scn"
     path.write_text(
-        '<Node name="root" dt="0.02">\n  <Node name="n">\n    <RegularGridTopology min="0 0 0" max="1 1 1"/>\n'
+        '<Node name="root" dt="0.02">\n  <Node name="n">\n'
+        '    <RegularGridTopology min="0 0 0" max="1 1 1"/>\n'
         '    <MechanicalObject/>\n    <BoxROI name="box" box="0 0.75 0 1 1 1" position="0"/>\n'
         '    <FixedProjectiveConstraint indices="@box.indices"/>\n  </Node>\n</Node>\n'
     )
