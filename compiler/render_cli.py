@@ -16,6 +16,7 @@ from typing import Any, TextIO
 
 EXIT_OK = 0
 EXIT_ERRORS = 1
+EXIT_INTERRUPTED = 130
 
 FORMATS = (".png", ".gif", ".mp4")
 _LAYER_HELP = (
@@ -214,13 +215,23 @@ def cmd_render(args: argparse.Namespace) -> int:
                     frames.append(renderer.capture())
 
             bar = _Progress(args.steps, "simulate", progress_on)
+            from .run_progress import deferred_interrupt
+
             try:
-                _simulate(sim, args.steps, every, bar, on_frame)
+                with deferred_interrupt() as stop:
+                    _simulate(sim, args.steps, every, bar, on_frame, stop.is_set)
             except SimulationDiverged as error:
                 bar.close()
                 print(f"sofac: error: {error}", file=sys.stderr)
                 raise _Failed from None
             bar.close()
+            if stop.is_set():
+                print(
+                    f"sofac: interrupted at step {sim.steps} of {args.steps} (t={sim.time:g}); "
+                    f"nothing was written ({args.out} is written once every frame is drawn)",
+                    file=sys.stderr,
+                )
+                return EXIT_INTERRUPTED
             if not animated:
                 frames = [renderer.capture()]
             renderer.fit(frames)  # one camera for the whole animation
@@ -241,8 +252,15 @@ def cmd_render(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _simulate(sim: Any, steps: int, every: int, bar: _Progress, on_frame: Callable[[], None]) -> None:
-    """Run ``steps`` steps, calling ``on_frame`` after each ``every`` of them."""
+def _simulate(
+    sim: Any,
+    steps: int,
+    every: int,
+    bar: _Progress,
+    on_frame: Callable[[], None],
+    stopped: Callable[[], bool] = lambda: False,
+) -> None:
+    """Run ``steps`` steps, calling ``on_frame`` after each ``every`` of them, until ``stopped()``."""
     from .run_progress import Slicer
 
     slicer = Slicer()  # slices of about 0.2 s: the bar moves at least every second
@@ -251,6 +269,8 @@ def _simulate(sim: Any, steps: int, every: int, bar: _Progress, on_frame: Callab
         count = min(every, steps - done)
         stepped = 0
         while stepped < count:  # a frame after each full `every`
+            if stopped():
+                return
             part = slicer.next(count - stepped)
             began = time.perf_counter()
             sim.step(part)

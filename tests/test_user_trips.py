@@ -937,3 +937,28 @@ def test_box_roi_positions_that_are_no_points(tmp_path: Path, capsys: pytest.Cap
     )
     out = check_output(path, capsys)
     assert "box.scn:5: error E205 [position]: BoxROI 'box': position: 1 numbers is not a multiple of 3" in out
+
+
+def test_ctrl_c_during_a_render_says_where_it_stopped(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+
+    scene = oscillator(tmp_path)
+    sofac.load(scene)  # compiled: the child loads it warm
+    out = tmp_path / "o.png"
+    child = subprocess.Popen(
+        [sys.executable, "-m", "sofac", "render", str(scene), "--steps", "1000000000", "--out", str(out)],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert child.stderr is not None
+    first = child.stderr.readline()  # a progress line a second at least: the run is stepping
+    assert first.startswith("simulate: "), first
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=60)
+    assert child.returncode == 130, err
+    assert re.search(
+        r"sofac: interrupted at step \d+ of 1000000000 \(t=[\d.e+-]+\); nothing was written", err
+    )
+    assert not out.exists()
