@@ -20,10 +20,13 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ContactNotCompiled",
+    "InvalidParameter",
     "SceneError",
+    "SceneWarning",
     "Simulation",
     "SimulationDiverged",
     "SofacError",
+    "StrictSceneError",
     "__version__",
     "load",
     "save",
@@ -41,6 +44,9 @@ _LAZY = {
     "sweep": "sweeps.runner",
     "view": "viewer.window",
     "save": "pyscene.script",
+    "SceneWarning": "scene_warnings",
+    "StrictSceneError": "scene_warnings",
+    "InvalidParameter": "param_rules",
 }
 
 

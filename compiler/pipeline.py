@@ -9,13 +9,15 @@ The stages themselves import nothing from here: data flows one way.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sofac.diagnostics import Diagnostics, SceneError
+from sofac import param_rules, scene_warnings
+from sofac.diagnostics import Diagnostics, SceneError, SofacError
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
     from sofac.check.checker import CheckedScene
@@ -76,7 +78,9 @@ def add_compile_refusals(checked: CheckedScene | None, diagnostics: Diagnostics)
 
 
 def plan_file(path: str | Path, *, data_roots: Sequence[Path] = (), threads: int = 1) -> Plan:
+    """Check and plan a scene file, issuing its warnings (SceneWarning)."""
     checked, diagnostics = check_file(path, data_roots=data_roots)
+    scene_warnings.issue(diagnostics.sorted())
     return plan_checked(checked, diagnostics, threads=threads)
 
 
@@ -104,17 +108,14 @@ def compile_checked(
     scene_plan = plan_checked(
         checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
     )
+    spec = dataclasses.replace(run_spec(scene_plan), rules=param_rules.rules_of(checked, scene_plan.buffers))
     source = generate(scene_plan)
     direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
     built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
+    found = scene_warnings.scene_warnings(diagnostics.sorted()) if diagnostics is not None else ()
     return Compiled(
-        run_spec(scene_plan),
-        built,
-        scene_plan=scene_plan,
-        source=source,
-        checked=checked,
-        rebuild=_rebuild,
+        spec, built, scene_plan=scene_plan, source=source, checked=checked, rebuild=_rebuild, warnings=found
     )
 
 
@@ -130,12 +131,43 @@ def compile_scene(
     rigid_model: str = "sofa",
     threads: int = 1,
     interactive: bool = False,
+    strict: bool = False,
 ) -> Compiled:
-    """Check, plan, generate and build a scene file (the build may come from the cache)."""
-    checked, diagnostics = check_file(path, data_roots=data_roots)
-    return compile_checked(
-        checked, diagnostics, prune=prune, rigid_model=rigid_model, threads=threads, interactive=interactive
+    """Check, plan, generate and build a scene file (the build may come from the cache). The
+    scene's warnings are issued as SceneWarning; ``strict``: they are errors (StrictSceneError)."""
+    compiled = _compile_scene(
+        path,
+        data_roots=data_roots,
+        prune=prune,
+        rigid_model=rigid_model,
+        threads=threads,
+        interactive=interactive,
+        strict=strict,
     )
+    scene_warnings.issue(compiled.warnings, strict=strict)
+    return compiled
+
+
+def _compile_scene(
+    path: str | Path, *, data_roots: Sequence[Path] = (), strict: bool = False, **options: Any
+) -> Compiled:
+    """compile_scene() without issuing the warnings (a strict scene with warnings stops before
+    it is built)."""
+    _check_data_roots(data_roots)
+    checked, diagnostics = check_file(path, data_roots=data_roots)
+    if strict:
+        scene_warnings.issue(diagnostics, strict=True)
+    return compile_checked(checked, diagnostics, **options)
+
+
+def _check_data_roots(data_roots: Sequence[Path]) -> None:
+    """The command line refuses a data root that is no folder (--data-path); so does the API."""
+    if isinstance(data_roots, (str, Path)):
+        shown = repr(str(data_roots))
+        raise SofacError(f"data_roots={shown}: give a list of folders, such as [{shown}]")
+    for root in data_roots:
+        if not Path(root).is_dir():
+            raise SofacError(f"data_roots: {root}: no such folder (each data root is a folder to search)")
 
 
 def compile_model(scene: Scene, **options: Any) -> Compiled:
@@ -153,11 +185,16 @@ def load(
     rigid_model: str = "sofa",
     threads: int = 1,
     interactive: bool = False,
+    strict: bool = False,
 ) -> Simulation:
     """Compile (or fetch from the cache) and instantiate a scene. ``threads`` > 1 runs the large
     element loops (FEM) on that many OpenMP threads, with the same numbers as one thread;
     ``interactive`` compiles a point force on each state that Python sets between steps
     (``<state path>.pointForceIndex`` / ``.pointForce`` parameters: how ``sofac view`` pulls).
+
+    The scene's warnings (those ``sofac check`` prints) are issued as ``sofac.SceneWarning``
+    Python warnings, on every load; ``strict=True`` raises StrictSceneError (a SceneError listing
+    them) instead.
 
     A scene loaded before, whose files and sofac are unchanged, is instantiated from its warm
     record (simulation/warm.py) without being compiled again.
@@ -175,17 +212,26 @@ def load(
         "threads": threads,
         "interactive": interactive,
     }
+    _check_data_roots(data_roots)
     if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() == ".py":
         sim = _load_python_scene(path, options)
     else:
         record = warm.lookup(path, **options)
         if record is not None:
+
+            def recompute() -> Compiled:
+                with scene_warnings.quiet():  # issued below, from the record
+                    return _compile_scene(path, **options)
+
             compiled = Compiled(
-                record.spec, record.built, recompute=lambda: compile_scene(path, **options), rebuild=_rebuild
+                record.spec, record.built, recompute=recompute, rebuild=_rebuild, warnings=record.warnings
             )
         else:
-            compiled = compile_scene(path, **options)
-            warm.store(path, compiled.spec, compiled.built, compiled.checked, **options)
+            compiled = _compile_scene(path, strict=strict, **options)
+            warm.store(
+                path, compiled.spec, compiled.built, compiled.checked, warnings=compiled.warnings, **options
+            )
+        scene_warnings.issue(compiled.warnings, strict=strict)
         sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:

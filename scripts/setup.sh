@@ -113,3 +113,8 @@ else
         -e ".[test]" </dev/null
     installed_ok || { echo "setup: sofac is still not importable after pip install" >&2; exit 1; }
 fi
+
+# The host module (the pybind11 bridge to compiled scenes) is built once per installation: build it
+# now, so that the first scene only pays for its own compilation.
+log "building sofac's host module into its cache (once)"
+"$PYTHON" -c "from sofac import build; build.build_host(quiet=True)"

@@ -10,7 +10,19 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "compiler"
 # The stages in pipeline order; shared code any stage may use; tools that drive the stages.
 STAGES = ("front", "check", "plan", "codegen", "build", "simulation")
-SHARED = {"diagnostics", "resources", "progress", "registry", "geometry", "__init__"}
+SHARED = {
+    "diagnostics",
+    "resources",
+    "progress",
+    "registry",
+    "geometry",
+    "limits",
+    "paths",
+    "param_rules",
+    "scene_warnings",
+    "cache_errors",
+    "__init__",
+}
 TOOLS = {"pipeline", "cli", "accuracy", "render", "sweeps", "regress", "viewer", "pyscene", "__main__"}
 # Calls from a stage into a tool, each on purpose: ``sim.render()``, a shortcut for
 # ``sofac.render.render(sim)``; a ``.py`` scene handed by the parser to the Python front end, which

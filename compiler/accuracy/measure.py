@@ -49,7 +49,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sofac import registry
+from sofac import registry, scene_warnings
 from sofac.diagnostics import Diagnostics, SceneError, SofacError
 from sofac.front.model import Component, Node, Scene
 from sofac.pipeline import compile_checked
@@ -367,6 +367,7 @@ def _parse(path: Path, data_roots: Sequence[Path]) -> Scene:
     scene = parse_scene(path, diagnostics, data_roots=data_roots)
     if diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
+    scene_warnings.issue(diagnostics.sorted())
     return scene
 
 
@@ -378,6 +379,7 @@ def compile_variant(scene: Scene, solver: Solver, *, keep_rayleigh: bool) -> Com
     checked = check_scene(with_solver(scene, solver, keep_rayleigh=keep_rayleigh), diagnostics)
     if diagnostics.has_errors():
         raise SceneError(diagnostics.sorted())
+    scene_warnings.issue(diagnostics.sorted())
     return compile_checked(checked, diagnostics)
 
 
@@ -666,6 +668,8 @@ class _Setup:
         if solver not in self.compiled:
             try:
                 self.compiled[solver] = compile_variant(self.model, solver, keep_rayleigh=self.keep_rayleigh)
+            except scene_warnings.StrictSceneError:
+                raise  # the scene's own warnings under --strict: no configuration can run
             except SofacError as exc:
                 self.compiled[solver] = f"{type(exc).__name__}: {exc}"
         return self.compiled[solver]

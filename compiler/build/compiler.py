@@ -14,6 +14,7 @@ the kernels only) and the host extension module (pybind11), once per installatio
 
 from __future__ import annotations
 
+import errno
 import functools
 import hashlib
 import json
@@ -21,15 +22,19 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import sysconfig
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import platformdirs
 
 from sofac import __version__
+from sofac.build import guard as build_guard
+from sofac.cache_errors import CacheNotWritable
 from sofac.diagnostics import SofacError
 from sofac.resources import cache_dir, resource_dir
 
@@ -160,8 +165,35 @@ def build(
     flags: tuple[str, ...],
     includes: tuple[Path, ...],
     libraries: tuple[str, ...] = (),
+    announce: Callable[[], None] | None = None,
 ) -> Built:
-    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry)."""
+    """Compile ``source`` into ``name`` in the cache (or reuse a valid entry, which needs no write);
+    ``announce`` is called just before the compiler runs. Raises CacheNotWritable when the cache
+    folder cannot take the build."""
+    try:
+        return _build(
+            source,
+            kind=kind,
+            name=name,
+            flags=flags,
+            includes=includes,
+            libraries=libraries,
+            announce=announce,
+        )
+    except OSError as error:  # the compiler's own failures are BuildErrors: this is the folder
+        raise CacheNotWritable(cache_dir(), error) from None
+
+
+def _build(
+    source: str,
+    *,
+    kind: str,
+    name: str,
+    flags: tuple[str, ...],
+    includes: tuple[Path, ...],
+    libraries: tuple[str, ...] = (),
+    announce: Callable[[], None] | None = None,
+) -> Built:
     command = compiler()
     identity = {
         "source": hashlib.sha256(source.encode()).hexdigest(),
@@ -184,16 +216,19 @@ def build(
         if valid_entry(entry, key, name):  # built by another process meanwhile
             return Built(entry / name, key, True, 0.0)
         started = time.perf_counter()
-        staging = Path(tempfile.mkdtemp(prefix="build-", dir=root))
+        _remove_stale_builds(root, key)
+        if announce is not None:
+            announce()
+        staging = Path(tempfile.mkdtemp(prefix=f"build-{key[:16]}-", dir=root))
         try:
             (staging / "source.cpp").write_text(source)
             arguments = [command, *flags, *(f"-I{p}" for p in includes), "source.cpp", "-o", name, *libraries]
             try:
-                result = subprocess.run(
-                    arguments, cwd=staging, capture_output=True, text=True, timeout=900, check=False
-                )
+                result = build_guard.run(arguments, cwd=staging, timeout=BUILD_TIMEOUT)
             except (OSError, subprocess.TimeoutExpired) as error:
                 raise BuildError(f"the C++ compiler could not run: {error}") from None
+            if result.returncode != 0 and "No space left on device" in result.stderr:
+                raise OSError(errno.ENOSPC, "No space left on device", str(staging))
             if result.returncode != 0:
                 log = root / "logs" / f"{key}.log"
                 log.parent.mkdir(parents=True, exist_ok=True)
@@ -210,6 +245,22 @@ def build(
             if staging.exists():
                 shutil.rmtree(staging, ignore_errors=True)
         return Built(entry / name, key, False, time.perf_counter() - started)
+
+
+BUILD_TIMEOUT = 900.0  # seconds a compiler run may take
+
+
+def _remove_stale_builds(root: Path, key: str) -> None:
+    """Private build folders left by a build that was killed: those of ``key`` (whose lock this
+    process holds, so no one else is building it), and any older than two build timeouts."""
+    now = time.time()
+    for folder in root.glob("build-*"):
+        try:
+            old = now - folder.stat().st_mtime > 2 * BUILD_TIMEOUT
+        except OSError:
+            continue  # removed meanwhile
+        if old or folder.name.startswith(f"build-{key[:16]}-"):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 SUITESPARSE_INCLUDE = Path("/usr/include/suitesparse")
@@ -240,12 +291,24 @@ def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0, o
     )
 
 
-def build_host() -> Built:
-    """The pybind11 host module, compiled once per installation (per compiler and Python)."""
+def build_host(*, quiet: bool = False) -> Built:
+    """The pybind11 host module, compiled once per installation (per compiler and Python; setup.sh
+    builds it). Its compilation takes a while, so it is announced on stderr unless ``quiet``."""
     import pybind11
 
     source = (resource_dir("runtime") / "host" / "host.cpp").read_text()
     suffix = sysconfig.get_config_var("EXT_SUFFIX") or ".so"
     includes = (Path(pybind11.get_include()), Path(sysconfig.get_paths()["include"]))
     flags = ("-std=c++17", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-DNDEBUG", "-ldl")
-    return build(source, kind="host", name=f"_sofac_host{suffix}", flags=flags, includes=includes)
+    def announce() -> None:
+        if not quiet:
+            print(
+                "sofac: building the Python bridge to compiled scenes (once per installation and "
+                f"compiler, 10-30 s) in {cache_dir() / 'host'}; `bash scripts/setup.sh` builds it ahead",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return build(
+        source, kind="host", name=f"_sofac_host{suffix}", flags=flags, includes=includes, announce=announce
+    )

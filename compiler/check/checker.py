@@ -279,6 +279,14 @@ class _Checker:
                     path = links.parse_link(attribute.value)
                     assert path is not None
                     checked.data_links[field_spec.name] = (path, attribute.loc)
+                elif isinstance(element, Node):
+                    self.diags.add(
+                        "E222",
+                        attribute.loc,
+                        f"{owner}: {name}={attribute.value.strip()[:40]!r}: sofac does not follow links "
+                        "on a node's Data yet",
+                        "write the value itself",
+                    )
                 continue
             try:
                 value = field_spec.type.parse(attribute.value)
@@ -447,6 +455,14 @@ class _Checker:
     def _is(self, component: Component, category: Category) -> bool:
         checked = self.checked.components.get(id(component))
         return checked is not None and checked.category is category
+
+    def _broken_link(self, checked: CheckedComponent, name: str, path: Any) -> bool:
+        """A Data link (of field ``name``) that points to nothing, or to a component without that Data."""
+        target = links.resolve(path, checked.component)
+        if target is None or isinstance(target, Node):
+            return True
+        source = self.checked.components.get(id(target))
+        return source is not None and source.spec is not None and source.spec.field(path.data or name) is None
 
     def _check_data_links(self, checked: CheckedComponent) -> None:
         assert checked.spec is not None
@@ -663,6 +679,8 @@ class _Checker:
         assert checked.spec is not None
         evaluator = evaluate.EVALUATORS[checked.spec.compute]
         checked.outputs = {}  # guards against cycles while evaluating
+        if any(self._broken_link(checked, name, path) for name, (path, _) in checked.data_links.items()):
+            return checked.outputs  # nothing to compute from; _check_data_links reports it (E213)
         try:
             checked.outputs = evaluator(_EvalContext(self, checked))
         except evaluate.UnknownInput:
@@ -1224,7 +1242,9 @@ class _Checker:
                 f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
                 f"file {value!r} not found (searched {base} and the data roots: {roots})"
                 + ("; nothing reads this loader's outputs" if unused else ""),
-                "fix the path, or add the folder holding it with --data-path",
+                "a file or folder name has at most 255 bytes: shorten it"
+                if any(len(part.encode()) > 255 for part in Path(str(value)).parts)
+                else "fix the path, or add the folder holding it with --data-path",
             )
         return path
 
@@ -1312,6 +1332,8 @@ class _EvalContext:
                 # reported there): not known here, and no second error.
                 raise evaluate.UnknownInput("the input positions are only known at run time")
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
+            if np.size(value) % datatype.coord_size:  # not points: the count check reports it (E205)
+                raise evaluate.UnknownInput(f"position is not a list of {datatype.name} points")
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)
         if state is None:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from sofac import limits
 from sofac.front import meshes
 
 
@@ -92,6 +93,9 @@ def string_mesh(ctx: Context) -> Outputs:
     count = int(ctx.value("resolution"))
     if count < 2:
         raise EvaluationError("resolution must be >= 2", "resolution")
+    refused = limits.too_many_points([count])
+    if refused:
+        raise EvaluationError(f"resolution: {refused}", "resolution", code="E207")
     points = np.zeros((count, 3))
     points[:, 0] = [(x * 1.0) / (count - 1) for x in range(count)]
     edges = np.array([[e - 1, e] for e in range(1, count)], dtype=np.int64)
@@ -114,26 +118,69 @@ def sphere_loader(ctx: Context) -> Outputs:
     return {"position": spheres.centers.ravel(), "listRadius": spheres.radii}
 
 
+def _numbers(ctx: Context, name: str, count: int, *, integer: bool = False) -> np.ndarray:
+    """``count`` finite numbers of field ``name`` (integers if ``integer``), checked here because
+    a linked value can be anything (written values are checked when they are parsed)."""
+    value = ctx.value(name)
+    if value is None:
+        raise EvaluationError(
+            f"{name} has no value known when the scene is compiled (a link cycle, or a Data computed at "
+            "run time); give the numbers",
+            name,
+            code="E213",
+        )
+    try:
+        numbers = np.asarray(value, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise EvaluationError(f"{name} is not a list of numbers", name, code="E204") from None
+    if numbers.size != count:
+        raise EvaluationError(f"{name} needs {count} numbers, its value has {numbers.size}", name, "E205")
+    if not np.isfinite(numbers).all():
+        raise EvaluationError(f"{name} has a value that is not finite", name, code="E206")
+    if integer and (numbers != np.round(numbers)).any():
+        raise EvaluationError(f"{name} needs whole numbers, got {numbers.tolist()}", name, code="E204")
+    return numbers
+
+
 def grid(ctx: Context) -> Outputs:
     """RegularGridTopology / GridTopology points: index = x + nx (y + ny z)."""
     legacy_counts = ("nx", "ny", "nz")
     if any(ctx.is_set(name) for name in legacy_counts):
-        counts = np.array([int(ctx.value(name) or 1) for name in legacy_counts], dtype=np.int64)
+        counts = np.array(
+            [int(_numbers(ctx, n, 1, integer=True)[0]) if ctx.is_set(n) else 1 for n in legacy_counts],
+            dtype=np.int64,
+        )
     else:
-        counts = np.asarray(ctx.value("n"), dtype=np.int64)
+        counts = np.array([int(c) for c in _numbers(ctx, "n", 3, integer=True)], dtype=np.int64)
     legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
     if all(ctx.is_set(name) for name in legacy_bounds):
         # SOFA reads the legacy bounds as single-precision floats.
-        bounds = np.array([float(np.float32(ctx.value(name))) for name in legacy_bounds])
+        with np.errstate(over="ignore"):  # a bound past the float range: the points check reports it
+            bounds = np.array([float(np.float32(_numbers(ctx, name, 1)[0])) for name in legacy_bounds])
         low, high = bounds[:3], bounds[3:]
     else:
-        low = np.asarray(ctx.value("min"), dtype=float)
-        high = np.asarray(ctx.value("max"), dtype=float)
+        low = _numbers(ctx, "min", 3)
+        high = _numbers(ctx, "max", 3)
     if (counts < 1).any():
         raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
+    refused = limits.too_many_points(counts.tolist())
+    if refused:
+        legacy = any(ctx.is_set(name) for name in legacy_counts)
+        attribute = legacy_counts[int(np.argmax(counts))] if legacy else "n"
+        raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    with np.errstate(all="ignore"):  # bounds near the float range: said below, not warned about
+        points = lattice.points()
+    if not np.isfinite(points).all():
+        legacy = all(ctx.is_set(name) for name in legacy_bounds)
+        raise EvaluationError(
+            "the grid's points are not finite: its bounds are too large"
+            + (" for the single-precision numbers SOFA reads xmin..zmax as" if legacy else ""),
+            "xmin" if legacy else "min",
+            code="E206",
+        )
     cells = _grid_cells(counts)
     if "quads" in cells and ctx.value("computeTriangleList") is not False:
         # A 2-D grid: SOFA's GridUpdate also splits each quad (q0 q1 q2) (q0 q2 q3) and, from those
@@ -144,7 +191,7 @@ def grid(ctx: Context) -> Outputs:
         if ctx.value("computeEdgeList") is not False:
             cells["edges"] = triangle_edges(triangles).ravel()
     return {
-        "position": lattice.points().ravel(),
+        "position": points.ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
         **cells,
@@ -395,6 +442,8 @@ def transform_engine(ctx: Context) -> Outputs:
     value = ctx.value("input_position")
     if value is None or not np.size(value):
         raise UnknownInput("input_position is not known at compile time")
+    if np.size(value) % 3:  # not points: the count check reports it (E205)
+        raise UnknownInput("input_position is not a list of x y z points")
     points = np.asarray(value, dtype=float).reshape(-1, 3).copy()
     scale = np.asarray(ctx.value("scale"), dtype=float)
     translation = np.asarray(ctx.value("translation"), dtype=float)

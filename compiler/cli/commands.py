@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, reported
+from sofac.cli.usage import EXIT_ERRORS, EXIT_INTERRUPTED, EXIT_OK, Failed, UsageError, reported
 
 if TYPE_CHECKING:
     from sofac.simulation.loader import Compiled, SimulationDiverged
@@ -128,20 +128,21 @@ def cmd_run(args: argparse.Namespace) -> int:
             sim = pipeline.load(_scene(args), dt=args.dt, **_load_options(args))
             ready = time.perf_counter()
             try:
-                if args.export_states:
-                    from sofac.regress.states import export_states
-
-                    export_states(
-                        sim, args.steps, Path(args.export_states), every=args.every, mapped=args.mapped
-                    )
-                else:
-                    sim.step(args.steps)
+                written, interrupted = _run_steps(sim, args)
             except SimulationDiverged as error:
                 _report_divergence(error, sim, args.show)
                 raise Failed from None
             stepped = time.perf_counter()
     except Failed:
         return EXIT_ERRORS
+    if interrupted:
+        what = f"the state files in {args.export_states} ({len(written)}) hold the records up to there"
+        print(
+            f"sofac: interrupted at step {sim.steps} of {args.steps} (t={sim.time:g}); "
+            + (what if args.export_states else "nothing was written"),
+            file=sys.stderr,
+        )
+        return EXIT_INTERRUPTED
     built = sim.compiled.built
     how = "cache hit" if built.cached else f"compiled in {built.seconds:.2f} s"
     how = "warm record" if sim.compiled.warm else how
@@ -156,6 +157,27 @@ def cmd_run(args: argparse.Namespace) -> int:
             continue
         print(_state_line(path, state.info.template, state.position, args.show))
     return EXIT_OK
+
+
+def _run_steps(sim: Any, args: argparse.Namespace) -> tuple[list[Path], bool]:
+    """The run's steps, in slices (run_progress.py): the state files written, and whether Ctrl-C
+    stopped it (between two slices)."""
+    from sofac.cli.run_progress import StepBar, deferred_interrupt, run_in_slices
+
+    bar = StepBar(args.steps, not args.no_progress)
+    try:
+        with deferred_interrupt() as stop:
+            if not args.export_states:
+                run_in_slices(sim.step, args.steps, now=lambda: sim.time, bar=bar, stop=stop)
+                return [], stop.is_set()
+            from sofac.regress.states import StateRecorder, select_states
+
+            states = select_states(sim.states(), mapped=args.mapped)
+            with StateRecorder(sim, states, Path(args.export_states), every=args.every) as recorder:
+                run_in_slices(recorder.run, args.steps, now=lambda: sim.time, bar=bar, stop=stop)
+            return list(recorder.paths), stop.is_set()
+    finally:
+        bar.close()
 
 
 def _state_line(path: str, template: str, position: Any, show: int) -> str:
@@ -209,4 +231,9 @@ def register(commands: argparse._SubParsersAction, epilog: str) -> None:
     run.add_argument("--every", type=int, default=1, help="record every K steps (default 1)")
     run.add_argument("--mapped", action="store_true", help="also export / print mapped states")
     run.add_argument("--show", type=int, default=4, help="DOFs printed per state (default 4)")
+    run.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress bar (one is drawn on a terminal for runs longer than a second)",
+    )
     run.set_defaults(handler=cmd_run)

@@ -136,7 +136,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
         items: list[Diagnostic] = diagnostics.sorted()
         if args.quiet:
             items = [d for d in items if d.severity is Severity.ERROR]
-        has_errors = has_errors or diagnostics.has_errors()
+        has_errors = has_errors or diagnostics.has_errors() or bool(args.strict and diagnostics.warnings)
         results.append(FileResult(relative_name(path), tuple(items)))
     sys.stdout.write(render_results(results, args.format, with_summary=not args.quiet))
     return EXIT_ERRORS if has_errors else EXIT_OK
@@ -194,7 +194,8 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
             sys.stdout.write(json.dumps(tree_as_dict(checked), indent=2, ensure_ascii=False) + "\n")
         else:
             sys.stdout.write(format_tree(checked) + "\n")
-    return EXIT_ERRORS if diagnostics.has_errors() else EXIT_OK
+    failed = diagnostics.has_errors() or bool(args.strict and diagnostics.warnings)
+    return EXIT_ERRORS if failed else EXIT_OK
 
 
 def _cmd_regress(args: argparse.Namespace) -> int:
@@ -240,6 +241,9 @@ def _cmd_version(args: argparse.Namespace) -> int:
 
 
 # --- parser ------------------------------------------------------------------------------------
+
+# The commands that read a scene: each prints its warnings (as check does), or fails under --strict.
+_SCENE_COMMANDS = ("check", "inspect", "compile", "emit", "run", "render", "accuracy", "sweep")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -369,6 +373,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     register_sweep(commands, _EPILOG)
 
+    for name in _SCENE_COMMANDS:
+        commands.choices[name].add_argument(
+            "--strict", action="store_true", help="treat the scene's warnings as errors (exit code 1)"
+        )
     version = commands.add_parser("version", help="print sofac's version")
     version.set_defaults(handler=_cmd_version)
     return parser
@@ -409,8 +417,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         print(_usage_message("no command given"), file=sys.stderr)
         return EXIT_USAGE
+    from sofac.scene_warnings import on_stderr
+
     try:
-        code = args.handler(args)
+        with on_stderr(strict=bool(getattr(args, "strict", False)) and args.command in _SCENE_COMMANDS):
+            code = args.handler(args)
         sys.stdout.flush()
         return code
     except UsageError as exc:

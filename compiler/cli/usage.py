@@ -28,6 +28,7 @@ class Failed(Exception):
 def reported() -> Iterator[None]:
     """Turn sofac errors into messages on stderr, then raise Failed (the caller returns 1)."""
     from sofac.cli.report import format_diagnostic
+    from sofac.scene_warnings import StrictSceneError
 
     try:
         yield
@@ -35,6 +36,8 @@ def reported() -> Iterator[None]:
         for diag in error.diagnostics:
             if diag.severity >= Severity.WARNING:
                 print(format_diagnostic(diag), file=sys.stderr)
+        if isinstance(error, StrictSceneError):
+            print("sofac: error: --strict: the scene's warnings are errors; fix them", file=sys.stderr)
         raise Failed from None
     except SofacError as error:
         print(f"sofac: error: {error}", file=sys.stderr)

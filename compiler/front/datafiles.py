@@ -24,6 +24,15 @@ def real_path(path: Path) -> Path:
     return Path(os.path.realpath(path))
 
 
+def is_file(path: Path) -> bool:
+    """Whether ``path`` is a regular file; False, not an exception, for a name the system cannot
+    even look up (longer than its limit, 255 bytes a name on Linux: ENAMETOOLONG)."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False
+
+
 def _is_within(path: Path, root: Path) -> bool:
     return path == root or root in path.parents
 
@@ -130,7 +139,7 @@ def find_data_file(name: str, relative_to: Path, scene: Scene) -> DataFileLookup
         if not any(_is_within(real, root) for root in allowed):
             refused.append(candidate)
             continue
-        found = real.is_file()
+        found = is_file(real)
         scene.lookups.setdefault(real, found)  # what the result depends on (warm.py)
         if found:
             return DataFileLookup(real, tuple(bases), tuple(refused))

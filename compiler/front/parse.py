@@ -24,6 +24,7 @@ from sofac.front.datafiles import (
     DataFileLookup,
     default_data_roots,
     find_data_file,
+    is_file,
     real_path,
     resolve_data_file,
 )
@@ -479,7 +480,7 @@ def parse_scene(
 
     Diagnostics name the file as given (``path`` is not made absolute); included files are named
     relative to the cwd when possible. Raises :class:`SceneError` if the scene cannot be read.
-    A ``.py`` file is a SofaPython3 scene script: it is run (pyscene.py) to build the tree.
+    A ``.py`` file is a SofaPython3 scene script: it is run (sofac.pyscene) to build the tree.
     """
     if Path(path).suffix.lower() == ".py":
         from sofac.pyscene.script import execute_script
@@ -526,7 +527,7 @@ def parse_string(
         raise SceneError(diagnostics)
     # A string that names a real file can still be part of a cycle; otherwise it has no path.
     candidate = directory / filename
-    real = real_path(candidate) if not filename.startswith("<") and candidate.is_file() else None
+    real = real_path(candidate) if not filename.startswith("<") and is_file(candidate) else None
     f = builder.load_bytes(text, filename, real, directory, from_disk=False)
     if f is None:
         raise SceneError(diagnostics)

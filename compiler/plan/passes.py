@@ -61,6 +61,9 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
             else group.scheme
         )
         effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))
+        linear = group.linear_solver
+        if linear is not None and all(linear is not c for c in planner.lowered):
+            effects.append(("linear_solve", origin_of(linear), f"solves the system of {states}"))
     if planner.gravity.key not in planner.pruned:
         effects.append(
             ("gravity", "root node", f"g = {planner.gravity.initial.tolist()}, applied by the masses")

@@ -18,7 +18,7 @@ def format_schedule(plan: Plan) -> str:
     """The plan as text, for ``sofac inspect --schedule``."""
     lines = [
         f"scene {plan.scene_file}",
-        f"dt = {plan.dt.initial[0]!r}, gravity = {plan.gravity.initial.tolist()}",
+        f"dt = {float(plan.dt.initial[0])!r}, gravity = {plan.gravity.initial.tolist()}",
     ]
     for group in plan.groups:
         scheme = {

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, reported
+from sofac.cli.usage import EXIT_ERRORS, EXIT_INTERRUPTED, EXIT_OK, Failed, UsageError, reported
 
 FORMATS = (".png", ".gif", ".mp4")
 _LAYER_HELP = (
@@ -64,7 +64,8 @@ def _color(text: str) -> tuple[float, float, float, float]:
 
 
 class _Progress:
-    """A progress bar on stderr, redrawn in place on a terminal; elsewhere a line per quarter."""
+    """A progress bar on stderr, redrawn in place on a terminal; elsewhere a line per quarter, and
+    one a second between them."""
 
     def __init__(self, total: int, label: str, enabled: bool, stream: TextIO | None = None) -> None:
         self.total = max(total, 1)
@@ -74,6 +75,7 @@ class _Progress:
         self.done = 0
         self.started = time.perf_counter()
         self._quarter = 0
+        self._printed = self.started
         self._tty = self.stream.isatty()
 
     def advance(self, count: int = 1) -> None:
@@ -89,8 +91,9 @@ class _Progress:
             self.stream.flush()
         else:
             quarter = 4 * self.done // self.total
-            if quarter > self._quarter:
-                self._quarter = quarter
+            now = time.perf_counter()
+            if quarter > self._quarter or now - self._printed >= 1.0:
+                self._quarter, self._printed = quarter, now
                 print(f"{self.label}: {self.done}/{self.total}", file=self.stream, flush=True)
 
     def close(self) -> None:
@@ -222,13 +225,23 @@ def cmd_render(args: argparse.Namespace) -> int:
                     frames.append(renderer.capture())
 
             bar = _Progress(args.steps, "simulate", progress_on)
+            from sofac.cli.run_progress import deferred_interrupt
+
             try:
-                _simulate(sim, args.steps, every, bar, on_frame)
+                with deferred_interrupt() as stop:
+                    _simulate(sim, args.steps, every, bar, on_frame, stop.is_set)
             except SimulationDiverged as error:
                 bar.close()
                 print(f"sofac: error: {error}", file=sys.stderr)
                 raise Failed from None
             bar.close()
+            if stop.is_set():
+                print(
+                    f"sofac: interrupted at step {sim.steps} of {args.steps} (t={sim.time:g}); "
+                    f"nothing was written ({args.out} is written once every frame is drawn)",
+                    file=sys.stderr,
+                )
+                return EXIT_INTERRUPTED
             if not animated:
                 frames = [renderer.capture()]
             renderer.fit(frames)  # one camera for the whole animation
@@ -249,22 +262,34 @@ def cmd_render(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _simulate(sim: Any, steps: int, every: int, bar: _Progress, on_frame: Callable[[], None]) -> None:
-    """Run ``steps`` steps, calling ``on_frame`` after each ``every`` of them."""
+def _simulate(
+    sim: Any,
+    steps: int,
+    every: int,
+    bar: _Progress,
+    on_frame: Callable[[], None],
+    stopped: Callable[[], bool] = lambda: False,
+) -> None:
+    """Run ``steps`` steps, calling ``on_frame`` after each ``every`` of them, until ``stopped()``."""
+    from sofac.cli.run_progress import Slicer
+
+    slicer = Slicer()  # slices of about 0.2 s: the bar moves at least every second
     done = 0
     while done < steps:
         count = min(every, steps - done)
-        # Steps in slices for the progress bar; a frame after each full `every`.
-        for part in _slices(count):
+        stepped = 0
+        while stepped < count:  # a frame after each full `every`
+            if stopped():
+                return
+            part = slicer.next(count - stepped)
+            began = time.perf_counter()
             sim.step(part)
+            slicer.took(part, time.perf_counter() - began)
             bar.advance(part)
+            stepped += part
         done += count
         if count == every:
             on_frame()
-
-
-def _slices(count: int, size: int = 50) -> list[int]:
-    return [min(size, count - start) for start in range(0, count, size)]
 
 
 def register(commands: argparse._SubParsersAction, epilog: str) -> None:

@@ -31,6 +31,7 @@ import ctypes.util
 import math
 import os
 import sys
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -606,6 +607,27 @@ class Renderer:
         self._flags: dict[int, Layers] = {}
         self._states = set(sim.objects())
         self._scene = _SceneBuilder(self).build()
+        self._never_blank()
+
+    def _never_blank(self) -> None:
+        """A scene whose layers draw nothing (no visual model, no VisualStyle asking for more) gets
+        its behavior models drawn, and a warning; when even they draw nothing, an error."""
+        if self._primitives(self.capture(), 0.0):
+            return
+        hidden = any(not on and "behavior" in (_layers_of(word) or ()) for word, on in self.show.items())
+        if not hidden:
+            self.show = {**self.show, "behaviormodels": True}
+            if self._primitives(self.capture(), 0.0):
+                self.warnings.append(
+                    "nothing in the scene would be drawn (no visual model shown, and no VisualStyle "
+                    "asking for debug layers): drawing the behavior models (the DOFs) instead; choose "
+                    "the layers with --show (Python: show=...), e.g. --show behavior,collision"
+                )
+                return
+        raise SofacError(
+            "nothing to draw: no visual model, DOF, force field or collision model is shown with these "
+            "layers; give --show all (Python: show={'all': True}) or add an OglModel to the scene"
+        )
 
     # --- public ----------------------------------------------------------------------------------
     def capture(self) -> Frame:
@@ -757,7 +779,8 @@ def render(
     background: Sequence[float] = DEFAULT_BACKGROUND,
     supersample: int = 2,
 ) -> np.ndarray:
-    """A picture of ``sim`` now: (height, width, 3) uint8 RGB. See :class:`Renderer` for the options."""
+    """A picture of ``sim`` now: (height, width, 3) uint8 RGB. See :class:`Renderer` for the options;
+    what it could not draw as asked is issued as UserWarning."""
     renderer = Renderer(
         sim,
         width=width,
@@ -768,6 +791,8 @@ def render(
         background=background,
         supersample=supersample,
     )
+    for text in renderer.warnings:
+        warnings.warn(text, stacklevel=2)
     return renderer.render()
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import sys
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,8 +19,9 @@ from types import ModuleType
 from typing import IO, TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
+from sofac import param_rules, paths
 from sofac.build import compiler as build
-from sofac.diagnostics import SofacError
+from sofac.diagnostics import Diagnostic, SofacError
 from sofac.simulation.runspec import RunSpec
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
@@ -61,9 +63,11 @@ class SimulationDiverged(SofacError):
 
     The simulation's arrays hold the failing step's values: the compiled step stops right after
     the step whose state stopped being finite. ``last_finite`` ({state path: (position, velocity)},
-    copies of the independent states) is the state at the start of the chunk of steps that failed
-    (at most ``Simulation.chunk`` steps earlier), at ``last_finite_step`` / ``last_finite_time``;
-    it is None when the state was not finite before the call (or snapshots are switched off).
+    copies of the independent states) is the last state that was finite (and within the energy
+    bound, if one was set), at ``last_finite_step`` / ``last_finite_time``: the chunk that failed
+    is run again from its start to find it (``Simulation.restore_last_finite()`` puts it back into
+    the live arrays). It is None when the state was not finite before the call (or snapshots are
+    switched off).
     """
 
     def __init__(
@@ -237,8 +241,10 @@ class Compiled:
         checked: Any = None,
         recompute: Callable[[], Compiled] | None = None,
         rebuild: Callable[..., Compiled] | None = None,
+        warnings: tuple[Diagnostic, ...] = (),
     ) -> None:
         self.spec = spec
+        self.warnings = warnings  # the scene's warnings (sofac check's W codes), issued by load()
         self.built = built
         self._plan, self._source, self._checked = scene_plan, source, checked
         self._recompute = recompute
@@ -309,9 +315,13 @@ class Simulation:
         self._touching = self._views[spec.contact.touching] if spec.contact else None
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
-        self._snapshot: Snapshot | None = None  # preallocated copies, refilled at each chunk
+        # The buffers a step carries over ("state": positions, velocities, solver history): copied
+        # at the start of each chunk, so that a failure can be replayed up to its last good step.
+        self._carried = [v for b, v in zip(spec.buffers, self._views, strict=True) if b.role == "state"]
+        self._snapshot: list[np.ndarray] | None = None  # preallocated copies, refilled at each chunk
         self._snapshot_step = 0
         self._snapshot_time = 0.0
+        self._kept: tuple[list[np.ndarray], int, float] | None = None  # the last good state, if known
         # Parameters read only at init, with the values the instance was initialised with.
         self._init_params = [
             (buffer.key, view)
@@ -324,6 +334,9 @@ class Simulation:
             for f in spec.energy_files
         ]
         self._saving = [f for f in self._energy_files if f.save]
+        # Values set at run time get the rules of their fields (checked when they change).
+        self._param_guard = param_rules.ParamGuard(self.params(), spec.rules)
+        self._lock = threading.Lock()  # one step (reset...) of this instance at a time
 
     @property
     def plan(self) -> plan.Plan:
@@ -331,9 +344,10 @@ class Simulation:
         return self.compiled.plan
 
     #: Steps per call of the compiled step: between two chunks, ``step()`` checks the energy bound
-    #: (if any) and copies the independent states for ``SimulationDiverged.last_finite``.
+    #: (if any) and copies the carried-over state, from which a failure is replayed to find
+    #: ``SimulationDiverged.last_finite``.
     chunk: int = 1000
-    #: Copy the independent states at the start of each chunk (``SimulationDiverged.last_finite``).
+    #: Copy the state at the start of each chunk (``SimulationDiverged.last_finite``).
     keep_last_finite: bool = True
 
     # --- time ----------------------------------------------------------------------------------
@@ -347,9 +361,14 @@ class Simulation:
 
     @dt.setter
     def dt(self, value: float) -> None:
-        if not np.isfinite(value) or value <= 0:
-            raise ValueError(f"dt must be a positive number, got {value!r}")
-        self.param("/.dt")[0] = value
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise param_rules.InvalidParameter(
+                f"E204: /.dt = {value!r} is not a number", key="/.dt", code="E204"
+            ) from None
+        param_rules.check("/.dt", np.array([number]), self.spec.rules.get("/.dt"))
+        self.param("/.dt")[0] = number
 
     @property
     def steps(self) -> int:
@@ -357,17 +376,28 @@ class Simulation:
         return self._steps
 
     def step(self, n: int = 1, *, energy_bound: float | None = None) -> None:
-        """Advance ``n`` steps, in chunks of at most ``chunk`` steps.
+        """Advance ``n`` steps (a whole number), in chunks of at most ``chunk`` steps.
 
         Raises SimulationDiverged when an independent state stops being finite (the compiled step
         checks every step and stops right after the failing one, whose values the arrays then
         hold), or, checked between chunks and at the end, when the total energy exceeds
-        ``energy_bound`` or the bound set by ``guard_energy()``."""
+        ``energy_bound`` or the bound set by ``guard_energy()``.
+
+        Calls from several threads on one instance run one after the other (the native step
+        releases the GIL: two at once would corrupt the state); separate instances step in parallel."""
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+            raise TypeError(f"step(n): n is a whole number of steps, got {type(n).__name__} {n!r}")
+        with self._lock:
+            self._step(int(n), energy_bound)
+
+    def _step(self, n: int, energy_bound: float | None) -> None:
         if n < 0:
             raise ValueError("n must be >= 0")
         if energy_bound is not None and np.isnan(energy_bound):
             raise ValueError("energy_bound must be a number")
+        self._param_guard.check()
         self._check_init_params()
+        self._kept = None
         chunk = max(1, int(self.chunk))
         remaining = int(n)
         while remaining > 0:
@@ -425,40 +455,94 @@ class Simulation:
             self._energy_guard = None
             return
         if not (np.isfinite(factor) and factor > 0):
-            raise ValueError(f"factor must be a positive number, got {factor!r}")
+            raise ValueError(f"factor must be a positive number, got {factor!s}")
         energy = self.energy()
         if scale is None:
             scale = abs(energy.kinetic) + abs(energy.potential)
             if not (np.isfinite(scale) and scale > 0):
                 raise ValueError(f"the energy scale is {scale:g} now; give guard_energy(factor, scale=...)")
         elif not (np.isfinite(scale) and scale > 0):
-            raise ValueError(f"scale must be a positive number, got {scale!r}")
+            raise ValueError(f"scale must be a positive number, got {scale!s}")
         self._energy_guard = _EnergyGuard(float(factor), float(scale), energy.total)
 
     # --- the divergence guard ------------------------------------------------------------------
     def _take_snapshot(self) -> None:
         if self._snapshot is None:
-            self._snapshot = {
-                s.info.path: (s.position.copy(), s.velocity.copy())
-                for s in self._independent
-                if s.info.simulated
-            }
+            self._snapshot = [view.copy() for view in self._carried]
         else:
-            for path, (x, v) in self._snapshot.items():
-                state = self._states[path]
-                np.copyto(x, state.position)
-                np.copyto(v, state.velocity)
+            for copy, view in zip(self._snapshot, self._carried, strict=True):
+                np.copyto(copy, view)
         self._snapshot_step = self._steps
         self._snapshot_time = self.time
 
+    def _replay(self, limit: float | None) -> None:
+        """Find the last good state of the chunk that failed: finite, and with a total energy at
+        most ``limit`` if given. The chunk is run again from its snapshot, one step at a time; the
+        live arrays get the failing step's values back. If the replay does not end on the very
+        values of the failure (a step that depends on more than the carried state), the snapshot
+        itself is kept, when it was good."""
+        self._kept = None
+        if self._snapshot is None or not self.keep_last_finite:
+            return
+        failing = [view.copy() for view in self._carried]
+        failing_time, failing_steps = self._native.time, self._steps
+
+        def good() -> bool:
+            return self._finite() and (limit is None or self.energy().total <= limit)
+
+        def copies() -> tuple[list[np.ndarray], int, float]:
+            return [view.copy() for view in self._carried], steps, float(self._native.time)
+
+        for view, copy in zip(self._carried, self._snapshot, strict=True):
+            np.copyto(view, copy)
+        self._native.time = self._snapshot_time
+        steps = self._snapshot_step
+        kept = copies() if good() else None
+        start = kept
+        while steps < failing_steps and int(self._native.step(1)) == 1:
+            steps += 1
+            if steps < failing_steps and kept is not None and kept[1] == steps - 1 and good():
+                kept = copies()
+        faithful = steps == failing_steps and all(
+            np.array_equal(view, copy, equal_nan=True)
+            for view, copy in zip(self._carried, failing, strict=True)
+        )
+        for view, copy in zip(self._carried, failing, strict=True):
+            np.copyto(view, copy)
+        self._native.time = failing_time
+        self._kept = kept if faithful else start
+
     def _last_finite(self) -> tuple[Snapshot | None, int | None, float | None]:
-        snapshot = self._snapshot if self.keep_last_finite else None
-        if snapshot is None or not all(
-            np.isfinite(x).all() and np.isfinite(v).all() for x, v in snapshot.values()
-        ):
+        if self._kept is None:
             return None, None, None
-        copies = {path: (x.copy(), v.copy()) for path, (x, v) in snapshot.items()}
-        return copies, self._snapshot_step, self._snapshot_time
+        copies, step, time = self._kept
+        index = {id(view): i for i, view in enumerate(self._carried)}
+        states = {}
+        for spec in self.spec.states:
+            x, v = (index.get(id(self._views[i])) for i in (spec.x, spec.v))
+            if not spec.mapped and spec.simulated and x is not None and v is not None:
+                states[spec.path] = (
+                    copies[x].reshape(-1, spec.coord_size).copy(),
+                    copies[v].reshape(-1, spec.deriv_size).copy(),
+                )
+        return states, step, time
+
+    def restore_last_finite(self) -> int:
+        """After SimulationDiverged: put the last good state (``error.last_finite``: finite, and
+        within the energy bound if one was set) back into the live arrays, with its time and step
+        count, and return that step. Raises SofacError when none is known."""
+        if self._kept is None:
+            raise SofacError(
+                "no finite state is kept to restore: the simulation has not diverged, the state was "
+                "not finite before the failing call, or keep_last_finite is off; reset() restarts it"
+            )
+        copies, step, time = self._kept
+        with self._lock:
+            for view, copy in zip(self._carried, copies, strict=True):
+                np.copyto(view, copy)
+            self._native.time = time
+            self._steps = step
+        return step
 
     def _solver_and_hint(self, path: str, energy: bool = False) -> tuple[str, str]:
         group = self._solver_of.get(path)
@@ -496,13 +580,15 @@ class Simulation:
                 name for name, rows in (("position", x_bad), ("velocity", v_bad)) if rows[dof]
             )
         solver, hint = self._solver_and_hint(path)
+        self._replay(None)
         last, last_step, last_time = self._last_finite()
-        if last is not None:
-            kept = f"last finite state: step {last_step} (t={last_time:g})"
-        elif self.keep_last_finite:
-            kept = "the state was already not finite before this call (reset() restarts the simulation)"
-        else:
-            kept = ""
+        kept = f"last finite state: step {last_step} (t={last_time:g})" if last is not None else ""
+        if last is None and self.keep_last_finite:
+            # Nothing to do with the time step: the state came into this call broken.
+            hint = (
+                "the state was already not finite before this call (a NaN or infinity written into "
+                "it, or left by an earlier divergence): reset() restarts the simulation"
+            )
         at = f" (DOF {dof}, its {where})" if dof is not None else ""
         under = f" under {solver}" if solver else ""
         message = (
@@ -542,6 +628,7 @@ class Simulation:
             fastest = self._fastest()
             path, dof, speed = fastest if fastest is not None else ("?", None, 0.0)
             solver, hint = self._solver_and_hint(path, energy=True)
+            self._replay(limit)
             last, last_step, last_time = self._last_finite()
             at = f"; the fastest DOF is {path} DOF {dof} (|v| = {speed:g})" if dof is not None else ""
             under = f" under {solver}" if solver else ""
@@ -593,12 +680,18 @@ class Simulation:
                 )
 
     def reset(self) -> None:
-        """Back to the initial state and time 0 (tuned parameters are kept)."""
+        """Back to the initial state and time 0 (tuned parameters are kept, and checked)."""
+        with self._lock:
+            self._reset()
+
+    def _reset(self) -> None:
+        self._param_guard.check()
         for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.role in ("state", "scratch"):
                 view[:] = buffer.initial
         self._native.time = 0.0
         self._steps = 0
+        self._kept = None
         self._native.init()
         self._init_values = [view.copy() for _, view in self._init_params]
 
@@ -611,13 +704,9 @@ class Simulation:
         return [s.info for s in self._states.values()]
 
     def __getitem__(self, path: str) -> State:
-        key = path if path.startswith("/") else "/" + path
-        if key in self._states:
-            return self._states[key]
-        named = [s for s in self._states.values() if s.info.name == path]
-        if len(named) == 1:
-            return named[0]
-        raise KeyError(f"no MechanicalObject {path!r}; the scene has: {', '.join(self._states)}")
+        """A MechanicalObject by its path (``"/pendulum/dofs"``, ``"pendulum/dofs"``, or its unique
+        end, ``"dofs"``: see sofac.paths)."""
+        return self._states[paths.resolve(path, self._states, "MechanicalObject")]
 
     def param(self, key: str, *, recompile: bool = False) -> np.ndarray:
         """A tunable parameter (``"/pendulum/spring.stiffness"``, ``"/.gravity"``, ``"/.dt"``) as a view.
@@ -628,7 +717,10 @@ class Simulation:
         ``reset()``, and ``step()`` raises ParameterNeedsReset if one was changed without it.
         Raises PrunedEffectError for a parameter whose effect was compiled out (zero gravity),
         unless ``recompile``: then the scene is recompiled with every effect kept and the
-        simulation goes on from where it is (see ``recompile()``)."""
+        simulation goes on from where it is (see ``recompile()``). ``key`` may also be written
+        without its leading slash, or by its unique end (``"spring.stiffness"``: see sofac.paths)."""
+        params = [b.key for b in self.spec.buffers if b.role == "param"]
+        key = paths.resolve(key, [*params, *(k for k in self.spec.pruned if k not in params)], "parameter")
         if key in self.spec.pruned:
             if not recompile:
                 raise PrunedEffectError(
@@ -637,11 +729,11 @@ class Simulation:
                     "(the state carries over), or load the scene with sofac.load(path, prune=False)"
                 )
             self.recompile(prune=False)
-        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
-            if buffer.key == key and buffer.role == "param":
-                return view
-        names = ", ".join(b.key for b in self.spec.buffers if b.role == "param")
-        raise KeyError(f"no parameter {key!r}; parameters: {names}")
+        return next(
+            view
+            for buffer, view in zip(self.spec.buffers, self._views, strict=True)
+            if buffer.key == key and buffer.role == "param"
+        )
 
     def recompile(self, *, prune: bool = False) -> None:
         """Recompile the scene (``prune=False``: with the effects it compiled out, such as a zero
@@ -677,14 +769,12 @@ class Simulation:
 
     def output(self, key: str) -> np.ndarray:
         """A read-only view of a value the step computes, such as a VariationalSymplecticSolver's
-        ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included)."""
-        for buffer, view in zip(self.spec.buffers, self._views, strict=True):
-            if buffer.key == key and buffer.role == "state":
-                out = view.view()
-                out.flags.writeable = False
-                return out
-        names = ", ".join(b.key for b in self.spec.buffers if b.role == "state")
-        raise KeyError(f"no output {key!r}; outputs: {names}")
+        ``"/node/solver.hamiltonianEnergy"`` (any buffer restored by reset(): states included; the
+        path as sofac.paths reads it)."""
+        outputs = {b.key: v for b, v in zip(self.spec.buffers, self._views, strict=True) if b.role == "state"}
+        out = outputs[paths.resolve(key, outputs, "output")].view()
+        out.flags.writeable = False
+        return out
 
     def params(self) -> dict[str, np.ndarray]:
         return {b.key: v for b, v in zip(self.spec.buffers, self._views, strict=True) if b.role == "param"}

@@ -7,10 +7,11 @@ a stored run spec, without parsing, checking or planning it again (``warm.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
+from sofac.param_rules import ParamRule
 
 if TYPE_CHECKING:
     from sofac.front.model import Component
@@ -82,6 +83,7 @@ class RunSpec:
     threads: int
     rigid_model: str
     interactive: bool  # compiled with the point forces an interactive viewer pulls with
+    rules: dict[str, ParamRule] = field(default_factory=dict)  # parameter key -> its field's rule
 
     def index(self, key: str) -> int:
         return next(i for i, b in enumerate(self.buffers) if b.key == key)

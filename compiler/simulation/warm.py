@@ -29,13 +29,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sofac import __version__
+from sofac import __version__, scene_warnings
 from sofac.build import compiler as build
-from sofac.front.datafiles import default_data_roots
+from sofac.diagnostics import Diagnostic
+from sofac.front.datafiles import default_data_roots, is_file
+from sofac.param_rules import ParamRule
 from sofac.resources import cache_dir, resource_dir
 from sofac.simulation.runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
-FORMAT = 1
+FORMAT = 2  # 2: the scene's warnings are kept, so that a warm load issues them too
 # Environment variables that change what a scene compiles to (see build.py and datafiles.py).
 ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 
@@ -44,6 +46,7 @@ ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 class Record:
     spec: RunSpec
     built: build.Built
+    warnings: tuple[Diagnostic, ...] = ()
 
 
 @functools.cache
@@ -93,7 +96,7 @@ def _sha256(path: Path) -> str | None:
 
 def _unchanged(path: Path, digest: str | None) -> bool:
     """A file read before still has its content; a candidate absent before is still absent."""
-    return _sha256(path) == digest if digest is not None else not path.is_file()
+    return _sha256(path) == digest if digest is not None else not is_file(path)
 
 
 def _options(
@@ -123,14 +126,24 @@ def lookup(path: str | Path, **options: Any) -> Record | None:
                 return None
             arrays = [stored[f"b{i}"] for i in range(len(meta["spec"]["buffers"]))]
         return Record(
-            _spec_from_json(meta["spec"], arrays), build.Built(library, meta["build_key"], True, 0.0)
+            _spec_from_json(meta["spec"], arrays),
+            build.Built(library, meta["build_key"], True, 0.0),
+            scene_warnings.from_json(meta["warnings"]),
         )
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         # No record, or a damaged one: a miss
         return None
 
 
-def store(path: str | Path, spec: RunSpec, built: build.Built, checked: Any, **options: Any) -> None:
+def store(
+    path: str | Path,
+    spec: RunSpec,
+    built: build.Built,
+    checked: Any,
+    *,
+    warnings: Sequence[Diagnostic] = (),
+    **options: Any,
+) -> None:
     """Record a scene just compiled; a failure to write only costs the next load its speed."""
     scene = checked.scene
     dependencies: list[tuple[str, str | None]] = [(str(p), _sha256(p)) for p in scene.sources]
@@ -143,6 +156,7 @@ def store(path: str | Path, spec: RunSpec, built: build.Built, checked: Any, **o
         "build_key": built.key,
         "dependencies": dependencies,
         "spec": _spec_to_json(spec),
+        "warnings": scene_warnings.to_json(warnings),
     }
     arrays = {f"b{i}": b.initial for i, b in enumerate(spec.buffers)}
     target = _file(_key(Path(os.path.realpath(path)), _options(**options)))
@@ -171,6 +185,7 @@ def _spec_to_json(spec: RunSpec) -> dict[str, Any]:
         "threads": spec.threads,
         "rigid_model": spec.rigid_model,
         "interactive": spec.interactive,
+        "rules": {key: dataclasses.asdict(rule) for key, rule in spec.rules.items()},
     }
 
 
@@ -190,4 +205,5 @@ def _spec_from_json(meta: dict[str, Any], arrays: list[np.ndarray]) -> RunSpec:
         int(meta["threads"]),
         str(meta["rigid_model"]),
         bool(meta["interactive"]),
+        {key: ParamRule(**rule) for key, rule in meta["rules"].items()},
     )

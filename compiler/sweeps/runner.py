@@ -4,7 +4,8 @@
 returns an :class:`xarray.Dataset` with one entry per run along the ``run`` dimension, the swept
 parameters as coordinates of ``run``, the recorded quantities sampled every ``every`` steps along
 ``sample`` (with their times in the ``time`` coordinate), and per run its ``status`` ("ok",
-"diverged", "failed"), ``message``, ``diverged_step`` and ``wall_seconds``.
+"diverged", "failed", or "invalid": a value its field's rule refuses, as in a scene file),
+``message``, ``diverged_step`` and ``wall_seconds``.
 
 Runs are Dask tasks (distributed): an embedded ``LocalCluster`` by default (one single-threaded
 worker process per core, BLAS pinned to one thread), or any scheduler given by address. A task
@@ -41,9 +42,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from sofac import paths
 from sofac.diagnostics import SofacError
 
-STATUSES = ("ok", "diverged", "failed")
+STATUSES = ("ok", "diverged", "failed", "invalid")
 FIELDS = ("position", "velocity", "force")
 ENERGY = "energy"
 #: Environment of each worker process: single-threaded BLAS/OpenMP, so that runs neither fight over
@@ -162,18 +164,13 @@ def resolve_parameter(text: str, sizes: Mapping[str, int | None]) -> Parameter:
     component's name is unique) among the scene's tunable parameters ``sizes`` ({key: length})."""
     match = _COMPONENT.match(text.strip())
     base, component = (match.group(1), int(match.group(2))) if match else (text.strip(), None)
-    candidates = [k for k in sizes if k == base or k == "/" + base.lstrip("/")]
-    if not candidates:
-        candidates = [k for k in sizes if k.endswith("/" + base.lstrip("/"))]
-    if len(candidates) != 1:
-        listing = ", ".join(sizes)
-        problem = "is ambiguous" if candidates else "is not a tunable parameter of this scene"
+    try:
+        key = paths.resolve(base, sizes, "tunable parameter")
+    except paths.UnknownPath as error:
         raise SweepError(
-            f"--param {text}: {problem}; give one of: {listing} (fields computed when the scene is "
-            "compiled, such as meshes or masses from a density, need one compilation per value: "
-            "sweep over scene files instead)"
-        )
-    key = candidates[0]
+            f"--param {text}: {error} (fields computed when the scene is compiled, such as meshes or "
+            "masses from a density, need one compilation per value: sweep over scene files instead)"
+        ) from None
     size = sizes[key]
     if size is None:  # a parameter compiled out (the caller says so): nothing to check its index against
         return Parameter(key, component)
@@ -219,17 +216,17 @@ def resolve_record(text: str, states: Mapping[str, int]) -> Record:
             f"--record {text}: use PATH.FIELD with FIELD one of {', '.join(FIELDS)} (PATH a "
             f"MechanicalObject: {', '.join(states)}), optionally [DOF,...], or 'energy'"
         )
-    found = [s for s in states if s == path or s == "/" + path.lstrip("/") or s.endswith("/" + path)]
-    if len(found) != 1:
-        problem = "is ambiguous" if found else "is not a MechanicalObject of this scene"
-        raise SweepError(f"--record {text}: {path} {problem}; the scene has: {', '.join(states)}")
+    try:
+        found = paths.resolve(path, states, "MechanicalObject")
+    except paths.UnknownPath as error:
+        raise SweepError(f"--record {text}: {error}") from None
     selected = None
     if dofs is not None:
         selected = tuple(int(d) for d in dofs.replace(",", " ").split())
-        bad = [d for d in selected if d >= states[found[0]]]
+        bad = [d for d in selected if d >= states[found]]
         if bad or not selected:
-            raise SweepError(f"--record {text}: {found[0]} has DOFs 0 to {states[found[0]] - 1}")
-    return Record(found[0], name, selected)
+            raise SweepError(f"--record {text}: {found} has DOFs 0 to {states[found] - 1}")
+    return Record(found, name, selected)
 
 
 # --- one run -------------------------------------------------------------------------------------
@@ -260,6 +257,7 @@ _compiled: dict[tuple[str, bool, str, tuple[str, ...]], Any] = {}  # per worker 
 def _compiled_scene(job: Job) -> Any:
     """The scene compiled in this process (built once per node into its cache, under a file lock)."""
     from sofac.pipeline import compile_scene
+    from sofac.scene_warnings import quiet
 
     key = (job.scene, job.prune, job.rigid_model, job.data_roots)
     if key not in _compiled:
@@ -268,12 +266,13 @@ def _compiled_scene(job: Job) -> Any:
                 f"{job.scene}: no such file on worker host {socket.gethostname()}; workers read the "
                 "scene from the same path as the client (put it on a shared folder)"
             )
-        compiled = compile_scene(
-            job.scene,
-            data_roots=[Path(p) for p in job.data_roots],
-            prune=job.prune,
-            rigid_model=job.rigid_model,
-        )
+        with quiet():  # the client issued them when it planned the sweep
+            compiled = compile_scene(
+                job.scene,
+                data_roots=[Path(p) for p in job.data_roots],
+                prune=job.prune,
+                rigid_model=job.rigid_model,
+            )
         if scene_fingerprint(compiled) != job.fingerprint:
             raise SweepError(f"{job.scene} differs on host {socket.gethostname()} from the client's copy")
         _compiled[key] = compiled
@@ -290,6 +289,7 @@ def scene_fingerprint(compiled: Any) -> str:
 
 def run_one(job: Job, values: Sequence[float]) -> dict[str, Any]:
     """Run one parameter set. Never raises: failures come back as ``status``/``message``."""
+    from sofac.param_rules import InvalidParameter
     from sofac.simulation.loader import SimulationDiverged
 
     started = time.perf_counter()
@@ -315,6 +315,8 @@ def run_one(job: Job, values: Sequence[float]) -> dict[str, Any]:
                 arrays[record.name][index] = _read(sim, record)
     except SimulationDiverged as error:
         out.update(status="diverged", message=str(error).splitlines()[0], diverged_step=error.step)
+    except InvalidParameter as error:  # not run: the others go on
+        out.update(status="invalid", message=str(error))
     except Exception as error:  # recorded, never fatal to the sweep: the other runs go on
         out.update(status="failed", message=_describe(error))
     out["wall_seconds"] = time.perf_counter() - started

@@ -356,7 +356,17 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
         # SOFA's order: every corner pair (p, q), p < q (a hexahedron's 28, a SparseGridTopology's
         # only elements: it derives no edges or quads)
         pairs = [(p, q) for p in range(corners) for q in range(p + 1, corners)]
-        for element in np.asarray(elements, dtype=np.int64).reshape(-1, corners):
+        cells = np.asarray(elements, dtype=np.int64).reshape(-1, corners)
+        if cells.size and int(cells.max()) >= len(rest):
+            planner.diags.add(
+                "E218",
+                component.loc,
+                f"{origin_of(component)}: its topology's {field_name} use point {int(cells.max())}, but "
+                f"{state.path} has {len(rest)} points",
+                "give the state the topology's points (or none, to take them from the topology)",
+            )
+            return
+        for element in cells:
             for a, b in pairs:
                 i, j = sorted((int(element[a]), int(element[b])))
                 if (i, j) in seen or i == j:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ...limits import MAX_GENERATED_POINTS
 from ..fields import Bool, Coords, Int, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import ALL_TYPES, MUST_BE_POSITIVE
@@ -73,7 +74,13 @@ MECHANICAL_OBJECT = ComponentSpec(
             "restScale", Real(), 1.0, "scale of the rest shape (<1 pre-stresses)", valid=MUST_BE_POSITIVE
         ),
         FieldSpec("useTopology", Bool(), True, "take size/positions from the node's topology"),
-        FieldSpec("size", Int(nonnegative=True), 0, "number of DOFs"),
+        FieldSpec(
+            "size",
+            Int(nonnegative=True),
+            0,
+            "number of DOFs",
+            valid=(lambda n: n <= MAX_GENERATED_POINTS, f"must be at most {MAX_GENERATED_POINTS}"),
+        ),
         FieldSpec("reserve", Int(nonnegative=True), 0, "capacity to reserve"),
         FieldSpec("showObject", Bool(), False),
         FieldSpec("showObjectScale", Real(), 0.1),
