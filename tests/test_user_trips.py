@@ -15,9 +15,9 @@ import sofac
 from sofac.cache_errors import CacheNotWritable
 from sofac.cli.main import main
 from sofac.param_rules import InvalidParameter, ParamRule, check
+from sofac.pipeline import compile_scene
 from sofac.resources import bundled_scene
 from sofac.scene_warnings import SceneWarning, StrictSceneError
-from sofac.simulation.loader import compile_scene
 from sofac.sweeps import runner as sweeps
 
 SPRING = '<SpringForceField template="Vec3d" name="spring" spring="0 1 100 0 1"/>'
