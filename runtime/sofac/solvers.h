@@ -44,7 +44,7 @@ public:
         return sum;
     }
 
-    // a.b on coordinates (positions), as the Newton stopping tests measure |x|.
+    // a.b on coordinates (positions): |x| for the Newton and variational stopping tests.
     double dot_coordinates(const Vector& a, const Vector& b) const {
         double sum = 0.0;
         each([&](auto k, auto type) { sum += sofac::dot(a[k], b[k], points_[k], decltype(type)::coord); });
@@ -91,6 +91,7 @@ public:
         return sum;
     }
 
+    // No rigid frame: coordinates and derivatives share a layout (what the variational solver needs).
     static constexpr bool all_points = (!DataTypes::rigid && ...);
 
 private:
