@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "kernels.h"
+#include "solvers.h"
 #include "types.h"
 
 namespace sofac {
@@ -223,11 +224,8 @@ private:
 // SOFA's CGLinearSolver on an assembled matrix (its CompressedRowSparseMatrix*, SparseMatrix and
 // FullMatrix templates): A = mfact M + kfact K assembled, projected as SOFA's MatrixLinearSystem
 // does (rows and columns of constrained DOFs cleared, diagonal 1), then CG on the global vectors
-// with the arithmetic of SOFA's FullVector (dot products summed in one sequence, p = p beta + r,
-// x += p alpha, r += q (-alpha)) and CGLinearSolver's rules: x0 = 0; before each iteration, stop
-// if |r| / |b| <= tolerance; after the product, stop if p.Ap = 0 or |p.Ap| <= threshold; on the
-// very first solve, neither test stops the first iteration. Sized at creation: a solve allocates
-// nothing.
+// with the arithmetic of SOFA's FullVector (dot products summed in one sequence) and
+// CGLinearSolver's rules (sofac::conjugate_gradient). Sized at creation: a solve allocates nothing.
 template <int B>
 struct AssembledCg {
     BlockRows<B> matrix;
@@ -260,40 +258,14 @@ struct AssembledCg {
         for (Index slot : unit_) matrix.values[slot] = 1.0;
     }
 
-    // Solves A solution = rhs.
+    // Solves A solution = rhs: sofac::conjugate_gradient on the global vector (one state of n
+    // scalars: dot products summed in one sequence, as SOFA's FullVector), the product fused with p.q.
     void solve(std::int64_t max_iterations, double tolerance, double threshold, bool first_solve) {
-        const Index n = matrix.n;
-        double* x = solution.data();
-        double* r = r_.data();
-        double* p = p_.data();
-        double* q = q_.data();
-        std::fill(x, x + n, 0.0);
-        std::copy(rhs.begin(), rhs.end(), r);
-        double rho = 0.0;  // r.r, summed in index order as each pass that changes r ends
-        for (Index i = 0; i < n; ++i) rho += r[i] * r[i];
-        const double normb = std::sqrt(rho);
-        if (normb == 0.0) return;
-        double rho_previous = 0.0;
-        for (std::int64_t iteration = 1; iteration <= max_iterations; ++iteration) {
-            const bool may_stop = !(iteration == 1 && first_solve);
-            if (std::sqrt(rho) / normb <= tolerance && may_stop) break;
-            if (iteration == 1) {
-                std::copy(r, r + n, p);
-            } else {
-                const double beta = rho / rho_previous;
-                for (Index i = 0; i < n; ++i) p[i] = p[i] * beta + r[i];
-            }
-            const double den = matrix.multiply(p, q);  // q = A p, and p.q
-            if (den == 0.0 || (std::fabs(den) <= threshold && may_stop)) break;
-            const double alpha = rho / den;
-            rho_previous = rho;
-            rho = 0.0;
-            for (Index i = 0; i < n; ++i) {
-                x[i] += p[i] * alpha;
-                r[i] += q[i] * -alpha;
-                rho += r[i] * r[i];
-            }
-        }
+        const StateSpace<Vec1d> space({matrix.n});
+        std::copy(rhs.begin(), rhs.end(), r_.begin());
+        const StateSpace<Vec1d>::Vector x{solution.data()}, r{r_.data()}, p{p_.data()}, q{q_.data()};
+        conjugate_gradient(space, {max_iterations, tolerance, threshold, first_solve}, x, r, p, q,
+                           [&] { return matrix.multiply(p_.data(), q_.data()); });
     }
 
 private:
