@@ -39,7 +39,8 @@ CORPUS_SAMPLE = [
     "Component/LinearSystem/CompositeLinearSystem.scn",
     "Component/SolidMechanics/FEM/TriangularFEMForceFieldOptim.scn",
     "Component/Mass/MeshMatrixMass.scn",
-    "Component/ODESolver/Backward/StaticSolver.scn",
+    "Component/Mapping/NonLinear/RigidMapping-basic.scn",
+    "Component/LinearSolver/Iterative/FEMBAR_MinResLinearSolver.scn",
     "Component/ODESolver/Backward/NewmarkImplicitSolver.scn",
     "Component/ODESolver/Backward/VariationalSymplecticSolver.scn",
 ]
