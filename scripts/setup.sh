@@ -100,6 +100,9 @@ if Path(sofac.__file__).resolve().parent != root / "compiler":
     sys.exit(1)
 if metadata.version("sofac") != project["version"] or sofac.__version__ != project["version"]:
     sys.exit(1)
+scripts = {e.name: e.value for e in metadata.entry_points(group="console_scripts")}
+if any(scripts.get(name) != target for name, target in project["scripts"].items()):
+    sys.exit(1)  # installed from an older pyproject.toml: its console script points elsewhere
 for requirement in [*project["dependencies"], *project["optional-dependencies"]["test"]]:
     metadata.version(re.match(r"[A-Za-z0-9._-]+", requirement).group(0))  # raises when missing
 PY
@@ -117,4 +120,4 @@ fi
 # The host module (the pybind11 bridge to compiled scenes) is built once per installation: build it
 # now, so that the first scene only pays for its own compilation.
 log "building sofac's host module into its cache (once)"
-"$PYTHON" -c "from sofac import build; build.build_host(quiet=True)"
+"$PYTHON" -c "from sofac.build import compiler; compiler.build_host(quiet=True)"

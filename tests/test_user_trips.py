@@ -814,7 +814,7 @@ def test_the_host_build_names_itself_and_the_setup_script(
 
 def test_setup_builds_the_host_module() -> None:
     setup = (Path(__file__).resolve().parents[1] / "scripts" / "setup.sh").read_text()
-    assert "build.build_host(quiet=True)" in setup
+    assert "compiler.build_host(quiet=True)" in setup
 
 
 # --- 9. a Python scene is read as one, never as broken XML -------------------------------------------
