@@ -169,7 +169,7 @@ class _Checker:
                 self._check_indices(checked)
         self._check_plugins()
         for checked in self.checked:
-            if checked.spec is not None and checked.spec.kernel == "uniform_mass":
+            if checked.spec is not None and checked.spec.lowering == "uniform_mass":
                 self._check_rigid_inertia(checked)
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)
@@ -1080,7 +1080,7 @@ class _Checker:
         """The DOFs of ``state`` that a FixedProjectiveConstraint holds."""
         fixed: set[int] = set()
         for other in self.checked:
-            if other.state is not state or other.spec is None or other.spec.kernel != "fixed":
+            if other.state is not state or other.spec is None or other.spec.lowering != "fixed":
                 continue
             if self.value(other, "fixAll"):
                 return set(range(self.state_size(state) or 0))

@@ -6,7 +6,7 @@ solver its *group* (section 5.1 of the SOFA introduction): the independent state
 the mapped states below them in parent → child order, and the kernel calls of one step
 (propagate down the mappings, accumulate forces, map forces up with Jᵀ, a = M⁻¹f, project).
 
-Each component is lowered by the function its spec names (``ComponentSpec.kernel``); a component
+Each component is lowered by the function its spec names (``ComponentSpec.lowering``); a component
 that takes part in the step but has no lowering is reported as unsupported (E222), with its line.
 Nothing from the scene text reaches C++: identifiers are made here from counters, and every
 number and array is a buffer handed to the instance when it is created.
@@ -204,7 +204,7 @@ class Planner:
                 self.ignored.append(
                     (checked.component, "no other collision model to touch: no contact possible")
                 )
-            elif checked.category in _STEP_CATEGORIES and not spec.kernel:
+            elif checked.category in _STEP_CATEGORIES and not spec.lowering:
                 if self._is_visual_mapping(checked):
                     self.ignored.append((checked.component, "visual mapping: computed only for rendering"))
                     continue
@@ -285,7 +285,7 @@ class Planner:
         mapping = self.checked.mapping_of(state)
         if mapping is None or mapping.spec is None:
             return 0
-        if mapping.spec.kernel not in ("distance_mapping", "distance_multi_mapping"):
+        if mapping.spec.lowering not in ("distance_mapping", "distance_multi_mapping"):
             return 0
         topology = _topology_of(self, mapping)
         edges = self.value(topology, "edges") if topology is not None else None
@@ -345,7 +345,7 @@ class Planner:
                         state.component, name, np.zeros_like(like.initial), columns=columns, role="scratch"
                     )
         for checked in self.checked:
-            lowering = LOWERINGS.get(checked.spec.kernel) if checked.spec else None
+            lowering = LOWERINGS.get(checked.spec.lowering) if checked.spec else None
             if lowering is None or checked.category in (Category.STATE, Category.ODE_SOLVER):
                 continue
             lowering(self, checked, owner)

@@ -63,7 +63,7 @@ def _subtree(node: Any) -> list[Any]:
 
 
 def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group | None:
-    kernel = solver.spec.kernel if solver.spec else ""
+    kernel = solver.spec.lowering if solver.spec else ""
     scheme = {
         "euler_explicit": "euler",
         "runge_kutta2": "rk2",
@@ -90,7 +90,7 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
         if not isinstance(linear, Component):
             linear = planner.checked.linear_solver_below(solver.component.node)
         spec = planner.checked.of(linear).spec if linear is not None else None
-        if spec is not None and spec.kernel == "direct":
+        if spec is not None and spec.lowering == "direct":
             group.linear_solver, group.assembled = linear, True
             group.llt = spec.role == "llt"
     return group
@@ -121,7 +121,7 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
     }
     if isinstance(preconditioner, Component) and planner.value(component, "use_precond") is not False:
         spec = planner.checked.of(preconditioner).spec
-        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.kernel if spec else "")
+        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.lowering if spec else "")
         if block == 4 and not warp_is_identity(planner, planner.checked.of(preconditioner), group):
             return False
         if block is None:
@@ -183,7 +183,7 @@ def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> 
         )
         return False
     spec = planner.checked.of(inner).spec if isinstance(inner, Component) else None
-    if spec is None or spec.kernel != "direct":
+    if spec is None or spec.lowering != "direct":
         planner.unsupported(warp, "its linearSolver must be a sparse direct solver")
         return False
     group.llt = spec.role == "llt"
@@ -335,9 +335,9 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
     checked_linear = planner.checked.of(linear) if linear is not None else None
     if checked_linear is None or checked_linear.spec is None:
         return False  # E221, reported by the checker
-    if checked_linear.spec.kernel == "pcg":
+    if checked_linear.spec.lowering == "pcg":
         return plan_pcg(planner, checked_linear, group)
-    if checked_linear.spec.kernel == "minres":
+    if checked_linear.spec.lowering == "minres":
         group.linear_solver = linear
         group.minres = {
             "iterations": planner.buffer(
@@ -348,15 +348,15 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
             ),
         }
         return True
-    if checked_linear.spec.kernel not in ("cg", "direct", "precomputed"):
+    if checked_linear.spec.lowering not in ("cg", "direct", "precomputed"):
         planner.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
         return False
     group.linear_solver = linear
-    if checked_linear.spec.kernel in ("direct", "precomputed"):
+    if checked_linear.spec.lowering in ("direct", "precomputed"):
         if not assembles_everything(planner, checked_linear):
             return False
         group.assembled = group.direct = True
-        group.factor_once = checked_linear.spec.kernel == "precomputed"
+        group.factor_once = checked_linear.spec.lowering == "precomputed"
         group.llt = checked_linear.spec.role == "llt"
         return True
     if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:

@@ -137,10 +137,11 @@ class ComponentSpec:
     # Name of the front-end evaluator (in evaluate.py) that computes this component's output Data
     # at compile time: "mesh_loader", "sphere_loader", "grid", "box_roi", ... ("" = none).
     compute: str = ""
-    # Name of the lowering (in plan.py) that turns it into kernel calls of the compiled step;
-    # "" = the compiler cannot compile it yet (components with no part in the step need none).
-    kernel: str = ""
-    # A finer kind that later stages distinguish inside a category or kernel, e.g. which of SOFA's
+    # Name of the lowering (plan/lower/__init__.py LOWERINGS) that turns it into calls of the
+    # runtime's kernels in the compiled step; "" = the compiler cannot compile it yet (components
+    # with no part in the step need none).
+    lowering: str = ""
+    # A finer kind that later stages distinguish inside a category or lowering, e.g. which of SOFA's
     # barycentric mappers a topology gets ("regular_grid", "sparse_grid", "dynamic"; "" = mesh),
     # "corotational" vs "linear" element force fields, "gravity" and "nodal_mass_density" data.
     role: str = ""

@@ -886,7 +886,9 @@ class _SceneBuilder:
             elif category is Category.COLLISION_MODEL:
                 self._collision(item, scene)
             elif (
-                category is Category.MAPPING and item.spec is not None and item.spec.kernel == "rigid_mapping"
+                category is Category.MAPPING
+                and item.spec is not None
+                and item.spec.lowering == "rigid_mapping"
             ):
                 self._attachment(item, scene)
         return scene
@@ -1012,7 +1014,7 @@ class _SceneBuilder:
     # --- mappings ---------------------------------------------------------------------------------
     def _feed(self, mapping: Any, points: np.ndarray, path: str) -> _Feed | None:
         name = mapping.spec.name if mapping.spec is not None else mapping.component.type_name
-        kernel = mapping.spec.kernel if mapping.spec is not None else ""
+        kernel = mapping.spec.lowering if mapping.spec is not None else ""
         source = mapping.links.get("input")
         if not isinstance(source, Component):
             self.warnings.append(f"{path}: its {name} has no input state; drawn at rest")

@@ -65,7 +65,7 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     state, group = found
     component = checked.component
     assert checked.spec is not None
-    prefix, kind, corners, sizes = FEM_KINDS[checked.spec.kernel]
+    prefix, kind, corners, sizes = FEM_KINDS[checked.spec.lowering]
     if state.datatype.name != "Vec3d":
         planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
         return

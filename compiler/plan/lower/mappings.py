@@ -338,7 +338,7 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
     if parent.datatype is not child.datatype:
         planner.unsupported(checked, f"{component.type_name} between different templates is not compiled yet")
         return
-    if checked.spec and checked.spec.kernel == "identity_mapping":
+    if checked.spec and checked.spec.lowering == "identity_mapping":
         indices = np.arange(parent.size, dtype=np.int64)
     else:
         indices = _indices(planner, checked, "indices", 0, all_if_empty=False)

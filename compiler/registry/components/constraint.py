@@ -28,7 +28,7 @@ _FIXED_FIELDS = (
 
 FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="FixedProjectiveConstraint",
-    kernel="fixed",
+    lowering="fixed",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Keeps the selected DOFs at their initial positions (whole DOF: every translation/rotation).",
@@ -42,7 +42,7 @@ FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 PARTIAL_FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PartialFixedProjectiveConstraint",
-    kernel="partial_fixed",
+    lowering="partial_fixed",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Fixes the selected DOFs along some coordinates only (one 0/1 flag per Deriv coordinate).",
@@ -62,7 +62,7 @@ PARTIAL_FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="LineProjectiveConstraint",
-    kernel="line_or_plane",
+    lowering="line_or_plane",
     role="line",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
@@ -83,7 +83,7 @@ LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PlaneProjectiveConstraint",
-    kernel="line_or_plane",
+    lowering="line_or_plane",
     role="plane",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
@@ -104,7 +104,7 @@ PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
 
 POINT_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PointProjectiveConstraint",
-    kernel="point_constraint",
+    lowering="point_constraint",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a fixed target point.",
@@ -126,7 +126,7 @@ _KEYED = ("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d")
 
 LINEAR_VELOCITY_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="LinearVelocityProjectiveConstraint",
-    kernel="linear_velocity",
+    lowering="linear_velocity",
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Imposes a velocity on the selected DOFs, interpolated linearly between key times.",

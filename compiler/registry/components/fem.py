@@ -31,7 +31,7 @@ _GATHER = (
 
 TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedronFEMForceField",
-    kernel="tetra_fem",
+    lowering="tetra_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Linear tetrahedra (constant strain), small or corotational (large/polar/svd). Uses the "
@@ -86,7 +86,7 @@ TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
 
 TETRAHEDRAL_COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedralCorotationalFEMForceField",
-    kernel="tetracorot_fem",
+    lowering="tetracorot_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Corotational linear tetrahedra on a dynamic TetrahedronSetTopology (same physics as "
@@ -148,7 +148,7 @@ _HEXAHEDRON_FIELDS = (
 
 HEXAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
     name="HexahedronFEMForceField",
-    kernel="hexa_fem",
+    lowering="hexa_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Trilinear hexahedra (8-node bricks), small or corotational, on the topology's hexahedra.",
@@ -161,7 +161,7 @@ HEXAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
 
 HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
     name="HexahedronFEMForceFieldAndMass",
-    kernel="hexa_fem",
+    lowering="hexa_fem",
     role="and_mass",
     category=Category.MASS,
     module=_MODULE,
@@ -180,7 +180,7 @@ HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
 
 TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
     name="TriangularFEMForceField",
-    kernel="trifem",
+    lowering="trifem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Constant-strain membrane triangles (plane stress) on a TriangleSetTopology, corotational for "
@@ -209,7 +209,7 @@ TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
 
 TRIANGULAR_FEM_FORCE_FIELD_OPTIM = ComponentSpec(
     name="TriangularFEMForceFieldOptim",
-    kernel="trifem_optim",
+    lowering="trifem_optim",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Optimised corotational membrane triangles (large displacements only).",
@@ -279,7 +279,7 @@ _ELEMENT_FEM_FIELDS = (
 COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="CorotationalFEMForceField",
     role="corotational",
-    kernel="element_fem",
+    lowering="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Corotational linear elasticity for one element type, chosen by the second template "
@@ -301,7 +301,7 @@ COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
 
 LINEAR_SMALL_STRAIN_FEM_FORCE_FIELD = ComponentSpec(
     name="LinearSmallStrainFEMForceField",
-    kernel="element_fem",
+    lowering="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
     doc="Small-strain linear elasticity for one element type, chosen by the second template argument.",

@@ -79,7 +79,7 @@ _UNIFORM_STIFFNESS = (
 
 SPRING_FORCE_FIELD = ComponentSpec(
     name="SpringForceField",
-    kernel="springs",
+    lowering="springs",
     category=Category.INTERACTION_FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Linear springs between DOFs of object1 and object2 (possibly the same state), with damping "
@@ -113,7 +113,7 @@ _mesh_cubes = _per_element("cubes", 0.0, 0.0, "hexahedron")
 
 MESH_SPRING_FORCE_FIELD = ComponentSpec(
     name="MeshSpringForceField",
-    kernel="mesh_springs",
+    lowering="mesh_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="One spring per vertex pair of the node's topology elements; per-spring ks = stiffness / L0 and "
@@ -174,7 +174,7 @@ _GRID_KINDS = ("lines", "quads", "cubes")
 
 REGULAR_GRID_SPRING_FORCE_FIELD = ComponentSpec(
     name="RegularGridSpringForceField",
-    kernel="grid_springs",
+    lowering="grid_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs along the edges, face diagonals and cube diagonals of the node's RegularGridTopology, "
@@ -208,7 +208,7 @@ REGULAR_GRID_SPRING_FORCE_FIELD = ComponentSpec(
 
 REST_SHAPE_SPRINGS_FORCE_FIELD = ComponentSpec(
     name="RestShapeSpringsForceField",
-    kernel="rest_shape_springs",
+    lowering="rest_shape_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs pulling DOFs back to their rest positions (or to another state's positions); for "
@@ -264,7 +264,7 @@ JOINT_SPRING_FORCE_FIELD = ComponentSpec(
 
 QUAD_BENDING_SPRINGS = ComponentSpec(
     name="QuadBendingSprings",
-    kernel="quad_bending_springs",
+    lowering="quad_bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs across the quads of a mesh that resist bending.",
@@ -283,7 +283,7 @@ QUAD_BENDING_SPRINGS = ComponentSpec(
 
 TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     name="TriangularBendingSprings",
-    kernel="triangular_bending_springs",
+    lowering="triangular_bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Springs between the opposite vertices of adjacent triangles, resisting bending.",
@@ -302,7 +302,7 @@ TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
 
 FAST_TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     name="FastTriangularBendingSprings",
-    kernel="bending_springs",
+    lowering="bending_springs",
     category=Category.FORCEFIELD,
     module=_SPRING_MODULE,
     doc="Bending springs across triangle edges (linear bending model).",
@@ -320,7 +320,7 @@ FAST_TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
 
 CONSTANT_FORCE_FIELD = ComponentSpec(
     name="ConstantForceField",
-    kernel="constant_force",
+    lowering="constant_force",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="A constant force on selected DOFs: `forces` (one, or per index) or `totalForce` spread evenly.",
@@ -344,7 +344,7 @@ CONSTANT_FORCE_FIELD = ComponentSpec(
 
 PLANE_FORCE_FIELD = ComponentSpec(
     name="PlaneForceField",
-    kernel="plane_force",
+    lowering="plane_force",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Penalty repulsion of points below the plane x.normal = d: f = -stiffness delta n + damping.",
@@ -389,7 +389,7 @@ ELLIPSOID_FORCE_FIELD = ComponentSpec(
 
 INTERACTION_ELLIPSOID_FORCE_FIELD = ComponentSpec(
     name="InteractionEllipsoidForceField",
-    kernel="interaction_ellipsoid",
+    lowering="interaction_ellipsoid",
     category=Category.INTERACTION_FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Ellipsoid repulsion whose frame is a rigid DOF of object2.",
@@ -409,7 +409,7 @@ INTERACTION_ELLIPSOID_FORCE_FIELD = ComponentSpec(
 
 TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
     name="TrianglePressureForceField",
-    kernel="triangle_pressure",
+    lowering="triangle_pressure",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Pressure on selected triangles of the topology.",
@@ -430,7 +430,7 @@ TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
 
 UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
     name="UniformVelocityDampingForceField",
-    kernel="velocity_damping",
+    lowering="velocity_damping",
     category=Category.FORCEFIELD,
     module=_LOAD_MODULE,
     doc="Viscous damping force -c v on every DOF.",

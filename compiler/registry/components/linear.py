@@ -43,7 +43,7 @@ _VERBOSE_LOG = FieldSpec("verbose", Bool(), doc="alias of printLog", sets=("prin
 
 CG_LINEAR_SOLVER = ComponentSpec(
     name="CGLinearSolver",
-    kernel="cg",
+    lowering="cg",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="Unpreconditioned conjugate gradient; matrix-free with GraphScattered (default).",
@@ -69,7 +69,7 @@ CG_LINEAR_SOLVER = ComponentSpec(
 
 PCG_LINEAR_SOLVER = ComponentSpec(
     name="PCGLinearSolver",
-    kernel="pcg",
+    lowering="pcg",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="Preconditioned conjugate gradient (matrix-free), preconditioned by another linear solver.",
@@ -89,7 +89,7 @@ PCG_LINEAR_SOLVER = ComponentSpec(
 
 MIN_RES_LINEAR_SOLVER = ComponentSpec(
     name="MinResLinearSolver",
-    kernel="minres",
+    lowering="minres",
     category=Category.LINEAR_SOLVER,
     module=_ITERATIVE,
     doc="MINRES iterations (symmetric, possibly indefinite systems).",
@@ -103,7 +103,7 @@ MIN_RES_LINEAR_SOLVER = ComponentSpec(
 
 SPARSE_LDL_SOLVER = ComponentSpec(
     name="SparseLDLSolver",
-    kernel="direct",
+    lowering="direct",
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
     doc="Direct sparse L D L^T factorisation of the assembled matrix, every step.",
@@ -121,7 +121,7 @@ SPARSE_LDL_SOLVER = ComponentSpec(
 
 SPARSE_CHOLESKY_SOLVER = ComponentSpec(
     name="SparseCholeskySolver",
-    kernel="direct",
+    lowering="direct",
     role="llt",  # factors L L^T (CHOLMOD's L L^T), where SparseLDLSolver factors L D L^T
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
@@ -137,7 +137,7 @@ SPARSE_CHOLESKY_SOLVER = ComponentSpec(
 
 SPARSE_LU_SOLVER = ComponentSpec(
     name="SparseLUSolver",
-    kernel="direct",
+    lowering="direct",
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
     doc="Direct sparse LU factorisation (CSparse). Moved out of SOFA's main repository into the "
@@ -158,7 +158,7 @@ SPARSE_LU_SOLVER = ComponentSpec(
 def _eigen(name: str, what: str, role: str = "") -> ComponentSpec:
     return ComponentSpec(
         name=name,
-        kernel="direct",
+        lowering="direct",
         role=role,
         category=Category.LINEAR_SOLVER,
         module=_DIRECT,
@@ -220,7 +220,7 @@ SVD_LINEAR_SOLVER = ComponentSpec(
 
 PRECOMPUTED_LINEAR_SOLVER = ComponentSpec(
     name="PrecomputedLinearSolver",
-    kernel="precomputed",
+    lowering="precomputed",
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
     doc="Solves with the system matrix of the first step, factorised once (SOFA precomputes its "
@@ -238,7 +238,7 @@ PRECOMPUTED_LINEAR_SOLVER = ComponentSpec(
 
 JACOBI_PRECONDITIONER = ComponentSpec(
     name="JacobiPreconditioner",
-    kernel="jacobi",
+    lowering="jacobi",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Diagonal (Jacobi) preconditioner.",
@@ -252,7 +252,7 @@ JACOBI_PRECONDITIONER = ComponentSpec(
 
 BLOCK_JACOBI_PRECONDITIONER = ComponentSpec(
     name="BlockJacobiPreconditioner",
-    kernel="block_jacobi",
+    lowering="block_jacobi",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Block-diagonal (3x3 blocks) Jacobi preconditioner.",
@@ -265,7 +265,7 @@ BLOCK_JACOBI_PRECONDITIONER = ComponentSpec(
 
 SSOR_PRECONDITIONER = ComponentSpec(
     name="SSORPreconditioner",
-    kernel="ssor",
+    lowering="ssor",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Symmetric successive over-relaxation preconditioner.",
@@ -282,7 +282,7 @@ SSOR_PRECONDITIONER = ComponentSpec(
 
 WARP_PRECONDITIONER = ComponentSpec(
     name="WarpPreconditioner",
-    kernel="warp",
+    lowering="warp",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Wraps another (precomputed) solver with per-node rotations.",
@@ -295,7 +295,7 @@ WARP_PRECONDITIONER = ComponentSpec(
 
 PRECOMPUTED_WARP_PRECONDITIONER = ComponentSpec(
     name="PrecomputedWarpPreconditioner",
-    kernel="precomputed_warp",
+    lowering="precomputed_warp",
     category=Category.PRECONDITIONER,
     module=_PRECONDITIONER,
     doc="Meant as a precomputed inverse rotated per node each step; SOFA sizes that inverse from its "

@@ -20,7 +20,7 @@ _GEOMETRIC_STIFFNESS = FieldSpec(
 
 BARYCENTRIC_MAPPING = ComponentSpec(
     name="BarycentricMapping",
-    kernel="barycentric_mapping",
+    lowering="barycentric_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child points embedded in the cells of the parent's topology (grid cells, tetrahedra, "
@@ -39,7 +39,7 @@ BARYCENTRIC_MAPPING = ComponentSpec(
 
 SUBSET_MAPPING = ComponentSpec(
     name="SubsetMapping",
-    kernel="subset_mapping",
+    lowering="subset_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child DOF i is parent DOF indices[i] (or matched by position within `radius`).",
@@ -69,7 +69,7 @@ SUBSET_MAPPING = ComponentSpec(
 
 IDENTITY_MAPPING = ComponentSpec(
     name="IdentityMapping",
-    kernel="identity_mapping",
+    lowering="identity_mapping",
     category=Category.MAPPING,
     module=_LINEAR,
     doc="Child = parent, DOF by DOF (Rigid to Vec keeps the positions).",
@@ -92,7 +92,7 @@ IDENTITY_MAPPING = ComponentSpec(
 
 RIGID_MAPPING = ComponentSpec(
     name="RigidMapping",
-    kernel="rigid_mapping",
+    lowering="rigid_mapping",
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="Points (or frames) attached to rigid parent frames: x = c + R(q) p with p in local coordinates.",
@@ -140,7 +140,7 @@ _DISTANCE_FIELDS = (
 
 DISTANCE_MAPPING = ComponentSpec(
     name="DistanceMapping",
-    kernel="distance_mapping",
+    lowering="distance_mapping",
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="One scalar per edge of the topology: its length minus the rest length.",
@@ -153,7 +153,7 @@ DISTANCE_MAPPING = ComponentSpec(
 
 SQUARE_DISTANCE_MAPPING = ComponentSpec(
     name="SquareDistanceMapping",
-    kernel="distance_mapping",
+    lowering="distance_mapping",
     role="square",
     category=Category.MAPPING,
     module=_NONLINEAR,
@@ -173,7 +173,7 @@ SQUARE_DISTANCE_MAPPING = ComponentSpec(
 
 DISTANCE_MULTI_MAPPING = ComponentSpec(
     name="DistanceMultiMapping",
-    kernel="distance_multi_mapping",
+    lowering="distance_multi_mapping",
     category=Category.MULTI_MAPPING,
     module=_NONLINEAR,
     doc="Distances between points of several parent states (edges refer to indexPairs).",

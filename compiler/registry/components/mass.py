@@ -20,7 +20,7 @@ _DENSITY_TEMPLATES = ("Vec3d", "Vec2d", "Vec2d,Vec3d", "Vec1d", "Vec1d,Vec2d", "
 
 UNIFORM_MASS = ComponentSpec(
     name="UniformMass",
-    kernel="uniform_mass",
+    lowering="uniform_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="The same mass for every DOF: vertexMass each, or totalMass spread evenly. One of the two is "
@@ -49,7 +49,7 @@ UNIFORM_MASS = ComponentSpec(
 
 DIAGONAL_MASS = ComponentSpec(
     name="DiagonalMass",
-    kernel="diagonal_mass",
+    lowering="diagonal_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="Lumped mass from the node's topology: each element gives density x measure / nodes to its "
@@ -83,7 +83,7 @@ DIAGONAL_MASS = ComponentSpec(
 
 MESH_MATRIX_MASS = ComponentSpec(
     name="MeshMatrixMass",
-    kernel="mesh_matrix_mass",
+    lowering="mesh_matrix_mass",
     category=Category.MASS,
     module=_MODULE,
     doc="Consistent finite-element mass matrix (vertex and edge terms) from the node's topology; "
@@ -110,7 +110,7 @@ MESH_MATRIX_MASS = ComponentSpec(
 
 FEM_MASS = ComponentSpec(
     name="FEMMass",
-    kernel="fem_mass",
+    lowering="fem_mass",
     category=Category.MASS,
     module=_MODULE,
     doc='Consistent finite-element mass matrix of one element type (template "Vec3d,Tetrahedron" or '

@@ -39,7 +39,7 @@ _VDAMPING = FieldSpec(
 
 EULER_IMPLICIT_SOLVER = ComponentSpec(
     name="EulerImplicitSolver",
-    kernel="euler_implicit",
+    lowering="euler_implicit",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Linearised backward Euler (one linear solve per step, no Newton iterations).",
@@ -62,7 +62,7 @@ EULER_IMPLICIT_SOLVER = ComponentSpec(
 
 EULER_EXPLICIT_SOLVER = ComponentSpec(
     name="EulerExplicitSolver",
-    kernel="euler_explicit",
+    lowering="euler_explicit",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Explicit Euler, symplectic (v first, then x with the new v) by default. Needs a linear solver "
@@ -79,7 +79,7 @@ EULER_EXPLICIT_SOLVER = ComponentSpec(
 
 RUNGE_KUTTA2_SOLVER = ComponentSpec(
     name="RungeKutta2Solver",
-    kernel="runge_kutta2",
+    lowering="runge_kutta2",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Explicit midpoint method on (x, v).",
@@ -90,7 +90,7 @@ RUNGE_KUTTA2_SOLVER = ComponentSpec(
 
 RUNGE_KUTTA4_SOLVER = ComponentSpec(
     name="RungeKutta4Solver",
-    kernel="runge_kutta4",
+    lowering="runge_kutta4",
     category=Category.ODE_SOLVER,
     module=_FORWARD,
     doc="Classical explicit 4-stage Runge-Kutta on (x, v).",
@@ -101,7 +101,7 @@ RUNGE_KUTTA4_SOLVER = ComponentSpec(
 
 NEWMARK_IMPLICIT_SOLVER = ComponentSpec(
     name="NewmarkImplicitSolver",
-    kernel="newmark",
+    lowering="newmark",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Implicit Newmark-beta scheme with Rayleigh damping (gamma 1/2, beta 1/4: average acceleration).",
@@ -156,7 +156,7 @@ _STATIC_LEGACY = (
 
 STATIC_SOLVER = ComponentSpec(
     name="StaticSolver",
-    kernel="static",
+    lowering="static",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Static equilibrium f(x) = 0 by Newton-Raphson (a NewtonRaphsonSolver found below, or created).",
@@ -257,7 +257,7 @@ NEWTON_RAPHSON_SOLVER = ComponentSpec(
 
 VARIATIONAL_SYMPLECTIC_SOLVER = ComponentSpec(
     name="VariationalSymplecticSolver",
-    kernel="variational",
+    lowering="variational",
     category=Category.ODE_SOLVER,
     module=_BACKWARD,
     doc="Variational (implicit midpoint) integrator of Kharevych et al. 2006, conserving momentum and "

@@ -51,7 +51,7 @@ _TRANSFORM_FIELDS = (
 
 MECHANICAL_OBJECT = ComponentSpec(
     name="MechanicalObject",
-    kernel="mechanical_object",
+    lowering="mechanical_object",
     category=Category.STATE,
     module="Sofa.Component.StateContainer",
     doc="The degrees of freedom of a node: positions, velocities, forces.",
