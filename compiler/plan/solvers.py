@@ -63,7 +63,7 @@ def _subtree(node: Any) -> list[Any]:
 
 
 def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group | None:
-    kernel = solver.spec.lowering if solver.spec else ""
+    lowering = solver.spec.lowering if solver.spec else ""
     scheme = {
         "euler_explicit": "euler",
         "runge_kutta2": "rk2",
@@ -72,18 +72,18 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
         "static": "implicit",
         "newmark": "implicit",
         "variational": "implicit",
-    }.get(kernel)
+    }.get(lowering)
     if scheme is None:
         return None  # reported by _screen
     symplectic = bool(planner.value(solver.component, "symplectic")) if scheme == "euler" else False
     group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
-    if kernel == "static" and not plan_static(planner, solver, group):
+    if lowering == "static" and not plan_static(planner, solver, group):
         return None
-    if kernel == "euler_implicit" and not plan_implicit(planner, solver, group):
+    if lowering == "euler_implicit" and not plan_implicit(planner, solver, group):
         return None
-    if kernel == "newmark" and not plan_newmark(planner, solver, group):
+    if lowering == "newmark" and not plan_newmark(planner, solver, group):
         return None
-    if kernel == "variational" and not plan_variational(planner, solver, group):
+    if lowering == "variational" and not plan_variational(planner, solver, group):
         return None
     if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
         linear = solver.links.get("linearSolver")
@@ -105,7 +105,7 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
     if (
         isinstance(preconditioner, Component)
         and planner.value(component, "use_precond") is not False
-        and getattr(planner.checked.of(preconditioner).spec, "kernel", "") == "precomputed_warp"
+        and getattr(planner.checked.of(preconditioner).spec, "lowering", "") == "precomputed_warp"
     ):
         if not precomputed_warp_is_inert(planner, planner.checked.of(preconditioner), group):
             return False
@@ -174,7 +174,7 @@ def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> 
             c for c in warp.component.node.objects if planner.checked.of(c).category is Category.LINEAR_SOLVER
         ]
         inner = next(
-            (c for c in solvers if getattr(planner.checked.of(c).spec, "kernel", "") == "direct"), None
+            (c for c in solvers if getattr(planner.checked.of(c).spec, "lowering", "") == "direct"), None
         )
     if isinstance(system, Component) and int(planner.value(system, "assemblingRate") or 1) != 1:
         planner.unsupported(
