@@ -18,10 +18,18 @@ from sofac import resources
 
 REPO = Path(__file__).resolve().parents[1]
 BUNDLED = {"runtime": "_runtime", "templates": "_templates", "scenes": "_scenes"}
-_IGNORE = shutil.ignore_patterns(
-    ".git", "build", "dist", "*.egg-info", "__pycache__", "*.pyc", ".pytest_cache", ".ruff_cache",
-    ".hypothesis", "out", ".venv", "venv",
+_IGNORE_ANYWHERE = shutil.ignore_patterns(
+    ".git", "*.egg-info", "__pycache__", "*.pyc", ".pytest_cache", ".ruff_cache", ".hypothesis", ".venv",
+    "venv",
 )  # fmt: skip
+_IGNORE_AT_TOP = {"build", "dist", "out", ".pkg"}  # build outputs; compiler/build/ is a package
+
+
+def _ignore(folder: str, names: list[str]) -> set[str]:
+    ignored = set(_IGNORE_ANYWHERE(folder, names))
+    if Path(folder) == REPO:
+        ignored |= _IGNORE_AT_TOP & set(names)
+    return ignored
 
 
 # --- editable install (this checkout) ------------------------------------------------------------
@@ -111,7 +119,7 @@ def _expected_members(source: Path) -> set[str]:
 def source_copy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A copy of the checkout with a nested probe scene, so the test does not depend on scenes/."""
     source = tmp_path_factory.mktemp("src") / "sofac"
-    shutil.copytree(REPO, source, ignore=_IGNORE)
+    shutil.copytree(REPO, source, ignore=_ignore)
     probe = source / "scenes" / "probe_dir" / "probe.scn"
     probe.parent.mkdir(parents=True, exist_ok=True)
     probe.write_text('<Node name="root"/>\n')

@@ -561,7 +561,7 @@ GROUPS = {
 def test_generated_steps_call_the_runtime_solvers(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The generated C++ only arranges calls: each implicit group hands its vectors and operations
     to an algorithm of solvers.h, and none of the algorithms' own arithmetic is written out."""
-    from sofac.cli import main
+    from sofac.cli.main import main
 
     nodes = "".join(GROUP.format(name=f"g{i}", solver=solver) for i, solver in enumerate(GROUPS.values()))
     scene = tmp_path / "groups.scn"

@@ -115,7 +115,7 @@ void step_g0(Instance& S, double dt) {
     propagate_g0(S);
 }
 
-double total_energy(const Instance& S, double* kinetic_out, double* potential_out) {
+double total_energy([[maybe_unused]] const Instance& S, double* kinetic_out, double* potential_out) {
     double kinetic = 0.0, potential = 0.0;
     energy_g0(S, kinetic, potential);
     *kinetic_out = kinetic;

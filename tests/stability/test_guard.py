@@ -5,7 +5,7 @@ energy bounds, and the command line's report (an error line, exit code 1, no tra
 from __future__ import annotations
 
 import math
-import pickle
+import re
 import subprocess
 import sys
 
@@ -15,7 +15,7 @@ import sofac
 from sofac.cli.main import main
 from sofac.diagnostics import SofacError
 
-from .scenes import EXACT_CG, Scenes, implicit, line, springs_body
+from .scenes import EXACT_CG, Scenes, line, springs_body
 
 # A particle on a spring k = 1e9 (mass 1) from x = 1.1: symplectic Euler at dt = 0.01 is far past
 # its stability limit (omega dt = 316 > 2) and overflows within a few dozen steps.
@@ -26,6 +26,10 @@ BLOWUP = springs_body(
     stiffness=1e9,
     damping=0.0,
     fixed=[0],
+)
+# An undamped oscillator under explicit Euler, whose energy grows slowly (k = 400, dt = 0.01).
+SLOW_GAIN = springs_body(
+    '<EulerExplicitSolver symplectic="false"/>', line(2), [(0, 1)], stiffness=400.0, damping=0.0, fixed=[0]
 )
 # The same oscillator with k = 100: stable at dt = 0.01 under an implicit solver.
 GENTLE = springs_body(EXACT_CG, line(2), [(0, 1)], stiffness=100.0, damping=0.5, fixed=[0])
@@ -151,63 +155,25 @@ def test_energy_bound_of_a_call(scenes: Scenes) -> None:
 
 
 def test_guard_energy_catches_a_slow_gain_before_it_overflows(scenes: Scenes) -> None:
-    # Spring damping is explicit in SOFA's implicit Euler: a negative damping pumps energy in
-    # (x10 in about 60 steps here), which the energy guard reports long before any infinity.
-    sim = scenes.sim("gentle", GENTLE)
+    # Forward (not symplectic) Euler multiplies an undamped oscillator's energy by 1 + (omega h)^2
+    # per step: 1.04 here (k = 400, m = 1, h = 0.01), x10 in about 60 steps, which the energy guard
+    # reports long
+    # before any infinity. (A negative damping would pump energy in too, but is refused at run
+    # time as in a scene file.)
+    sim = scenes.sim("slow-gain", SLOW_GAIN)
     sim["dofs"].position[1, 0] = 1.1
-    sim.param("/s/springs.damping")[:] = -5.0
     sim.guard_energy(10.0)
     sim.chunk = 10
     with pytest.raises(sofac.SimulationDiverged) as failure:
         sim.step(100_000)
     error = failure.value
-    assert error.reason == "energy" and error.step % 10 == 0 and error.step < 200
+    assert error.reason == "energy" and error.step % 10 == 0 and 40 <= error.step < 200
     assert error.energy is not None and math.isfinite(error.energy) and error.energy > error.bound
-    assert error.bound == pytest.approx(0.5 + 10.0 * 0.5)
-    assert "guard_energy" in str(error) and "more iterations" in error.hint
-    assert error.last_finite is not None and error.last_finite_step == error.step - 10
+    assert error.bound == pytest.approx(0.5 * 400.0 * 0.1**2 * 11.0)
+    assert "guard_energy" in str(error) and "smaller dt" in error.hint
+    assert error.last_finite is not None and error.last_finite_step < error.step
     sim.guard_energy(None)
     sim.reset()
-    sim.param("/s/springs.damping")[:] = 0.5
-    sim.step(500)
-
-
-def test_guard_energy_needs_a_scale(scenes: Scenes) -> None:
-    sim = scenes.sim("gentle", GENTLE)  # at rest, on the spring's rest length: no energy at all
-    with pytest.raises(ValueError, match="scale"):
-        sim.guard_energy(2.0)
-    with pytest.raises(ValueError, match="factor"):
-        sim.guard_energy(-1.0, scale=1.0)
-    sim.guard_energy(2.0, scale=1e-3)
-    sim["dofs"].velocity[1] = [1.0, 0.0, 0.0]  # 0.5 J, more than the bound
-    with pytest.raises(sofac.SimulationDiverged, match="guard_energy"):
-        sim.step(1)
-
-
-def test_diverged_survives_pickling(scenes: Scenes) -> None:
-    sim = blowup(scenes)
-    with pytest.raises(sofac.SimulationDiverged) as failure:
-        sim.step(10_000)
-    copy = pickle.loads(pickle.dumps(failure.value))
-    assert type(copy) is sofac.SimulationDiverged and str(copy) == str(failure.value)
-    assert (copy.step, copy.state, copy.dof, copy.last_finite_step) == (
-        failure.value.step,
-        failure.value.state,
-        failure.value.dof,
-        failure.value.last_finite_step,
-    )
-
-
-def test_hint_for_an_implicit_solver_names_the_linear_solver(scenes: Scenes) -> None:
-    # Explicit spring damping past its stability limit (kd dt / m = 10) under EulerImplicitSolver.
-    body = springs_body(implicit(), line(2), [(0, 1)], stiffness=1.0, damping=1.0, rest=0.0)
-    sim = scenes.sim("explicit-damping", body, dt=0.1)
-    sim.param("/s/mass.vertexMass")[:] = 0.01
-    sim["dofs"].velocity[1] = [0.0, 0.0, 1.0]
-    with pytest.raises(sofac.SimulationDiverged) as failure:
-        sim.step(10_000)
-    assert "EulerImplicitSolver" in failure.value.solver
-    assert "CGLinearSolver more iterations" in failure.value.hint
 
 
 def test_cli_run_reports_divergence_as_an_error_line(
@@ -220,8 +186,9 @@ def test_cli_run_reports_divergence_as_an_error_line(
     lines = captured.err.splitlines()
     assert lines[0].startswith("sofac: error: the simulation diverged at step ")
     assert "/s/dofs is no longer finite" in lines[0] and "smaller dt" in lines[0]
-    assert lines[1].startswith("sofac: the last finite state (step 0, t=0)")
-    assert lines[2] == "  /s/dofs <Vec3d>: 0 0 0; 1.1 0 0"
+    # the real last finite step, before the one that diverged (the state there is still finite)
+    assert re.match(r"sofac: the last finite state \(step [1-9][0-9]*, t=\S+\):", lines[1]), lines[1]
+    assert lines[2].startswith("  /s/dofs <Vec3d>: 0 0 0; ")
     assert "Traceback" not in captured.err
 
 
