@@ -13,8 +13,6 @@ import importlib.resources
 import os
 from pathlib import Path
 
-import platformdirs
-
 CACHE_ENV = "SOFAC_CACHE_DIR"
 
 # name -> (folder inside the installed package, folder at the repository root)
@@ -106,4 +104,8 @@ def bundled_scene(name: str) -> Path:
 def cache_dir() -> Path:
     """The cache folder: $SOFAC_CACHE_DIR, else the user's cache folder (platformdirs)."""
     override = os.environ.get(CACHE_ENV)
-    return Path(override) if override else Path(platformdirs.user_cache_dir("sofac"))
+    if override:
+        return Path(override)
+    import platformdirs  # only here: finding bundled folders needs no third-party package
+
+    return Path(platformdirs.user_cache_dir("sofac"))

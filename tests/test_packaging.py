@@ -142,7 +142,11 @@ def test_wheel_contains_runtime_templates_and_scenes(built_wheel: Path, source_c
     for packaged in BUNDLED.values():
         assert not any(n.startswith(f"sofac/{packaged}/") and "__pycache__" in n for n in names)
     # the package itself and the console script
-    assert {"sofac/cli.py", "sofac/report.py", "sofac/resources.py", "sofac/__main__.py"} <= names
+    assert {"sofac/cli/main.py", "sofac/cli/report.py", "sofac/resources.py", "sofac/__main__.py"} <= names
+    # every stage and tool package, and each of their modules
+    package = REPO / "compiler"
+    modules = {f"sofac/{p.relative_to(package).as_posix()}" for p in package.rglob("*.py")}
+    assert modules <= names, sorted(modules - names)
     assert "sofac/registry/sofa_catalog.json" in names  # SOFA's list of components (package data)
     entry_points = next(n for n in names if n.endswith(".dist-info/entry_points.txt"))
     assert "sofac = sofac.cli.main:main" in zipfile.ZipFile(built_wheel).read(entry_points).decode()
