@@ -12,7 +12,7 @@ import contextlib
 import dataclasses
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -201,9 +201,6 @@ def load(
 
     ``path`` may also be a ``.py`` SofaPython3 scene script, or a root node built in Python
     (``sofac.front.model.Node``, ``Sofa.Core.Node``): see sofac.pyscene."""
-    from sofac.simulation import warm
-    from sofac.simulation.loader import Compiled
-
     started = time.perf_counter()
     options: dict[str, Any] = {
         "data_roots": tuple(data_roots),
@@ -216,21 +213,7 @@ def load(
     if not isinstance(path, (str, os.PathLike)) or Path(path).suffix.lower() == ".py":
         sim = _load_python_scene(path, options)
     else:
-        record = warm.lookup(path, **options)
-        if record is not None:
-
-            def recompute() -> Compiled:
-                with scene_warnings.quiet():  # issued below, from the record
-                    return _compile_scene(path, **options)
-
-            compiled = Compiled(
-                record.spec, record.built, recompute=recompute, rebuild=_rebuild, warnings=record.warnings
-            )
-        else:
-            compiled = _compile_scene(path, strict=strict, **options)
-            warm.store(
-                path, compiled.spec, compiled.built, compiled.checked, warnings=compiled.warnings, **options
-            )
+        compiled = _warm_or_built(path, options, lambda: _compile_scene(path, strict=strict, **options))
         scene_warnings.issue(compiled.warnings, strict=strict)
         sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
@@ -243,24 +226,34 @@ def _load_python_scene(source: Any, options: dict[str, Any]) -> Simulation:
     """A SofaPython3 script (run once: its tree is compiled, or taken from its warm record keyed on
     the script and every file it read) or a tree built in Python, started with its controllers."""
     from sofac.pyscene import script
-    from sofac.simulation import warm
-    from sofac.simulation.loader import Compiled
 
     compile_options = {key: options[key] for key in ("prune", "rigid_model", "threads", "interactive")}
     if not isinstance(source, (str, os.PathLike)):
         scene, controllers = script.tree_scene(source, options["data_roots"])
         return script.start(compile_model(scene, **compile_options), scene, controllers)
     scene = script.execute_script(source, Diagnostics(), data_roots=options["data_roots"])
-    record = warm.lookup(source, **options)
-    if record is not None:
-        compiled = Compiled(
-            record.spec,
-            record.built,
-            recompute=lambda: compile_model(scene, **compile_options),
-            rebuild=_rebuild,
-        )
-    else:
-        compiled = compile_model(scene, **compile_options)
-        warm.store(source, compiled.spec, compiled.built, compiled.checked, **options)
+    compiled = _warm_or_built(source, options, lambda: compile_model(scene, **compile_options))
     compiled.python_scene = scene  # later instantiate() calls run the script again
     return script.start(compiled, scene, scene.controllers)
+
+
+def _warm_or_built(path: str | Path, options: dict[str, Any], build: Callable[[], Compiled]) -> Compiled:
+    """The scene's warm record for these load options (the plan, source and checked scene are
+    built again on first use, their warnings already in the record), else ``build()``, stored as
+    the record the next load finds."""
+    from sofac.simulation import warm
+    from sofac.simulation.loader import Compiled
+
+    record = warm.lookup(path, **options)
+    if record is not None:
+
+        def recompute() -> Compiled:
+            with scene_warnings.quiet():  # issued by load(), from the record
+                return build()
+
+        return Compiled(
+            record.spec, record.built, recompute=recompute, rebuild=_rebuild, warnings=record.warnings
+        )
+    compiled = build()
+    warm.store(path, compiled.spec, compiled.built, compiled.checked, warnings=compiled.warnings, **options)
+    return compiled

@@ -17,6 +17,7 @@ from sofac.cli.usage import EXIT_ERRORS, EXIT_INTERRUPTED, EXIT_OK, Failed, Usag
 if TYPE_CHECKING:
     from sofac.simulation.loader import Compiled, SimulationDiverged
 
+
 def _scene(args: argparse.Namespace) -> Path:
     path = Path(args.scene)
     if not path.is_file():

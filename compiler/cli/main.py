@@ -19,7 +19,15 @@ from typing import NoReturn
 
 from sofac import __version__
 from sofac.cli.report import FORMATS, FileResult, format_diagnostic, render_results
-from sofac.cli.usage import EXIT_ERRORS, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, UsageError
+from sofac.cli.usage import (
+    EXIT_ERRORS,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    UsageError,
+    data_roots,
+)
 from sofac.diagnostics import Diagnostic, Severity, relative_name
 
 _EPILOG = (
@@ -103,16 +111,6 @@ def find_scenes(paths: Sequence[str]) -> list[Path]:
     return list(unique.values())
 
 
-def _data_roots(values: Sequence[str] | None) -> list[Path]:
-    roots = []
-    for value in values or ():
-        path = Path(value)
-        if not path.is_dir():
-            raise UsageError(f"--data-path {value}: no such folder")
-        roots.append(path)
-    return roots
-
-
 # --- commands ----------------------------------------------------------------------------------
 
 
@@ -120,7 +118,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from sofac.check.checker import check_file
     from sofac.pipeline import add_compile_refusals
 
-    data_roots = _data_roots(args.data_path)
+    roots = data_roots(args.data_path)
     files = find_scenes(args.paths)
     results: list[FileResult] = []
     has_errors = False
@@ -131,7 +129,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
             diagnostics = refused(path)
         else:
             allow = args.allow_unsupported
-            checked, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=allow)
+            checked, diagnostics = check_file(path, data_roots=roots, allow_unsupported=allow)
             add_compile_refusals(checked, diagnostics)
         items: list[Diagnostic] = diagnostics.sorted()
         if args.quiet:
@@ -180,12 +178,12 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     path = Path(args.scene)
     if not path.is_file():
         raise UsageError(f"no such file: {args.scene}")
-    data_roots = _data_roots(args.data_path)
+    roots = data_roots(args.data_path)
 
     from sofac.check.checker import check_file
     from sofac.cli.inspect import format_tree, tree_as_dict
 
-    checked, diagnostics = check_file(path, data_roots=data_roots, allow_unsupported=args.allow_unsupported)
+    checked, diagnostics = check_file(path, data_roots=roots, allow_unsupported=args.allow_unsupported)
     for diag in diagnostics.sorted():
         if diag.severity >= Severity.WARNING:
             print(format_diagnostic(diag), file=sys.stderr)

@@ -3,9 +3,11 @@ into messages (never tracebacks)."""
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 
 from sofac.diagnostics import SceneError, Severity, SofacError
 
@@ -42,3 +44,23 @@ def reported() -> Iterator[None]:
     except SofacError as error:
         print(f"sofac: error: {error}", file=sys.stderr)
         raise Failed from None
+
+
+def data_roots(values: Sequence[str] | None) -> list[Path]:
+    """The folders of ``--data-path`` (repeatable), each checked to be one."""
+    roots = []
+    for value in values or ():
+        path = Path(value)
+        if not path.is_dir():
+            raise UsageError(f"--data-path {value}: no such folder")
+        roots.append(path)
+    return roots
+
+
+def layer_flags(args: argparse.Namespace) -> dict[str, bool]:
+    """The layers ``--show`` turns on and ``--hide`` off (the later word wins)."""
+    show: dict[str, bool] = {}
+    for words, on in ((args.show or [], True), (args.hide or [], False)):
+        for word in words:
+            show[word] = on
+    return show

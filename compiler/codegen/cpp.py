@@ -20,6 +20,7 @@ from sofac.plan.ir import (
     CHILD,
     OFFSET,
     PARENT,
+    STEP_PHASES,
     VECTOR,
     Aggregate,
     Arg,
@@ -178,16 +179,7 @@ def _headers(plan: Plan) -> list[str]:
     """The runtime headers a plan's calls need, beyond the always-included ones."""
     statements: list[Statement] = []
     for group in plan.groups:
-        for phase in (
-            group.forces,
-            group.accelerations,
-            group.mass_dx,
-            group.stiffness_dx,
-            group.energy,
-            group.init,
-            group.assemble,
-        ):
-            statements += [s for op in phase for s in op.calls]
+        statements += group.calls()
         # (J's assembly reaches the step through group.assemble, where an assembled system uses it)
         for mapping in (*group.mappings, *group.on_read):
             statements += [*mapping.apply, mapping.jacobian]
@@ -326,7 +318,7 @@ class _GroupView:
             for p in group.projections
             if p.mark and self.matrix
         ]
-        for phase in ("forces", "accelerations", "mass_dx", "stiffness_dx", "energy", "init", "assemble"):
+        for phase in (*STEP_PHASES, "init"):
             setattr(self, phase, [_OpView(op) for op in getattr(group, phase)])
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)

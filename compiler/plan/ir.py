@@ -325,6 +325,10 @@ class StatePlan:
         return self.component.path
 
 
+# The phases of a group's step, each a list of Ops (Group.init runs at creation and reset).
+STEP_PHASES = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy")
+
+
 @dataclass
 class Group:
     """One ODE solver and what it integrates."""
@@ -387,6 +391,10 @@ class Group:
     # Assembled systems: the mapped states whose blocks go through their mappings' J, with their
     # first index past Assembler::kMapped and the component that first needed it (for diagnostics).
     routed: dict[int, tuple[StatePlan, int, CheckedComponent]] = field(default_factory=dict)
+
+    def calls(self, phases: tuple[str, ...] = (*STEP_PHASES, "init")) -> list[Statement]:
+        """The calls of some of the group's phases (default: all of them, init included)."""
+        return [c for phase in phases for op in getattr(self, phase) for c in op.calls]
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""

@@ -11,6 +11,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.plan.ir import (
     INPUT_OFFSET,
     OFFSET,
+    STEP_PHASES,
     Call,
     ContactGuard,
     Group,
@@ -34,11 +35,8 @@ if TYPE_CHECKING:
 def init_only(planner: Planner, groups: list[Group]) -> frozenset[str]:
     """The parameters the init code reads and no per-step code does."""
 
-    def touched(kinds: tuple[str, ...]) -> set[str]:
-        return buffers_of([c for g in groups for kind in kinds for op in getattr(g, kind) for c in op.calls])
-
-    init = touched(("init",))
-    step = touched(("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy"))
+    init = buffers_of([c for g in groups for c in g.calls(("init",))])
+    step = buffers_of([c for g in groups for c in g.calls(STEP_PHASES)])
     return frozenset(
         buffer.key
         for buffer in planner.buffers
@@ -224,9 +222,9 @@ def leave_unread_out(planner: Planner, groups: list[Group]) -> None:
     def states_named(statements: list[Call] | list[Statement]) -> set[int]:
         return {id(owners[ident]) for ident in buffers_of(statements) if ident in owners}
 
-    kinds = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy", "init")
-    calls = [c for g in groups for kind in kinds for op in getattr(g, kind) for c in op.calls]
-    read = states_named(calls) | {id(p.state) for g in groups for p in g.projections}
+    read = states_named([c for g in groups for c in g.calls()]) | {
+        id(p.state) for g in groups for p in g.projections
+    }
     if planner.guard is not None:  # the contact guard reads its models' positions before each step
         read |= {id(state) for _, state in planner.guard.models}
     mappings = [m for g in groups for m in g.mappings]

@@ -14,7 +14,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
 
-from sofac.cli.usage import EXIT_ERRORS, EXIT_INTERRUPTED, EXIT_OK, Failed, UsageError, reported
+from sofac.cli.usage import (
+    EXIT_ERRORS,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    Failed,
+    UsageError,
+    data_roots,
+    layer_flags,
+    reported,
+)
 
 FORMATS = (".png", ".gif", ".mp4")
 _LAYER_HELP = (
@@ -184,15 +193,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise UsageError("--fov must be in (0, 180) degrees")
     if args.dt is not None and not args.dt > 0:
         raise UsageError("--dt must be > 0")
-    data_roots = []
-    for folder in args.data_path or ():
-        if not Path(folder).is_dir():
-            raise UsageError(f"--data-path {folder}: no such folder")
-        data_roots.append(Path(folder))
-    show: dict[str, bool] = {}
-    for words, on in ((args.show or [], True), (args.hide or [], False)):
-        for word in words:
-            show[word] = on
+    roots = data_roots(args.data_path)
+    show = layer_flags(args)
     animated = out.suffix.lower() != ".png"
     width, height = args.size
     progress_on = not args.no_progress
@@ -206,7 +208,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                 render.check_show(show)
             except ValueError as error:
                 raise UsageError(str(error)) from None
-            sim = load(path, dt=args.dt, data_roots=data_roots)
+            sim = load(path, dt=args.dt, data_roots=roots)
             renderer = render.Renderer(
                 sim,
                 width=width,

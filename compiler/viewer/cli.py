@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, reported
+from sofac.cli.usage import EXIT_ERRORS, EXIT_OK, Failed, UsageError, data_roots, layer_flags, reported
 from sofac.render.cli import _LAYER_HELP, _camera, _size, _vector, _words
 
 _KEYS_HELP = (
@@ -35,15 +35,8 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise UsageError("--speed must be in (0, 64]")
     if args.fov is not None and not 0 < args.fov < 180:
         raise UsageError("--fov must be in (0, 180) degrees")
-    data_roots = []
-    for folder in args.data_path or ():
-        if not Path(folder).is_dir():
-            raise UsageError(f"--data-path {folder}: no such folder")
-        data_roots.append(Path(folder))
-    show: dict[str, bool] = {}
-    for words, on in ((args.show or [], True), (args.hide or [], False)):
-        for word in words:
-            show[word] = on
+    roots = data_roots(args.data_path)
+    show = layer_flags(args)
     from sofac.viewer import window as view
 
     why = view.display_problem()  # before compiling: say it at once
@@ -60,7 +53,7 @@ def cmd_view(args: argparse.Namespace) -> int:
                 render.check_show(show)
             except ValueError as error:
                 raise UsageError(str(error)) from None
-            sim = load(path, dt=args.dt, data_roots=data_roots, threads=args.threads, interactive=True)
+            sim = load(path, dt=args.dt, data_roots=roots, threads=args.threads, interactive=True)
             options = view.Options(
                 width=width,
                 height=height,

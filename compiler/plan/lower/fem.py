@@ -11,6 +11,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.plan.ir import (
     OFFSET,
     Aggregate,
+    Buffer,
     Constant,
     Count,
     Env,
@@ -58,6 +59,16 @@ DATA_SIZE_FUNCTIONS = {
 }
 
 
+def _material(planner: Planner, checked: CheckedComponent) -> tuple[Buffer, Buffer]:
+    """Young's modulus and Poisson's ratio (one, or per element) as tunable buffers."""
+    buffers = []
+    for name in ("youngModulus", "poissonRatio"):
+        value = planner.value(checked.component, name)
+        value = value if value is not None else _default(checked, name)
+        buffers.append(planner.buffer(checked.component, name, np.atleast_1d(value), role="param"))
+    return buffers[0], buffers[1]
+
+
 def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     found = _target(planner, checked, owner)
     if found is None:
@@ -92,21 +103,8 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         planner.unsupported(checked, f"it needs {kind} known at compile time")
         return
     count = cells.size // corners
-    young = planner.value(component, "youngModulus")
-    poisson = planner.value(component, "poissonRatio")
     elements = planner.buffer(component, kind, cells, "i64", columns=corners)
-    young_buffer = planner.buffer(
-        component,
-        "youngModulus",
-        np.atleast_1d(young if young is not None else _default(checked, "youngModulus")),
-        role="param",
-    )
-    poisson_buffer = planner.buffer(
-        component,
-        "poissonRatio",
-        np.atleast_1d(poisson if poisson is not None else _default(checked, "poissonRatio")),
-        role="param",
-    )
+    young_buffer, poisson_buffer = _material(planner, checked)
     padded = -(-count // TETRA_LANES) * TETRA_LANES if kind == "tetrahedra" else count
     data = planner.buffer(component, "elements", np.zeros(padded * sizes[method]), role="scratch")
     coefficients = _sparse_grid_coefficients(planner, checked) if prefix == "hexa_fem" else None
@@ -200,21 +198,8 @@ def lower_trifem_optim(planner: Planner, checked: CheckedComponent, owner: dict[
         return
     cells = topology["triangles"]
     count = cells.size // 3
-    young = planner.value(component, "youngModulus")
-    poisson = planner.value(component, "poissonRatio")
     elements = planner.buffer(component, "triangles", cells, "i64", columns=3)
-    young_buffer = planner.buffer(
-        component,
-        "youngModulus",
-        np.atleast_1d(young if young is not None else _default(checked, "youngModulus")),
-        role="param",
-    )
-    poisson_buffer = planner.buffer(
-        component,
-        "poissonRatio",
-        np.atleast_1d(poisson if poisson is not None else _default(checked, "poissonRatio")),
-        role="param",
-    )
+    young_buffer, poisson_buffer = _material(planner, checked)
     material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
     data = planner.buffer(component, "triangleInfo", np.zeros(count * 10), role="scratch")
     origin = origin_of(component)
