@@ -440,7 +440,6 @@ def test_rigid_frames_linked_to_grid_points_get_identity_orientations(tmp_path: 
 @pytest.mark.parametrize(
     ("attributes", "why"),
     [
-        ('plasticMaxThreshold="0.025" plasticYieldThreshold="0.01"', "plasticity (plasticMaxThreshold > 0)"),
         ('updateStiffnessMatrix="true"', "updateStiffnessMatrix=true"),
     ],
 )

@@ -27,7 +27,7 @@
 // default (5000 / 0.45). SOFA's init replaces a negative Young's modulus by 5000 and a Poisson ratio
 // outside [0, 0.5) by 0.45 (with a warning); these kernels do the same.
 //
-// Not reproduced: plasticity (plasticMaxThreshold > 0), updateStiffnessMatrix=true,
+// Plasticity (plasticMaxThreshold > 0): tetra_fem_add_force_plastic. Not reproduced: updateStiffnessMatrix=true,
 // computeGlobalMatrix=true (assembled-in-addForce path), von Mises stress, topological changes.
 #pragma once
 
@@ -422,19 +422,24 @@ inline void strain_displacement(double* j, const V3& a, const V3& b, const V3& c
 // off-diagonal normal terms = K01, shear terms = K33), already divided by 36 V.
 // T is double, or a vector of doubles holding that many elements (one per lane) for the
 // vectorised kernels: each lane then does exactly the scalar operations, in the same order.
+// In two halves, so that plasticity (tetra_plastic_strain) can act on the strain between them.
+// The strain J^T D (Voigt xx yy zz xy yz zx) of the 12 displacements D.
 template <class T>
-inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, const T& fact, bool scale) {
+inline void tetra_strain(T* e, const T* D, const T* j) {
     const T a0 = j[0], b0 = j[1], g0 = j[2];
     const T a1 = j[3], b1 = j[4], g1 = j[5];
     const T a2 = j[6], b2 = j[7], g2 = j[8];
     const T a3 = j[9], b3 = j[10], g3 = j[11];
-    T e[6];
     e[0] = a0 * D[0] + a1 * D[3] + a2 * D[6] + a3 * D[9];
     e[1] = b0 * D[1] + b1 * D[4] + b2 * D[7] + b3 * D[10];
     e[2] = g0 * D[2] + g1 * D[5] + g2 * D[8] + g3 * D[11];
     e[3] = b0 * D[0] + a0 * D[1] + b1 * D[3] + a1 * D[4] + b2 * D[6] + a2 * D[7] + b3 * D[9] + a3 * D[10];
     e[4] = g0 * D[1] + b0 * D[2] + g1 * D[4] + b1 * D[5] + g2 * D[7] + b2 * D[8] + g3 * D[10] + b3 * D[11];
     e[5] = g0 * D[0] + a0 * D[2] + g1 * D[3] + a1 * D[5] + g2 * D[6] + a2 * D[8] + g3 * D[9] + a3 * D[11];
+}
+// F = J (fact K e) of a strain e.
+template <class T>
+inline void tetra_strain_force(T* F, const T* e, const T* j, const T* mat, const T& fact, bool scale) {
     const T kd = mat[0], ko = mat[1], ks = mat[2];
     T s[6];
     s[0] = kd * e[0] + ko * e[1] + ko * e[2];
@@ -451,6 +456,36 @@ inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, cons
         F[3 * n + 1] = b * s[1] + a * s[3] + g * s[4];
         F[3 * n + 2] = g * s[2] + b * s[4] + a * s[5];
     }
+}
+template <class T>
+inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, const T& fact, bool scale) {
+    T e[6];
+    tetra_strain(e, D, j);
+    tetra_strain_force(F, e, j, mat, fact, scale);
+}
+
+// SOFA's squared norm of a Voigt vector (r = v0^2, then += vi^2 in order).
+inline double voigt_norm2(const double* v) {
+    double r = v[0] * v[0];
+    for (int i = 1; i < 6; ++i) r += v[i] * v[i];
+    return r;
+}
+
+// SOFA's plasticity of computeForce (plasticMaxThreshold > 0), applied to the total strain e of an
+// element with plastic strain p (6 numbers, carried from step to step): the elastic strain e - p,
+// when its 2-norm exceeds the yield threshold, moves the fraction `creep` of itself into p; p is
+// then scaled back onto the sphere of radius max_threshold if it left it; e becomes e - p.
+inline void tetra_plastic_strain(double* e, double* p, double max_threshold, double yield_threshold, double creep) {
+    double elastic[6];
+    for (int i = 0; i < 6; ++i) elastic[i] = e[i] - p[i];
+    if (voigt_norm2(elastic) > yield_threshold * yield_threshold)
+        for (int i = 0; i < 6; ++i) p[i] += creep * elastic[i];
+    const double p_norm2 = voigt_norm2(p);
+    if (p_norm2 > max_threshold * max_threshold) {
+        const double ratio = max_threshold / std::sqrt(p_norm2);
+        for (int i = 0; i < 6; ++i) p[i] *= ratio;
+    }
+    for (int i = 0; i < 6; ++i) e[i] -= p[i];
 }
 
 // R^T v and R v for a row-major 3x3 R (9 numbers), as mul_t and mul (SOFA's order), on T.
@@ -639,10 +674,32 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
     }
 }
 
+// TetrahedronFEMForceField's plasticity (plasticMaxThreshold > 0): `strain` holds 6 numbers per
+// element (SOFA's _plasticStrains, Voigt order, zero at creation), updated by every add_force.
+struct TetraPlasticity {
+    double* strain;
+    double max_threshold;
+    double yield_threshold;
+    double creep;
+};
+
+namespace fem_detail {
+// computeForce of element i with its displacements D, with plasticity when given.
+inline void tetra_element_force(double* F, const double* D, const double* e, Index i,
+                                const TetraPlasticity* plasticity) {
+    if (plasticity == nullptr) return tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+    double strain[6];
+    tetra_strain(strain, D, e + TJ);
+    tetra_plastic_strain(strain, plasticity->strain + 6 * i, plasticity->max_threshold,
+                         plasticity->yield_threshold, plasticity->creep);
+    tetra_strain_force(F, strain, e + TJ, e + TMAT, 1.0, false);
+}
+}  // namespace fem_detail
+
 // The internal force of element i at positions x, F (12 numbers) to add to its nodes; stores the
-// element's current rotation (large/polar/svd).
+// element's current rotation (large/polar/svd); updates its plastic strain when given.
 inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, double* element_data, int method,
-                               double* out) {
+                               double* out, const TetraPlasticity* plasticity = nullptr) {
     using namespace fem_detail;
     const int stride = tetra_fem_data_size(method);
     double e[54];
@@ -657,7 +714,7 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
             const double* pk = x + 3 * t[k];
             for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
         }
-        tetra_compute_force(out, D, e + TJ, e + TMAT, 1.0, false);
+        tetra_element_force(out, D, e, i, plasticity);
         return;
     }
     const V3 p[4] = {load(x + 3 * t[0]), load(x + 3 * t[1]), load(x + 3 * t[2]), load(x + 3 * t[3])};
@@ -701,7 +758,7 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
         for (int k = 0; k < 4; ++k)
             for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TREST + 3 * k + m] - q[k][m];
     }
-    tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+    tetra_element_force(F, D, e, i, plasticity);
     for (int k = 0; k < 4; ++k) {
         const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
         for (int m = 0; m < 3; ++m) out[3 * k + m] = fk[m];
@@ -1018,6 +1075,20 @@ inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, do
         else
             serial_elements<4>(n, tetra, f, element);
     }
+}
+
+// tetra_fem_add_force with SOFA's plasticity (any method; the scalar path, one element after the
+// other as SOFA: each element's plastic strain depends on its own strain only).
+inline void tetra_fem_add_force_plastic(const Index* tetra, Index n, const double* x, double* f,
+                                        double* element_data, int method, const TetraPlasticity& plasticity,
+                                        const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) {
+        tetra_fem_force_of(tetra, i, x, element_data, method, out, &plasticity);
+    };
+    if (split.chunks > 1)
+        split_elements<4>(split, tetra, f, element);
+    else
+        serial_elements<4>(n, tetra, f, element);
 }
 
 // df += kfactor * (df/dx) dx (see tetra_fem_dforce_of), TETRA_LANES elements at once.

@@ -69,6 +69,22 @@ def _material(planner: Planner, checked: CheckedComponent) -> tuple[Buffer, Buff
     return buffers[0], buffers[1]
 
 
+def _plasticity(planner: Planner, checked: CheckedComponent, count: int) -> Aggregate | None:
+    """TetrahedronFEMForceField's plasticity when plasticMaxThreshold > 0 (SOFA's test): each
+    element's plastic strain (6 numbers, a state: reset restores zeros) and the three thresholds."""
+    values = {
+        name: float(planner.value(checked.component, name) or 0.0)
+        for name in ("plasticMaxThreshold", "plasticYieldThreshold", "plasticCreep")
+    }
+    if values["plasticMaxThreshold"] <= 0.0:
+        return None
+    strains = planner.buffer(checked.component, "plasticStrains", np.zeros(count * 6), columns=6, role="state")
+    return Aggregate(
+        "TetraPlasticity",
+        (strains, values["plasticMaxThreshold"], values["plasticYieldThreshold"], values["plasticCreep"]),
+    )
+
+
 def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     found = _target(planner, checked, owner)
     if found is None:
@@ -88,9 +104,6 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         return
     if prefix != "tetra_fem" and method == FemMethod.SVD:
         method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
-    if prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0:
-        planner.unsupported(checked, "plasticity (plasticMaxThreshold > 0) is not compiled yet")
-        return
     if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
         planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
         return
@@ -136,9 +149,12 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         )
     )
     split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
-    group.forces.append(
-        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)])
-    )
+    plasticity = _plasticity(planner, checked, count) if prefix == "tetra_fem" else None
+    if plasticity is not None:
+        force = _call("tetra_fem_add_force_plastic", elements, count, state.x, state.f, data, method, plasticity, *split)
+    else:
+        force = _call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)
+    group.forces.append(Op(origin, [force]))
     and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
     if and_mass and not lower_hexa_mass(
         planner, checked, state, group, elements, count, data, method, coefficient_buffer
