@@ -78,7 +78,9 @@ def _plasticity(planner: Planner, checked: CheckedComponent, count: int) -> Aggr
     }
     if values["plasticMaxThreshold"] <= 0.0:
         return None
-    strains = planner.buffer(checked.component, "plasticStrains", np.zeros(count * 6), columns=6, role="state")
+    strains = planner.buffer(
+        checked.component, "plasticStrains", np.zeros(count * 6), columns=6, role="state"
+    )
     return Aggregate(
         "TetraPlasticity",
         (strains, values["plasticMaxThreshold"], values["plasticYieldThreshold"], values["plasticCreep"]),
@@ -151,7 +153,9 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
     plasticity = _plasticity(planner, checked, count) if prefix == "tetra_fem" else None
     if plasticity is not None:
-        force = _call("tetra_fem_add_force_plastic", elements, count, state.x, state.f, data, method, plasticity, *split)
+        force = _call(
+            "tetra_fem_add_force_plastic", elements, count, state.x, state.f, data, method, plasticity, *split
+        )
     else:
         force = _call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)
     group.forces.append(Op(origin, [force]))
