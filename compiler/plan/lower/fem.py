@@ -50,6 +50,8 @@ FEM_KINDS = {
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
     "trifem": ("trifem", "triangles", 3, {1: 35}),
 }
+# runtime quad_bending.h QUAD_BENDING_DATA: doubles per quad (rest offsets 12, material 4)
+QUAD_BENDING_DATA = 16
 # The runtime's data sizes of those kinds, which tests/test_layout.py checks against this table.
 DATA_SIZE_FUNCTIONS = {
     "tetra_fem": "tetra_fem_data_size",
@@ -202,6 +204,58 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             group,
             state,
             _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
+        )
+
+
+def lower_quad_bending(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """QuadBendingFEMForceField: SOFA's small method on the topology's quads, its stiffness
+    recomputed from the positions at every force and derivative pass (as SOFA)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"QuadBendingFEMForceField on {state.datatype.name} is not compiled yet")
+        return
+    if group.assembled:
+        # SOFA's buildStiffnessMatrix reads 3x3 blocks at 3-strides of its 5-unknown-per-node matrix
+        planner.unsupported(checked, "QuadBendingFEMForceField in an assembled system is not compiled yet")
+        return
+    quads = (_topology_cells(planner, checked) or {}).get("quads")
+    if quads is None or not quads.size:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    component = checked.component
+    count = quads.size // 4
+    elements = planner.buffer(component, "quads", quads, "i64", columns=4)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    thickness = float(planner.value(component, "thickness") or _default(checked, "thickness"))
+    data = planner.buffer(component, "quadInfo", np.zeros(count * QUAD_BENDING_DATA), role="scratch")
+    origin = origin_of(component)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    group.init.append(
+        Op(origin, [_call("quad_bending_init", elements, count, state.rest, *material, thickness, data)])
+    )
+    group.forces.append(
+        Op(origin, [_call("quad_bending_add_force", elements, count, state.x, state.f, data)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "quad_bending_add_dforce",
+                        elements,
+                        count,
+                        state.x,
+                        state.dx,
+                        state.df,
+                        Env.KFACT,
+                        data,
+                    )
+                ],
+            )
         )
 
 

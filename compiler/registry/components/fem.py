@@ -324,17 +324,19 @@ QUAD_BENDING_FEM_FORCE_FIELD = ComponentSpec(
     name="QuadBendingFEMForceField",
     category=Category.FORCEFIELD,
     module=_MODULE,
-    doc="Quad plate elements with membrane and bending stiffness.",
+    lowering="quad_bending",
+    doc="Quad plate elements in world coordinates: a bilinear membrane on x, y and the transverse "
+    "shear of w with the rotations held at zero (SOFA's small method, runtime/sofac/quad_bending.h).",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="QuadBendingFEMForceField (plate bending) is not implemented yet",
+    supported=True,
     effects=_FEM_EFFECTS,
     fields=(
         FieldSpec(
             "method",
             Enum(values=("small", "large"), case_sensitive=True),
             "small",
-            "small or large displacements",
+            "SOFA reads it nowhere: every quad uses the small-displacement method",
         ),
         FieldSpec(
             "youngModulus",
