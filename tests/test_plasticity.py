@@ -1,4 +1,4 @@
-"""TetrahedronFEMForceField's plasticity (runtime/sofac/fem.h, tetra_fem_add_force_plastic).
+"""TetrahedronFEMForceField's plasticity (runtime/sofac/fem.h, tetra_fem_add_force_options).
 
 SOFA's rule (computeForce, plasticMaxThreshold > 0), per element and per force pass: with e the
 total strain J^T D and p the plastic strain carried from pass to pass, if |e - p| > yield then
@@ -34,8 +34,9 @@ API void tet_force(const Index* t, Index n, const double* x, double* f, double* 
 }
 API void tet_force_plastic(const Index* t, Index n, const double* x, double* f, double* data, int method,
                            double* strain, double max_threshold, double yield_threshold, double creep) {
-    sofac::tetra_fem_add_force_plastic(t, n, x, f, data, method,
-                                       sofac::TetraPlasticity{strain, max_threshold, yield_threshold, creep});
+    sofac::tetra_fem_add_force_options(t, n, x, f, data, method,
+                                       sofac::TetraPlasticity{strain, max_threshold, yield_threshold, creep},
+                                       sofac::TetraStiffnessUpdate{false, nullptr});
 }
 API void tet_dforce(const Index* t, Index n, const double* dx, double* df, double k, const double* data,
                     int method) {

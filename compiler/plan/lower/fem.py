@@ -108,8 +108,15 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         return
     if prefix != "tetra_fem" and method == FemMethod.SVD:
         method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
-    if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
-        planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
+    updating = (
+        prefix == "tetra_fem"
+        and method != FemMethod.SMALL
+        and bool(planner.value(component, "updateStiffnessMatrix"))
+    )
+    if updating and method == FemMethod.LARGE and group.assembled:
+        planner.unsupported(
+            checked, "updateStiffnessMatrix=true with method large in an assembled system is not compiled yet"
+        )
         return
     # HexahedronFEMForceField(AndMass) applies a SparseGridTopology's cell coefficients (below)
     topology = _topology_cells(planner, checked, sparse_grid_ok=prefix == "hexa_fem") or {}
@@ -154,9 +161,18 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     )
     split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
     plasticity = _plasticity(planner, checked, count) if prefix == "tetra_fem" else None
-    if plasticity is not None:
+    # large + updateStiffnessMatrix: the rewritten normal-column cofactors (fem.h TetraStiffnessUpdate)
+    normals = None
+    if updating and method == FemMethod.LARGE:
+        normals = planner.buffer(component, "updatedStrainDisplacement", np.zeros(count * 12), role="scratch")
+        group.init.append(Op(origin, [_call("tetra_fem_copy_normals", count, data, method, normals)]))
+    if plasticity is not None or updating:
+        options = (
+            plasticity if plasticity is not None else Aggregate("TetraPlasticity", (Env.NONE, 0.0, 0.0, 0.0)),
+            Aggregate("TetraStiffnessUpdate", (updating, normals if normals is not None else Env.NONE)),
+        )
         force = _call(
-            "tetra_fem_add_force_plastic", elements, count, state.x, state.f, data, method, plasticity, *split
+            "tetra_fem_add_force_options", elements, count, state.x, state.f, data, method, *options, *split
         )
     else:
         force = _call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)
@@ -174,24 +190,25 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             )
         )
     if group.scheme == "implicit":
-        group.stiffness_dx.append(
-            Op(
-                origin,
-                [
-                    _call(
-                        f"{prefix}_add_dforce",
-                        elements,
-                        count,
-                        state.dx,
-                        state.df,
-                        Env.KFACT,
-                        data,
-                        method,
-                        *split,
-                    )
-                ],
+        dforce = (
+            _call(
+                "tetra_fem_add_dforce_normals",
+                elements,
+                count,
+                state.dx,
+                state.df,
+                Env.KFACT,
+                data,
+                method,
+                normals,
+                *split,
+            )
+            if normals is not None
+            else _call(
+                f"{prefix}_add_dforce", elements, count, state.dx, state.df, Env.KFACT, data, method, *split
             )
         )
+        group.stiffness_dx.append(Op(origin, [dforce]))
         # Tetrahedra: element matrices a block of TETRA_LANES at once, one per vector lane (fem.h).
         if prefix in ("tetra_fem", "tetracorot_fem"):
             assembler = kernel("assemble_elements", 4, Constant.TETRA_LANES)
