@@ -381,3 +381,21 @@ def test_plasticity_regression_scene_passes(shared_dir: Path) -> None:
     )
     assert result.status is Status.PASS, (result.status, result.message, result.error)
     assert result.error is not None and result.error <= result.epsilon
+
+
+def test_plasticity_with_an_assembled_global_matrix_is_refused(tmp_path: Path) -> None:
+    """SOFA logs an error and adds no force for plasticity with computeGlobalMatrix=true: refused."""
+    import sofac
+
+    scene = tmp_path / "assembling.scn"
+    scene.write_text(
+        '<Node name="root" dt="0.01"><DefaultAnimationLoop/>\n'
+        '<EulerImplicitSolver/><CGLinearSolver/><RegularGridTopology n="2 2 2" min="0 0 0" max="1 1 1"/>\n'
+        '<MechanicalObject/><UniformMass totalMass="1"/>\n'
+        '<TetrahedronFEMForceField plasticMaxThreshold="0.02" computeGlobalMatrix="true"/>\n</Node>\n'
+    )
+    with pytest.raises(sofac.SceneError) as refused:
+        sofac.load(scene)
+    first = refused.value.diagnostics[0]
+    assert first.code == "E222" and first.loc.line == 4
+    assert "plasticity with computeGlobalMatrix=true is not compiled" in first.message

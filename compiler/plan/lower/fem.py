@@ -113,6 +113,14 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         and method != FemMethod.SMALL
         and bool(planner.value(component, "updateStiffnessMatrix"))
     )
+    plastic = prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0
+    if plastic and planner.value(component, "computeGlobalMatrix"):
+        # SOFA's small and large methods then log "Support for assembling system matrix when using
+        # plasticity" and add no force at all
+        planner.unsupported(
+            checked, "plasticity with computeGlobalMatrix=true is not compiled (SOFA refuses it)"
+        )
+        return
     if updating and method == FemMethod.LARGE and group.assembled:
         planner.unsupported(
             checked, "updateStiffnessMatrix=true with method large in an assembled system is not compiled yet"
