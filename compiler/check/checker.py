@@ -1257,8 +1257,7 @@ class _Checker:
                 code,
                 component.attribute_loc(attribute),
                 f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
-                f"file {value!r} not found (searched {base} and the data roots: {roots})"
-                + why,
+                f"file {value!r} not found (searched {base} and the data roots: {roots})" + why,
                 "a file or folder name has at most 255 bytes: shorten it"
                 if any(len(part.encode()) > 255 for part in Path(str(value)).parts)
                 else "fix the path, or add the folder holding it with --data-path",

@@ -5,6 +5,7 @@ multi-mappings (x, v down; J, J^T and the geometric stiffness).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -37,6 +38,7 @@ from sofac.plan.lower.common import (
 )
 
 if TYPE_CHECKING:
+    from sofac.geometry.barycentric import RegularGrid
     from sofac.plan.planner import Planner
 
 
@@ -375,8 +377,33 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
     )
 
 
+@dataclass(frozen=True, eq=False)
+class _Ramified:
+    """What a SparseGridRamificationTopology's findCube reads: its grid, the finest (virtual) grid
+    and each finest cube's hexahedron."""
+
+    coarse: RegularGrid
+    finest: RegularGrid
+    table: np.ndarray
+
+
+def _ramified_grid(planner: Planner, topology: Component) -> _Ramified:
+    from sofac.geometry.barycentric import RegularGrid
+
+    def grid(prefix: str) -> RegularGrid:
+        resolution = np.asarray(planner.value(topology, f"{prefix}grid_resolution"), dtype=np.int64)
+        bounds = np.asarray(planner.value(topology, f"{prefix}grid_bounds"), dtype=float)
+        nx, ny, nz = (int(c) for c in resolution)
+        low = (float(bounds[0]), float(bounds[1]), float(bounds[2]))
+        high = (float(bounds[3]), float(bounds[4]), float(bounds[5]))
+        return RegularGrid((nx, ny, nz), low, high)
+
+    table = np.asarray(planner.value(topology, "finest_to_hexa"), dtype=np.int64)
+    return _Ramified(grid(""), grid("finest_"), table)
+
+
 def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    from sofac.geometry.barycentric import RegularGrid, SparseGrid, map_cells, mapper_for
+    from sofac.geometry.barycentric import RegularGrid, SparseGrid, map_cells, mapper_for, ramified_grid_map
 
     ends = _mapping_ends(planner, checked, owner)
     if ends is None:
@@ -400,6 +427,12 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
         grid = RegularGrid(tuple(int(c) for c in cells["resolution"]), tuple(bounds[:3]), tuple(bounds[3:]))
+    elif (
+        mode == "sparse_grid"
+        and topology is not None
+        and planner.value(topology, "finest_to_hexa") is not None
+    ):
+        grid = _ramified_grid(planner, topology)
     elif mode == "sparse_grid" and topology is not None:
         table = planner.value(topology, "regular_to_sparse")
         if table is None or "hexahedra" not in cells:
@@ -420,7 +453,12 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
         planner.unsupported(checked, "its input or output positions are not known at compile time")
         return
     try:
-        indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
+        if isinstance(grid, _Ramified):
+            indices, weights = ramified_grid_map(
+                grid.coarse, grid.finest, grid.table, cells["hexahedra"], points
+            )
+        else:
+            indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
     except ValueError as error:
         planner.unsupported(checked, f"it cannot embed its points: {error}")
         return
