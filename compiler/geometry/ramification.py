@@ -5,7 +5,8 @@ cells are duplicated where the surface inside a cell falls apart into disconnect
    n -> 2n - 1 applied k times (a virtual level, min/max as given). Each of its cubes is one
    *connexion*; two face-adjacent cubes are connected unless ``finestConnectivity`` asks to test
    it and both are BOUNDARY: then they are connected only if an edge (j-1, j) of a surface facet
-   crosses their common face (sharingTriangle, intersectionSegmentTriangle).
+   crosses their common face (sharingTriangle, intersectionSegmentTriangle; SOFA's test takes the
+   edge's start as the centre of a segment of half-length |edge|: reproduced).
 2. With ``finestConnectivity`` the finest grid is the topology itself: buildRamifiedFinestLevel
    gives each cube its own 8 points and merges the points of connected faces.
 3. Each coarser level (n -> n // 2 + 1, up to the scene's grid; buildFromFiner, the x index
