@@ -23,6 +23,7 @@ from sofac.plan.ir import (
     MappingOp,
     Op,
     Slot,
+    StatePlan,
     kernel,
     origin_of,
     recorded_once,
@@ -337,10 +338,16 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
         return
     parent, child, group = ends
     component = checked.component
+    identity = bool(checked.spec and checked.spec.lowering == "identity_mapping")
     if parent.datatype is not child.datatype:
-        planner.unsupported(checked, f"{component.type_name} between different templates is not compiled yet")
+        if identity:
+            _lower_leading_identity(planner, checked, parent, child, group)
+        else:
+            planner.unsupported(
+                checked, f"{component.type_name} between different templates is not compiled yet"
+            )
         return
-    if checked.spec and checked.spec.lowering == "identity_mapping":
+    if identity:
         indices = np.arange(parent.size, dtype=np.int64)
     else:
         indices = _indices(planner, checked, "indices", 0, all_if_empty=False)
@@ -371,6 +378,44 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
             assembly=[
                 recorded_once(
                     _call(kernel("subset_jacobian", t), Env.ASSEMBLER, OFFSET, INPUT_OFFSET, buffer, n)
+                )
+            ],
+        )
+    )
+
+
+def _lower_leading_identity(
+    planner: Planner, checked: CheckedComponent, parent: StatePlan, child: StatePlan, group: Group
+) -> None:
+    """IdentityMapping from a larger type (Rigid3d -> Vec3d, Rigid2d -> Vec2d, Vec6d -> Vec3d): SOFA's
+    core::eq / peq keep the leading numbers (a rigid body's centre and linear velocity; J^T adds the
+    force, no torque)."""
+    component = checked.component
+    n = parent.size
+    if child.size != n:
+        planner.unsupported(checked, f"it maps {n} DOFs onto a state of {child.size}")
+        return
+    p, c = parent.datatype, child.datatype
+    if c.coord_size > p.coord_size or c.deriv_size > p.deriv_size:
+        planner.unsupported(checked, f"IdentityMapping {p.name} -> {c.name} is not compiled yet")
+        return
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
+            origin_of(component),
+            parent,
+            child,
+            [
+                _call("leading_apply", parent.x, child.x, n, p.coord_size, c.coord_size),
+                _call("leading_apply", parent.v, child.v, n, p.deriv_size, c.deriv_size),
+            ],
+            _call("leading_apply", PARENT, CHILD, n, p.deriv_size, c.deriv_size),
+            _call("leading_apply_jt", PARENT, CHILD, n, p.deriv_size, c.deriv_size) if maps_forces else None,
+            assembly=[
+                recorded_once(
+                    _call(
+                        "leading_jacobian", Env.ASSEMBLER, OFFSET, INPUT_OFFSET, n, p.deriv_size, c.deriv_size
+                    )
                 )
             ],
         )
