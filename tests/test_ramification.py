@@ -31,6 +31,14 @@ def _box(low: tuple[float, float, float], high: tuple[float, float, float]) -> t
     return corners, triangles
 
 
+def _box_quads(
+    low: tuple[float, float, float], high: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The same box with its 6 faces as quads."""
+    corners, triangles = _box(low, high)
+    return corners, np.concatenate([triangles[0::2], triangles[1::2, 2:]], axis=1)
+
+
 def _union(*boxes: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     points, cells, offset = [], [], 0
     for corners, triangles in boxes:
@@ -139,6 +147,11 @@ def test_finest_connectivity_cuts_cells_no_facet_edge_joins() -> None:
                 vertices, triangles, (3, 2, 2), finest_connectivity=connectivity
             )
             counts[name, connectivity] = (len(grid.hexahedra), len(grid.points))
+    # quads: the face test walks their edges (0 1) (1 2) (2 3), the voxeliser their two triangles
+    quads = _union(_box_quads((0.0, 0.0, 0.0), (0.4, 1.0, 1.0)), _box_quads((1.6, 0.0, 0.0), (2.0, 1.0, 1.0)))
+    empty = np.zeros((0, 3), dtype=np.int64)
+    grid = ramification.ramified_grid(quads[0], empty, (3, 2, 2), quads=quads[1])
+    assert (len(grid.hexahedra), len(grid.points)) == (2, 16)
     assert counts == {
         ("apart", True): (2, 16),
         ("apart", False): (2, 12),

@@ -327,12 +327,6 @@ def sparse_grid_ramification(ctx: Context) -> Outputs:
     from sofac.geometry import ramification, voxelize
 
     mesh = _voxel_surface(ctx)
-    if len(mesh.quads):  # sharingTriangle walks each facet's own edges: quads are not split there
-        raise EvaluationError(
-            "a surface with quads is not supported by SparseGridRamificationTopology yet; triangulate it",
-            "filename",
-            code="E222",
-        )
     try:
         nx, ny, nz = (int(c) for c in _triple(ctx, "n"))
         grid = ramification.ramified_grid(
@@ -346,6 +340,7 @@ def sparse_grid_ramification(ctx: Context) -> Outputs:
             fill_weighted=ctx.value("fillWeighted") is not False,
             only_inside=bool(ctx.value("onlyInsideCells")),
             cell_width=float(ctx.value("cellWidth") or 0.0),
+            quads=mesh.quads,
         )
     except voxelize.VoxelError as error:
         raise EvaluationError(str(error), error.attribute, code="E207") from None

@@ -164,13 +164,15 @@ def _finest_level(
     grid: RegularGrid,
     vertices: np.ndarray,
     facets: np.ndarray,
+    facet_edges: np.ndarray,
     *,
     connectivity: bool,
     fill_weighted: bool,
     only_inside: bool,
     counter: _Counter,
 ) -> tuple[Level, voxelize.SparseGrid]:
-    """buildAsFinest then findConnexionsAtFinestLevel: the voxelised grid, one connexion per cube."""
+    """buildAsFinest then findConnexionsAtFinestLevel: the voxelised grid (of ``facets``, triangles),
+    one connexion per cube, joined across faces (tested against ``facet_edges``)."""
     voxels = voxelize.classify(grid, vertices, facets)
     sparse = voxelize.sparse_grid(voxels, only_inside=only_inside)
     count = len(sparse.hexahedra)
@@ -179,8 +181,7 @@ def _finest_level(
     connexions = [[counter.new()] for _ in range(count)]
     nx, ny, nz = (c - 1 for c in grid.resolution())
     table = np.asarray(sparse.regular_to_sparse, dtype=np.int64)
-    starts = vertices[facets[:, :-1].ravel()] if connectivity else np.zeros((0, 3))
-    ends = vertices[facets[:, 1:].ravel()] if connectivity else np.zeros((0, 3))
+    starts, ends = vertices[facet_edges[:, 0]], vertices[facet_edges[:, 1]]
 
     def connected(cube: int, neighbour: int, where: int) -> bool:
         if not connectivity or not (boundary[cube] and boundary[neighbour]):
@@ -374,7 +375,7 @@ def _coarser_level(finer: Level, counter: _Counter, *, build_points: bool) -> Le
 
 def ramified_grid(
     vertices: np.ndarray,
-    facets: np.ndarray,
+    triangles: np.ndarray,
     n: tuple[int, int, int],
     low: tuple[float, float, float] = (0.0, 0.0, 0.0),
     high: tuple[float, float, float] = (0.0, 0.0, 0.0),
@@ -384,11 +385,22 @@ def ramified_grid(
     fill_weighted: bool = True,
     only_inside: bool = False,
     cell_width: float = 0.0,
+    quads: np.ndarray | None = None,
 ) -> RamifiedGrid:
-    """SparseGridRamificationTopology::init on a triangle surface (``facets`` (t, 3), each
-    triangle's corners in the file's order: sharingTriangle walks the edges (0, 1) and (1, 2))."""
+    """SparseGridRamificationTopology::init on a surface of ``triangles`` (t, 3) and ``quads``
+    (q, 4), corners in the file's order: the voxeliser splits quads (0 1 2) (0 2 3);
+    sharingTriangle walks each facet's edges (j - 1, j), j = 1 .. corners - 1."""
     vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    facets = np.asarray(facets, dtype=np.int64).reshape(-1, 3)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    quads = (
+        np.zeros((0, 4), dtype=np.int64)
+        if quads is None
+        else np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    )
+    facet_edges = np.concatenate(
+        [triangles[:, [0, 1]], triangles[:, [1, 2]], quads[:, [0, 1]], quads[:, [1, 2]], quads[:, [2, 3]]]
+    )
+    facets = voxelize.triangulate(triangles, quads)
     counts = [max(int(c), 2) for c in n]
     if virtual_levels and cell_width:
         raise voxelize.VoxelError(
@@ -405,6 +417,7 @@ def ramified_grid(
         finest_grid,
         vertices,
         facets,
+        facet_edges,
         connectivity=finest_connectivity,
         fill_weighted=fill_weighted,
         only_inside=only_inside and not virtual_levels,  # virtual levels keep the default
