@@ -402,14 +402,10 @@ def ramified_grid(
     )
     facets = voxelize.triangulate(triangles, quads)
     counts = [max(int(c), 2) for c in n]
-    if virtual_levels and cell_width:
-        raise voxelize.VoxelError(
-            "cellWidth with nbVirtualFinerLevels is not supported (SOFA's virtual levels ignore it)",
-            "cellWidth",
-        )
     for _ in range(virtual_levels):
         counts = [(c - 1) * 2 + 1 for c in counts]
     counter = _Counter()
+    # the virtual finest level gets n, min and max, not cellWidth (SOFA then ignores it)
     finest_grid = voxelize.regular_grid(
         vertices, (counts[0], counts[1], counts[2]), low, high, 0.0 if virtual_levels else cell_width
     )
