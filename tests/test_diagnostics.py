@@ -410,9 +410,23 @@ CASES = [
     <MeshOBJLoader name="loader" filename="missing.obj"/>
     <Node name="v">
         <OglModel src="@../loader"/>
+        <MechanicalObject src="@../loader"/>
     </Node>
 """),
         6,
+        "filename",
+    ),
+    Case(
+        "visual-only-loader-missing-file",
+        "W231",
+        dyn("""\
+    <Node name="v">
+        <MeshOBJLoader name="loader" filename="missing.obj"/>
+        <OglModel name="visual" src="@loader"/>
+        <BarycentricMapping input="@.." output="@visual"/>
+    </Node>
+"""),
+        7,
         "filename",
     ),
     Case(

@@ -281,10 +281,15 @@ class Planner:
 
     def _mapped_size(self, state: Component) -> int:
         """The size a mapping gives its output state at init when the state has no positions of its
-        own (the distance mappings: one DOF per edge of their topology); else 0."""
+        own (the distance mappings: one DOF per edge of their topology; IdentityMapping: one per input
+        DOF); else 0."""
         mapping = self.checked.mapping_of(state)
         if mapping is None or mapping.spec is None:
             return 0
+        if mapping.spec.lowering == "identity_mapping":  # IdentityMapping::init: the input's size
+            source = mapping.links.get("input")
+            given = self.checked.positions(source) if isinstance(source, Component) else None
+            return len(given) if given is not None else 0
         if mapping.spec.lowering not in ("distance_mapping", "distance_multi_mapping"):
             return 0
         topology = _topology_of(self, mapping)
