@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 from ..fields import Bool, Color, Coords, Enum, Int, Ints, Options, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import (
@@ -344,30 +346,59 @@ QUAD_BENDING_FEM_FORCE_FIELD = ComponentSpec(
     ),
 )
 
+# SOFA's materialName options, in SOFA's order (the runtime's material codes, hyperelastic.h), and
+# the ParameterSet each compiled material reads (SOFA reads parameterArray[i] unchecked).
+HYPERELASTIC_MATERIALS = (
+    "ArrudaBoyce",
+    "StVenantKirchhoff",
+    "NeoHookean",
+    "MooneyRivlin",
+    "VerondaWestman",
+    "Costa",
+    "Ogden",
+    "StableNeoHookean",
+)
+HYPERELASTIC_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "ArrudaBoyce": ("mu", "k0"),
+    "StVenantKirchhoff": ("mu", "lambda"),
+    "NeoHookean": ("mu", "lambda"),
+    "MooneyRivlin": ("c1", "c2", "k0"),
+    "VerondaWestman": ("c1", "c2", "k0"),
+    "Ogden": ("mu1", "alpha1", "k0"),
+    "StableNeoHookean": ("mu", "lambda"),
+}
+
+
+def hyperelastic_problem(material: str, parameters: Sequence[float]) -> str | None:
+    """Why a material and ParameterSet cannot be compiled (None when they can)."""
+    names = HYPERELASTIC_PARAMETERS.get(material)
+    if names is None:
+        return f"materialName {material!r} is not compiled yet"
+    if len(parameters) < len(names):
+        wanted = f"{' '.join(names)} ({len(names)} numbers)"
+        return f"material {material} needs ParameterSet = {wanted}, got {len(parameters)}"
+    if material == "Ogden" and parameters[1] == 0:
+        return "material Ogden needs alpha1 (ParameterSet's second number) != 0"
+    return None
+
+
 TETRAHEDRON_HYPERELASTICITY_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedronHyperelasticityFEMForceField",
     category=Category.FORCEFIELD,
     module="Sofa.Component.SolidMechanics.FEM.HyperElastic",
-    doc="Hyperelastic tetrahedra (Neo-Hookean, Mooney-Rivlin, St Venant-Kirchhoff, Ogden, ...).",
+    doc="Hyperelastic tetrahedra (Neo-Hookean, Mooney-Rivlin, St Venant-Kirchhoff, Ogden, ...): "
+    "ParameterSet holds the material's parameters in SOFA's order (ArrudaBoyce, StVenantKirchhoff, "
+    "NeoHookean, StableNeoHookean: mu and k0 or lambda; MooneyRivlin, VerondaWestman: c1 c2 k0; "
+    "Ogden: mu1 alpha1 k0). Costa and AnisotropyDirections are not compiled.",
+    lowering="hyperelastic",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="hyperelastic materials are not supported yet",
+    supported=True,
     effects=_FEM_EFFECTS,
     fields=(
         FieldSpec(
             "materialName",
-            Options(
-                values=(
-                    "ArrudaBoyce",
-                    "StVenantKirchhoff",
-                    "NeoHookean",
-                    "MooneyRivlin",
-                    "VerondaWestman",
-                    "Costa",
-                    "Ogden",
-                    "StableNeoHookean",
-                )
-            ),
+            Options(values=HYPERELASTIC_MATERIALS),
             "ArrudaBoyce",
             "material law",
         ),
