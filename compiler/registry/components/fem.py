@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
 
 from ..fields import Bool, Color, Coords, Enum, Int, Ints, Options, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
@@ -369,17 +372,36 @@ HYPERELASTIC_PARAMETERS: dict[str, tuple[str, ...]] = {
 }
 
 
-def hyperelastic_problem(material: str, parameters: Sequence[float]) -> str | None:
-    """Why a material and ParameterSet cannot be compiled (None when they can)."""
+def hyperelastic_problem(material: str, parameters: Sequence[float]) -> tuple[str, str, str, str] | None:
+    """Why a material and ParameterSet cannot be compiled, as (code, attribute, message, hint);
+    None when they can."""
     names = HYPERELASTIC_PARAMETERS.get(material)
+    compiled = ", ".join(HYPERELASTIC_PARAMETERS)
     if names is None:
-        return f"materialName {material!r} is not compiled yet"
+        return (
+            "E222",
+            "materialName",
+            f"unsupported material {material!r}: it is not compiled yet",
+            f"use one of {compiled}",
+        )
+    wanted = " ".join(names)
     if len(parameters) < len(names):
-        wanted = f"{' '.join(names)} ({len(names)} numbers)"
-        return f"material {material} needs ParameterSet = {wanted}, got {len(parameters)}"
+        given = "no ParameterSet" if not len(parameters) else f"ParameterSet has {len(parameters)} numbers"
+        return (
+            "E205",
+            "ParameterSet",
+            f"material {material} reads {len(names)} parameters ({wanted}), {given}",
+            f'write ParameterSet="{wanted}" with numbers (SOFA reads them unchecked)',
+        )
     if material == "Ogden" and parameters[1] == 0:
-        return "material Ogden needs alpha1 (ParameterSet's second number) != 0"
+        return ("E207", "ParameterSet", "Ogden's alpha1 (the second number) is 0", "give alpha1 != 0")
     return None
+
+
+def _hyperelastic_rule(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    written = value("ParameterSet")
+    parameters = [] if written is None else [float(x) for x in np.ravel(written)]
+    return hyperelastic_problem(str(value("materialName") or "ArrudaBoyce"), parameters)
 
 
 TETRAHEDRON_HYPERELASTICITY_FEM_FORCE_FIELD = ComponentSpec(
@@ -391,6 +413,7 @@ TETRAHEDRON_HYPERELASTICITY_FEM_FORCE_FIELD = ComponentSpec(
     "NeoHookean, StableNeoHookean: mu and k0 or lambda; MooneyRivlin, VerondaWestman: c1 c2 k0; "
     "Ogden: mu1 alpha1 k0). Costa and AnisotropyDirections are not compiled.",
     lowering="hyperelastic",
+    validate=_hyperelastic_rule,
     templates=("Vec3d",),
     default_template="Vec3d",
     supported=True,
