@@ -457,7 +457,11 @@ inline void hyperelastic_init(const Index* tetra, Index count, const double* res
             cross_of((j + 2) % 4, (j + 3) % 4, (j + 1) % 4, c);
             for (int k = 0; k < 3; ++k) d[SHAPE + 3 * j + k] = sign * c[k] / volume;
         }
+        // the rest state (F = I, J = 1, S = 0: every material is stress-free there) until a force
+        // is evaluated, so that a tangent asked for first (an assembly's pattern) is finite
         for (int k = GRADIENT; k < VOLUME_SCALE; ++k) d[k] = 0.0;
+        d[GRADIENT] = d[GRADIENT + 4] = d[GRADIENT + 8] = 1.0;
+        d[JACOBIAN] = 1.0;
     }
     data[SIZE * count] = 1.0;
 }
