@@ -423,4 +423,4 @@ def test_matrix_free_assembled_and_explicit_solves_agree(tmp_path: Path) -> None
     sag = np.abs(final["cg"] - grid((2, 2, 5), (1.0, 1.0, 4.0))[0]).max()
     assert sag > 0.05  # the bar bends under its weight
     np.testing.assert_allclose(final["ldl"], final["cg"], rtol=0, atol=1e-8 * sag)
-    assert np.abs(final["explicit"] - final["cg"]).max() < 0.02 * sag
+    assert np.abs(final["explicit"] - final["cg"]).max() < 0.005 * sag  # measured: 0.001
