@@ -5,7 +5,7 @@
 //   2 NeoHookean             ParameterSet = mu lambda
 //   3 MooneyRivlin           ParameterSet = c1 c2 k0
 //   4 VerondaWestman         ParameterSet = c1 c2 k0
-//   5 Costa                  (not compiled: the compiler refuses it)
+//   5 Costa                  ParameterSet = a k0 bff bfs bss bfn bsn bnn
 //   6 Ogden                  ParameterSet = mu1 alpha1 k0
 //   7 StableNeoHookean       ParameterSet = mu lambda
 //
@@ -225,6 +225,28 @@ inline void ogden_tensor(const Strain& s, const Spectral& sp, const double* p, d
     }
 }
 
+// Costa's Fung-type quantities: E = (C - I) / 2, Q = sum b_ij E_ij^2 (the b of each stored entry,
+// off-diagonal ones twice), and U E (each entry of E times its b).
+struct Costa {
+    Sym UE;
+    double Q;
+    double Qbar;  // J^(-4/3) Q
+};
+
+inline Sym costa_weighted(const double* p, const Sym& a) {
+    return Sym{{p[2] * a[0], p[3] * a[1], p[4] * a[2], p[5] * a[3], p[6] * a[4], p[7] * a[5]}};
+}
+
+inline Costa costa_of(const double* p, const Strain& s) {
+    const Sym E = (s.C - identity()) / 2.0;
+    Costa c;
+    c.Q = p[2] * E[0] * E[0] + 2 * p[3] * E[1] * E[1] + p[4] * E[2] * E[2] + 2 * p[5] * E[3] * E[3] +
+          2 * p[6] * E[4] * E[4] + p[7] * E[5] * E[5];
+    c.Qbar = std::pow(s.J, -4.0 / 3.0) * c.Q;
+    c.UE = costa_weighted(p, E);
+    return c;
+}
+
 // ---- the materials ------------------------------------------------------------------------------
 
 // Second Piola-Kirchhoff stress (each material's deriveSPKTensor).
@@ -253,6 +275,12 @@ inline Sym stress(int material, const double* p, const Strain& s) {
             const double J23 = std::pow(J, -2.0 / 3.0);
             return (I - Ci * I1 / 3) * 2 * c1 * c2 * J23 * std::exp(c2 * (J23 * I1 - 3)) +
                    (I * I1 - s.C - Ci * I2 * 2 / 3) * (-c1 * c2 * std::pow(J, -4.0 / 3.0)) + Ci * k0 * std::log(J);
+        }
+        case 5: {  // Costa
+            const double a = p[0], k0 = p[1];
+            const Costa c = costa_of(p, s);
+            return (c.UE - Ci * (2.0 / 3.0) * c.Q) * (a * std::exp(c.Qbar) * std::pow(J, -4.0 / 3.0)) +
+                   Ci * k0 * J * std::log(J);
         }
         case 6: {  // Ogden
             const double mu = p[0], alpha = p[1], k0 = p[2];
@@ -321,6 +349,18 @@ inline Sym elasticity(int material, const double* p, const Strain& s, const Sym&
                        c1 * c2 * J43 +
                    first * (-k0) * std::log(J) + Ci * k0 * trHC / 2.0;
         }
+        case 5: {  // Costa; its volumetric term -Cinv H Cinv J ln J lacks k0 in SOFA, kept (exact for k0 = 1)
+            const double a = p[0], k0 = p[1];
+            const Costa c = costa_of(p, s);
+            const Sym UH = costa_weighted(p, H);
+            const double trHUE = contract(H, c.UE);
+            const Sym deviation = c.UE - Ci * (2.0 / 3.0) * c.Q;
+            return (deviation * ((-2.0 / 3.0) * trHC) + UH / 2.0 + first * (2.0 / 3.0) * c.Q -
+                    Ci * (2.0 / 3.0) * trHUE) *
+                       (a * std::pow(J, -4.0 / 3.0) * std::exp(c.Qbar)) +
+                   deviation * (a * std::pow(J, -8.0 / 3.0) * (trHUE - (2.0 / 3.0) * c.Q * trHC) * std::exp(c.Qbar)) +
+                   Ci * k0 / 2.0 * J * (std::log(J) + 1) * trHC - first * J * std::log(J);
+        }
         case 6: {  // Ogden: sum over k, l of dS_ij/dC_kl H_kl
             Sym r;
             for (int m = 0; m < 6; ++m) {
@@ -386,6 +426,10 @@ inline double energy_density(int material, const double* p, const Strain& s) {
             const double I2 = (I1 * I1 - trace_of_square(s.C)) / 2;
             return c1 * (std::exp(c2 * (std::pow(J, -2.0 / 3.0) * I1 - 3)) - 1) -
                    c1 * c2 * (std::pow(J, -4.0 / 3.0) * I2 - 3) / 2 + k0 * logJ * logJ / 2;
+        }
+        case 5: {
+            const Costa c = costa_of(p, s);
+            return p[0] * (std::exp(c.Qbar) - 1) / 2 + p[1] * (J * logJ - J - 1);
         }
         case 6: {
             const double mu = p[0], alpha = p[1], k0 = p[2];

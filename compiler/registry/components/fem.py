@@ -367,6 +367,7 @@ HYPERELASTIC_PARAMETERS: dict[str, tuple[str, ...]] = {
     "NeoHookean": ("mu", "lambda"),
     "MooneyRivlin": ("c1", "c2", "k0"),
     "VerondaWestman": ("c1", "c2", "k0"),
+    "Costa": ("a", "k0", "bff", "bfs", "bss", "bfn", "bsn", "bnn"),
     "Ogden": ("mu1", "alpha1", "k0"),
     "StableNeoHookean": ("mu", "lambda"),
 }
@@ -411,7 +412,8 @@ TETRAHEDRON_HYPERELASTICITY_FEM_FORCE_FIELD = ComponentSpec(
     doc="Hyperelastic tetrahedra (Neo-Hookean, Mooney-Rivlin, St Venant-Kirchhoff, Ogden, ...): "
     "ParameterSet holds the material's parameters in SOFA's order (ArrudaBoyce, StVenantKirchhoff, "
     "NeoHookean, StableNeoHookean: mu and k0 or lambda; MooneyRivlin, VerondaWestman: c1 c2 k0; "
-    "Ogden: mu1 alpha1 k0). Costa and AnisotropyDirections are not compiled.",
+    "Ogden: mu1 alpha1 k0; Costa: a k0 bff bfs bss bfn bsn bnn). AnisotropyDirections, which no "
+    "material of SOFA reads, and matrixRegularization, which SOFA does not use, change nothing.",
     lowering="hyperelastic",
     validate=_hyperelastic_rule,
     templates=("Vec3d",),
