@@ -366,6 +366,7 @@ _BAD = """<Node name="root" dt="0.01">
           ParameterSet="1000 2"/>
       <TetrahedronHyperelasticityFEMForceField name="none"/>
       <TetrahedronHyperelasticityFEMForceField name="fine" materialName="MooneyRivlin" ParameterSet="1 2 3"/>
+      <TetrahedronHyperelasticityFEMForceField name="flat" materialName="Ogden" ParameterSet="1000 0 5"/>
     </Node>
   </Node>
 </Node>
@@ -381,6 +382,7 @@ def test_unknown_materials_and_short_parameter_sets_are_check_errors(tmp_path: P
         ("E204", 12, "materialName"),
         ("E205", 14, "ParameterSet"),
         ("E205", 15, "ParameterSet"),
+        ("E207", 17, "ParameterSet"),
     ]
     messages = [d.message for d in diagnostics if d.code.startswith("E")]
     assert "Foo" in messages[0] and "StableNeoHookean" in messages[0]  # the name and the choices
