@@ -442,3 +442,20 @@ def test_matrix_free_assembled_and_explicit_solves_agree(tmp_path: Path) -> None
     assert sag > 0.05  # the bar bends under its weight
     np.testing.assert_allclose(final["ldl"], final["cg"], rtol=0, atol=1e-8 * sag)
     assert np.abs(final["explicit"] - final["cg"]).max() < 0.005 * sag  # measured: 0.001
+
+
+def test_a_grid_p0_set_in_the_scene_is_its_origin(tmp_path: Path) -> None:
+    """RegularGridTopology: a p0 the scene sets replaces the origin min gives (SOFA's setPos keeps a
+    set p0), as SOFA's hyperelastic example places its five bars."""
+    scene = tmp_path / "grid.scn"
+    scene.write_text(
+        '<Node name="root"><RegularGridTopology name="a" min="0 0 0" max="1 1 2" n="2 2 3" p0="2 0 0"/>'
+        '<RegularGridTopology name="b" min="0 0 0" max="1 1 2" n="2 2 3"/></Node>'
+    )
+    checked, diagnostics = check_file(scene)
+    assert checked is not None and not diagnostics.has_errors()
+    grids = {c.component.name: c.component for c in checked}
+    shifted = np.asarray(checked.value(grids["a"], "position")).reshape(-1, 3)
+    plain = np.asarray(checked.value(grids["b"], "position")).reshape(-1, 3)
+    np.testing.assert_array_equal(shifted, plain + np.array([2.0, 0.0, 0.0]))
+    assert plain.min(axis=0).tolist() == [0.0, 0.0, 0.0] and plain.max(axis=0).tolist() == [1.0, 1.0, 2.0]
