@@ -30,8 +30,8 @@ def lower_hyperelastic(planner: Planner, checked: CheckedComponent, owner: dict[
     written = planner.value(component, "ParameterSet")
     parameters = np.asarray(written if written is not None else [], dtype=float).ravel()
     problem = hyperelastic_problem(material, parameters)
-    if problem is not None:  # the checker has said why (ComponentSpec.validate)
-        planner.refused.add(id(component))
+    if problem is not None:  # the checker reports it first (ComponentSpec.validate); never silent
+        planner.unsupported(checked, problem[2])
         return
     if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
         planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
