@@ -171,6 +171,9 @@ class _Checker:
         for checked in self.checked:
             if checked.spec is not None and checked.spec.lowering == "uniform_mass":
                 self._check_rigid_inertia(checked)
+        for checked in self.checked:
+            if checked.spec is not None and checked.spec.validate is not None:
+                self._check_rule(checked)
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)
         return self.checked
@@ -877,6 +880,21 @@ class _Checker:
                 f"{checked.spec.name} {checked.component.label!r} needs {field_spec.name!r}{unresolved}",
                 field_spec.doc,
             )
+
+    def _check_rule(self, checked: CheckedComponent) -> None:
+        """The spec's own rule across its fields (ComponentSpec.validate)."""
+        assert checked.spec is not None and checked.spec.validate is not None
+        component = checked.component
+        problem = checked.spec.validate(lambda name: self.checked.value(component, name))
+        if problem is None:
+            return
+        code, attribute, message, hint = problem
+        self.diags.add(
+            code,
+            component.attribute_loc(self._attribute_name(checked, attribute)),
+            f"{checked.spec.name} {component.label!r} at line {component.loc.line}: {message}",
+            hint,
+        )
 
     # --- mappings ----------------------------------------------------------------------------
     def _check_mappings(self) -> None:

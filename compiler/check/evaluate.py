@@ -170,7 +170,11 @@ def grid(ctx: Context) -> Outputs:
         raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
-    lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    # p0, when the scene sets it, replaces the origin setPos derives from min (SOFA's d_p0.isSet())
+    p0 = tuple(map(float, _numbers(ctx, "p0", 3))) if ctx.is_set("p0") else None
+    lattice = RegularGrid(
+        tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)), p0=p0
+    )
     with np.errstate(all="ignore"):  # bounds near the float range: said below, not warned about
         points = lattice.points()
     if not np.isfinite(points).all():

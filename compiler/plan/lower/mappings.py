@@ -471,7 +471,13 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
     grid = None
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
-        grid = RegularGrid(tuple(int(c) for c in cells["resolution"]), tuple(bounds[:3]), tuple(bounds[3:]))
+        p0 = planner.value(topology, "p0") if topology.get("p0") is not None else None
+        grid = RegularGrid(
+            tuple(int(c) for c in cells["resolution"]),
+            tuple(bounds[:3]),
+            tuple(bounds[3:]),
+            p0=tuple(float(c) for c in np.ravel(p0)) if p0 is not None else None,
+        )
     elif (
         mode == "sparse_grid"
         and topology is not None
