@@ -26,6 +26,7 @@ from sofac.plan.ir import (
     Arg,
     Buffer,
     Call,
+    Collision,
     Constant,
     Count,
     Element,
@@ -74,6 +75,7 @@ _ENV = {
     Env.KINETIC_OUT: "&kinetic",
     Env.POTENTIAL_OUT: "&potential",
     Env.NONE: "nullptr",
+    Env.CONTACTS: "*S.contacts",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
 
@@ -330,6 +332,84 @@ class _GroupView:
         return getattr(self._group, name)
 
 
+_SIDE = {"triangle": "kTriangle", "line": "kLine", "point": "kPoint", "sphere": "kSphere"}
+
+
+def _model_view(index: int, model: Any) -> str:
+    """The runtime's view of a collision model on the instance's buffers (proximity.h)."""
+    x, cd = _ptr(model.state.x), repr(model.contact_distance)
+    here = f"C.models[{index}]"
+    if model.kind == "triangle":
+        normals = f"{here}.normals.data()"
+        return (
+            f"const sofac::collide::TriangleModel m{index}{{{x}, {_ptr(model.cells)}, {here}.flags.data(), "
+            f"{normals}, {model.elements}, {cd}}};"
+        )
+    if model.kind == "line":
+        return f"const sofac::collide::LineModel m{index}{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}};"
+    return f"const sofac::collide::PointModel m{index}{{{x}, {model.elements}, {cd}}};"
+
+
+class _CollisionView:
+    """The compiled contacts as the template arranges them: setup lines, the step's detection."""
+
+    def __init__(self, collision: Collision) -> None:
+        models = collision.models
+        self.origin = collision.origin
+        self.setup = [
+            f"C.resize({len(models)}, {collision.alarm_distance!r}, {collision.contact_distance!r}, {collision.depth});"
+        ]
+        for index, model in enumerate(models):
+            here = f"C.models[{index}]"
+            self.setup.append(f"// {_comment(model.origin)}")
+            self.setup.append(
+                f"{here}.kind = sofac::collide::ContactSide::{_SIDE[model.kind]}; {here}.points = {model.state.size}; "
+                f"{here}.elements = {model.elements};"
+            )
+            self.setup.append(
+                f"{here}.contact_distance = {model.contact_distance!r}; "
+                f"{here}.contact_stiffness = {model.contact_stiffness!r}; "
+                f"{here}.moving = {'true' if model.moving else 'false'};"
+            )
+            if model.cells is not None:
+                self.setup.append(f"{here}.cells = {_ptr(model.cells)};")
+            if model.kind == "triangle":
+                self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
+                self.setup.append(
+                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, {model.state.size}, "
+                    f"{here}.flags.data());"
+                )
+        for pair in collision.pairs:
+            self.setup.append(
+                f"C.add_pair({pair.first}, {pair.second}, {'true' if pair.root else 'false'}, {pair.id_bound});"
+                f"  // {pair.test}"
+            )
+        self.setup.append("C.finish_setup();")
+        used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
+        self.views = [_model_view(i, models[i]) for i in used]
+        self.updates = []
+        for i in used:
+            model = models[i]
+            normals = (f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr") if model.kind == "triangle" else ""
+            self.updates.append(f"if (C.needs_update({i})) sofac::collide::update_tree(C.models[{i}].tree, m{i}{normals});")
+        self.cases = []
+        for index, pair in enumerate(collision.pairs):
+            a, b = models[pair.first], models[pair.second]
+            options = "".join(f", {'true' if o else 'false'}" for o in pair.options)
+            test = f"sofac::collide::{pair.test}(method, m{pair.first}, e1, m{pair.second}, e2{options}, out);"
+            self.cases.append(
+                (
+                    index,
+                    _comment(f"{a.origin} / {b.origin}"),
+                    f"sofac::collide::bvh_narrow_phase(C.models[{pair.first}].tree, {a.contact_distance!r}, "
+                    f"C.models[{pair.second}].tree, {b.contact_distance!r}, {collision.alarm_distance!r}, "
+                    f"C.pairs[{index}].stack, [&](Index e1, Index e2) {{ {test} }});",
+                )
+            )
+        self.positions = ", ".join(_ptr(m.state.x) for m in models)
+        self.method = f"const sofac::collide::Proximity method{{{collision.alarm_distance!r}, {collision.contact_distance!r}}};"
+
+
 def generate_source(plan: Plan) -> str:
     """The C++ source of a plan's step (deterministic: same plan, same text). Compiled for
     threads, groups that share no buffer step in parallel (Plan.parallel_groups)."""
@@ -350,6 +430,7 @@ def generate_source(plan: Plan) -> str:
         dt=plan.dt,
         threads=plan.threads,
         guard=plan.contact_guard,
+        collision=_CollisionView(plan.collision) if plan.collision and plan.collision.pairs else None,
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,

@@ -55,6 +55,7 @@ class Env(enum.Enum):
     KINETIC_OUT = "kinetic_out"  # ... and their addresses, for kernels that add to both
     POTENTIAL_OUT = "potential_out"
     NONE = "none"  # an absent pointer
+    CONTACTS = "contacts"  # the scene's penalty contacts (runtime/sofac/penalty.h)
 
 
 class FemMethod(enum.IntEnum):
@@ -443,6 +444,49 @@ class ContactGuard:
 
 
 @dataclass
+class CollisionModel:
+    """A collision model of the pipeline, in SOFA's order (depth first below the pipeline's node)."""
+
+    origin: str
+    kind: str  # "triangle", "line", "point" or "sphere" (runtime ContactSide)
+    state: StatePlan  # its points (Vec3d)
+    elements: int  # triangles, edges, points or spheres
+    cells: Buffer | None  # i64 triangles (3 per) or edges (2 per)
+    contact_distance: float
+    contact_stiffness: float
+    moving: bool  # boxes follow the points (False: computed at the first step only)
+    simulated: bool
+    compute_normals: bool = True  # triangle models' computeNormals
+
+
+@dataclass
+class ContactPair:
+    """A model pair the broad phase can produce, models in the intersector's order."""
+
+    first: int
+    second: int
+    test: str  # the element test: "<method>::<kind>_<kind>" of runtime/sofac/proximity.h
+    root: bool  # both simulated: one explicit force per step (SOFA places it at the pipeline's node)
+    id_bound: int  # the outputs' ids are below it (the de-duplication's table)
+    options: tuple[bool, ...] = ()  # the test's flags after the models (same_model, useLineLine)
+
+
+@dataclass
+class Collision:
+    """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
+
+    origin: str  # the pipeline
+    method: str  # "new_proximity" or "min_proximity"
+    alarm_distance: float
+    contact_distance: float
+    depth: int  # the bounding trees' depth (BVHNarrowPhase needs deep trees)
+    models: list[CollisionModel]
+    pairs: list[ContactPair]
+    # Why each other pair of models gets no code: ((first origin, second origin), reason).
+    left_out: list[tuple[str, str, str]] = field(default_factory=list)
+
+
+@dataclass
 class Plan:
     scene_file: str
     dt: Buffer
@@ -462,6 +506,7 @@ class Plan:
     threads: int = 1
     rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
     contact_guard: ContactGuard | None = None
+    collision: Collision | None = None  # compiled contacts (then there is no guard)
     # Compiled for threads, with groups that share no buffer: they step side by side.
     parallel_groups: bool = False
     interactive: bool = False  # with a point force on each state, set from Python (plan_scene)

@@ -1,0 +1,285 @@
+"""Penalty contact as SOFA's DefaultAnimationLoop runs it, compiled for the model pairs that can meet.
+
+At compile time: the pipeline's collision models in SOFA's order, the pairs its broad phase can
+ever produce (different nodes or selfCollision, not both static, disjoint groups, an intersector
+for the two types), each with its element test and model order fixed, and where each pair's
+response goes (a static partner: inside the other model's group, in its force evaluations and K dx
+products; two simulated models: one explicit force per step). At run time (runtime/sofac/penalty.h):
+trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component, Node
+from sofac.registry import Category
+
+from .ir import Collision, CollisionModel, ContactPair, Env, Group, Op, call, origin_of
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+# The intersector's type order: a pair's first model is the one of higher rank (SOFA registers
+# Triangle-Line, Line-Point, Sphere-Point, Line-Sphere, Triangle-Sphere, never the other way).
+_RANK = {"triangle": 3, "line": 2, "sphere": 1, "point": 0}
+# The element tests each method registers (runtime/sofac/proximity.h), by (first, second) kind.
+_TESTS = {
+    "new_proximity": {
+        ("point", "point"),
+        ("line", "point"),
+        ("line", "line"),
+        ("triangle", "point"),
+        ("triangle", "line"),
+        ("triangle", "triangle"),
+        ("sphere", "sphere"),
+        ("sphere", "point"),
+        ("line", "sphere"),
+        ("triangle", "sphere"),
+    },
+    # MinProximity ignores Triangle-Line and Triangle-Triangle (MinProximityIntersection::init).
+    "min_proximity": {
+        ("point", "point"),
+        ("line", "point"),
+        ("line", "line"),
+        ("triangle", "point"),
+        ("sphere", "sphere"),
+        ("sphere", "point"),
+        ("triangle", "sphere"),
+        ("line", "sphere"),
+    },
+}
+# MinProximityIntersection's switches: the pairs each one removes.
+_MIN_PROXIMITY_SWITCHES = {
+    "usePointPoint": {("point", "point")},
+    "useLinePoint": {("line", "point")},
+    "useLineLine": {("line", "line")},
+    "useSphereTriangle": {("triangle", "sphere")},
+}
+
+
+def collision_models_in_order(planner: Planner, pipeline: Component) -> list[CheckedComponent]:
+    """The collision models below the pipeline's node as SOFA's get<CollisionModel>(SearchDown)
+    lists them: a node's objects, then its children, depth first."""
+    found: list[CheckedComponent] = []
+
+    def visit(node: Node) -> None:
+        for component in node.objects:
+            checked = planner.checked.of(component)
+            if checked.category is Category.COLLISION_MODEL:
+                found.append(checked)
+        for child in node.children:
+            visit(child)
+
+    visit(pipeline.node)
+    return found
+
+
+def _pipeline_parts(planner: Planner) -> dict[str, CheckedComponent] | None:
+    """The pipeline's components by role, or None (with a refusal) when the setup is not one sofac
+    compiles: a CollisionPipeline with BruteForceBroadPhase, BVHNarrowPhase, MinProximity or
+    NewProximity and a CollisionResponse giving PenalityContactForceField, under a DefaultAnimationLoop."""
+    parts: dict[str, CheckedComponent] = {}
+    for checked in planner.checked:
+        if checked.category is Category.COLLISION_PIPELINE and checked.spec is not None:
+            role = checked.spec.role or checked.spec.name
+            if role in ("min_proximity", "new_proximity"):
+                parts.setdefault("intersection", checked)
+            else:
+                parts.setdefault(role, checked)
+    needed = ("pipeline", "broad_phase", "narrow_phase", "intersection", "contact_manager")
+    return parts if all(role in parts for role in needed) else None
+
+
+def contact_setup_refusal(planner: Planner) -> str:
+    """Why the scene's contacts cannot be compiled ("" when they can)."""
+    parts = _pipeline_parts(planner)
+    if parts is None:
+        return (
+            "penalty contact is compiled for a CollisionPipeline with BruteForceBroadPhase, BVHNarrowPhase, "
+            "MinProximityIntersection or NewProximityIntersection and a CollisionResponse"
+        )
+    response = str(planner.value(parts["contact_manager"].component, "response") or "")
+    if response != "PenalityContactForceField":
+        return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
+    for checked in planner.checked:
+        if checked.category is Category.ANIMATION_LOOP and checked.spec and checked.spec.name != "DefaultAnimationLoop":
+            return f"contact response under {checked.spec.name} is not compiled yet (DefaultAnimationLoop is)"
+    models = collision_models_in_order(planner, parts["pipeline"].component)
+    for checked in models:
+        spec = checked.spec
+        assert spec is not None
+        if spec.role not in _RANK:
+            return f"{spec.name} takes no part in compiled contacts"
+        if checked.datatype is not None and checked.datatype.name != "Vec3d":
+            return f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
+        if planner.value(checked.component, "selfCollision"):
+            return "self-collision is not compiled yet"
+        if planner.value(checked.component, "contactResponse"):
+            return "a model's own contactResponse is not compiled yet"
+        if spec.role == "sphere":
+            return "sphere collision models' contacts are not compiled yet"
+    return ""
+
+
+def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | None:
+    """The scene's compiled contacts, and their calls in the groups of the models they act on."""
+    parts = _pipeline_parts(planner)
+    assert parts is not None
+    pipeline, intersection = parts["pipeline"], parts["intersection"]
+    method = intersection.spec.role if intersection.spec else ""
+    value = planner.value
+    tests = set(_TESTS[method])
+    if method == "min_proximity":
+        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
+            if value(intersection.component, switch) is False:
+                tests -= removed
+    models: list[CollisionModel] = []
+    checked_models = [
+        c for c in collision_models_in_order(planner, pipeline.component) if value(c.component, "active") is not False
+    ]
+    for checked in checked_models:
+        model = _model(planner, checked)
+        if model is None:
+            return None
+        models.append(model)
+    collision = Collision(
+        origin=origin_of(pipeline.component),
+        method=method,
+        alarm_distance=float(value(intersection.component, "alarmDistance")),
+        contact_distance=float(value(intersection.component, "contactDistance")),
+        depth=int(value(pipeline.component, "depth")),
+        models=models,
+        pairs=[],
+    )
+    use_line_line = bool(value(intersection.component, "useLineLine")) if method == "new_proximity" else False
+    for later in range(len(models)):
+        for earlier in range(later):
+            a, b = models[later], models[earlier]
+            why = _never(planner, checked_models[later], checked_models[earlier], a, b)
+            first, second = (later, earlier) if _RANK[a.kind] >= _RANK[b.kind] else (earlier, later)
+            kinds = (models[first].kind, models[second].kind)
+            if not why and kinds not in tests:
+                why = f"{method} has no {kinds[0]}-{kinds[1]} test"
+            if why:
+                collision.left_out.append((a.origin, b.origin, why))
+                continue
+            options: tuple[bool, ...] = ()
+            if kinds == ("triangle", "triangle"):
+                options = (False, use_line_line)
+            elif kinds == ("triangle", "line") and method == "new_proximity":
+                options = (use_line_line,)
+            m1, m2 = models[first], models[second]
+            id_bound = 3 * m1.elements + 12 * m2.elements if kinds == ("triangle", "triangle") else max(
+                m1.elements, m2.elements
+            ) + 1
+            collision.pairs.append(
+                ContactPair(
+                    first=first,
+                    second=second,
+                    test=f"{method}::{kinds[0]}_{kinds[1]}",
+                    root=m1.simulated and m2.simulated,
+                    id_bound=id_bound,
+                    options=options,
+                )
+            )
+    if not collision.pairs:
+        return collision
+    _place(planner, collision, owner)
+    return collision
+
+
+def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None:
+    from .lower.common import _topology_cells
+
+    state = planner.state_of(checked)
+    spec = checked.spec
+    assert spec is not None
+    if state is None or state.datatype.name != "Vec3d":
+        planner.unsupported(checked, "a collision model needs a Vec3d MechanicalObject in its node")
+        return None
+    kind = spec.role
+    value = planner.value
+    cells_buffer = None
+    elements = state.size
+    if kind in ("triangle", "line"):
+        cells = _topology_cells(planner, checked) or {}
+        if kind == "triangle":
+            if cells.get("quads") is not None and np.size(cells["quads"]):
+                planner.unsupported(checked, "quads in a TriangleCollisionModel are not compiled yet")
+                return None
+            array = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
+        else:
+            from sofac.geometry import masses
+
+            array = cells.get("edges")
+            if array is None or not np.size(array):
+                array = masses.topology_edges(state.size, triangles=cells.get("triangles"), quads=cells.get("quads"))
+            array = np.asarray(array, dtype=np.int64).reshape(-1, 2)
+        if array.size and (array.min() < 0 or array.max() >= state.size):
+            planner.unsupported(checked, f"its topology names points beyond the {state.size} of its state")
+            return None
+        elements = len(array)
+        cells_buffer = planner.buffer(checked.component, kind + "s", array, "i64", columns=array.shape[1])
+    return CollisionModel(
+        origin=origin_of(checked.component),
+        kind=kind,
+        state=state,
+        elements=elements,
+        cells=cells_buffer,
+        contact_distance=float(value(checked.component, "contactDistance")),
+        contact_stiffness=float(value(checked.component, "contactStiffness")),
+        moving=bool(value(checked.component, "moving")),
+        simulated=bool(value(checked.component, "simulated")),
+        compute_normals=bool(value(checked.component, "computeNormals")) if kind == "triangle" else False,
+    )
+
+
+def _never(
+    planner: Planner, a_checked: CheckedComponent, b_checked: CheckedComponent, a: CollisionModel, b: CollisionModel
+) -> str:
+    """Why the broad phase never pairs two models ("" if it may): CollisionModel::canCollideWith
+    and BruteForceBroadPhase's static test."""
+    if a_checked.component.node is b_checked.component.node:
+        return "models of one node collide only with selfCollision"
+    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
+    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
+    if groups_a & groups_b:
+        return "they share a collision group"
+    if not a.simulated and not b.simulated:
+        return "both are static (simulated=0)"
+    if not a.elements or not b.elements:
+        return "one of them has no element"
+    return ""
+
+
+def _place(planner: Planner, collision: Collision, owner: dict[int, Group]) -> None:
+    """Each simulated model's contact forces in the group integrating its state: in every force
+    evaluation and, for its contacts with static models, in every K dx product."""
+    in_pairs = {i for p in collision.pairs for i in (p.first, p.second)}
+    for index, model in enumerate(collision.models):
+        if index not in in_pairs or not model.simulated:
+            continue
+        group = owner.get(id(model.state.component))
+        if group is None:
+            continue  # nothing integrates it: the forces on it go nowhere, as in SOFA
+        if group.assembled or group.direct:
+            planner.unsupported(
+                planner.checked.of(model.state.component),
+                "penalty contact in an assembled system (a direct solver) is not compiled yet; use CGLinearSolver",
+            )
+            continue
+        where = f"contact forces on {model.origin}"
+        state = model.state
+        group.forces.append(Op(where, [call("contact_add_force", Env.CONTACTS, index, state.f, state.x)]))
+        static_partner = any(
+            not collision.models[p.second if p.first == index else p.first].simulated
+            for p in collision.pairs
+            if index in (p.first, p.second)
+        )
+        if group.scheme == "implicit" and static_partner and state.dx is not None:
+            group.stiffness_dx.append(
+                Op(where, [call("contact_add_dforce", Env.CONTACTS, index, state.df, state.dx, Env.KFACT)])
+            )
