@@ -346,7 +346,9 @@ def _model_view(index: int, model: Any) -> str:
             f"{normals}, {model.elements}, {cd}}};"
         )
     if model.kind == "line":
-        return f"const sofac::collide::LineModel m{index}{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}};"
+        return (
+            f"const sofac::collide::LineModel m{index}{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}};"
+        )
     return f"const sofac::collide::PointModel m{index}{{{x}, {model.elements}, {cd}}};"
 
 
@@ -356,16 +358,13 @@ class _CollisionView:
     def __init__(self, collision: Collision) -> None:
         models = collision.models
         self.origin = collision.origin
-        self.setup = [
-            f"C.resize({len(models)}, {collision.alarm_distance!r}, {collision.contact_distance!r}, {collision.depth});"
-        ]
+        alarm, contact = repr(collision.alarm_distance), repr(collision.contact_distance)
+        self.setup = [f"C.resize({len(models)}, {alarm}, {contact}, {collision.depth});"]
         for index, model in enumerate(models):
             here = f"C.models[{index}]"
             self.setup.append(f"// {_comment(model.origin)}")
-            self.setup.append(
-                f"{here}.kind = sofac::collide::ContactSide::{_SIDE[model.kind]}; {here}.points = {model.state.size}; "
-                f"{here}.elements = {model.elements};"
-            )
+            self.setup.append(f"{here}.kind = sofac::collide::ContactSide::{_SIDE[model.kind]};")
+            self.setup.append(f"{here}.points = {model.state.size}; {here}.elements = {model.elements};")
             self.setup.append(
                 f"{here}.contact_distance = {model.contact_distance!r}; "
                 f"{here}.contact_stiffness = {model.contact_stiffness!r}; "
@@ -376,13 +375,13 @@ class _CollisionView:
             if model.kind == "triangle":
                 self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
                 self.setup.append(
-                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, {model.state.size}, "
-                    f"{here}.flags.data());"
+                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, "
+                    f"{model.state.size}, {here}.flags.data());"
                 )
         for pair in collision.pairs:
+            root = "true" if pair.root else "false"
             self.setup.append(
-                f"C.add_pair({pair.first}, {pair.second}, {'true' if pair.root else 'false'}, {pair.id_bound});"
-                f"  // {pair.test}"
+                f"C.add_pair({pair.first}, {pair.second}, {root}, {pair.id_bound});  // {pair.test}"
             )
         self.setup.append("C.finish_setup();")
         used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
@@ -390,13 +389,22 @@ class _CollisionView:
         self.updates = []
         for i in used:
             model = models[i]
-            normals = (f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr") if model.kind == "triangle" else ""
-            self.updates.append(f"if (C.needs_update({i})) sofac::collide::update_tree(C.models[{i}].tree, m{i}{normals});")
+            normals = (
+                (f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr")
+                if model.kind == "triangle"
+                else ""
+            )
+            tree = f"C.models[{i}].tree"
+            self.updates.append(
+                f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, m{i}{normals});"
+            )
         self.cases = []
         for index, pair in enumerate(collision.pairs):
             a, b = models[pair.first], models[pair.second]
             options = "".join(f", {'true' if o else 'false'}" for o in pair.options)
-            test = f"sofac::collide::{pair.test}(method, m{pair.first}, e1, m{pair.second}, e2{options}, out);"
+            test = (
+                f"sofac::collide::{pair.test}(method, m{pair.first}, e1, m{pair.second}, e2{options}, out);"
+            )
             self.cases.append(
                 (
                     index,
@@ -407,7 +415,7 @@ class _CollisionView:
                 )
             )
         self.positions = ", ".join(_ptr(m.state.x) for m in models)
-        self.method = f"const sofac::collide::Proximity method{{{collision.alarm_distance!r}, {collision.contact_distance!r}}};"
+        self.method = f"const sofac::collide::Proximity method{{{alarm}, {contact}}};"
 
 
 def generate_source(plan: Plan) -> str:

@@ -105,7 +105,11 @@ def contact_setup_refusal(planner: Planner) -> str:
     if response != "PenalityContactForceField":
         return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
     for checked in planner.checked:
-        if checked.category is Category.ANIMATION_LOOP and checked.spec and checked.spec.name != "DefaultAnimationLoop":
+        if (
+            checked.category is Category.ANIMATION_LOOP
+            and checked.spec
+            and checked.spec.name != "DefaultAnimationLoop"
+        ):
             return f"contact response under {checked.spec.name} is not compiled yet (DefaultAnimationLoop is)"
     models = collision_models_in_order(planner, parts["pipeline"].component)
     for checked in models:
@@ -138,7 +142,9 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
                 tests -= removed
     models: list[CollisionModel] = []
     checked_models = [
-        c for c in collision_models_in_order(planner, pipeline.component) if value(c.component, "active") is not False
+        c
+        for c in collision_models_in_order(planner, pipeline.component)
+        if value(c.component, "active") is not False
     ]
     for checked in checked_models:
         model = _model(planner, checked)
@@ -171,10 +177,14 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
                 options = (False, use_line_line)
             elif kinds == ("triangle", "line") and method == "new_proximity":
                 options = (use_line_line,)
+            elif kinds == ("triangle", "point") and method == "min_proximity":
+                options = (bool(value(intersection.component, "useSurfaceNormals")),)
             m1, m2 = models[first], models[second]
-            id_bound = 3 * m1.elements + 12 * m2.elements if kinds == ("triangle", "triangle") else max(
-                m1.elements, m2.elements
-            ) + 1
+            id_bound = (
+                3 * m1.elements + 12 * m2.elements
+                if kinds == ("triangle", "triangle")
+                else max(m1.elements, m2.elements) + 1
+            )
             collision.pairs.append(
                 ContactPair(
                     first=first,
@@ -216,7 +226,9 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
 
             array = cells.get("edges")
             if array is None or not np.size(array):
-                array = masses.topology_edges(state.size, triangles=cells.get("triangles"), quads=cells.get("quads"))
+                array = masses.topology_edges(
+                    state.size, triangles=cells.get("triangles"), quads=cells.get("quads")
+                )
             array = np.asarray(array, dtype=np.int64).reshape(-1, 2)
         if array.size and (array.min() < 0 or array.max() >= state.size):
             planner.unsupported(checked, f"its topology names points beyond the {state.size} of its state")
@@ -238,7 +250,11 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
 
 
 def _never(
-    planner: Planner, a_checked: CheckedComponent, b_checked: CheckedComponent, a: CollisionModel, b: CollisionModel
+    planner: Planner,
+    a_checked: CheckedComponent,
+    b_checked: CheckedComponent,
+    a: CollisionModel,
+    b: CollisionModel,
 ) -> str:
     """Why the broad phase never pairs two models ("" if it may): CollisionModel::canCollideWith
     and BruteForceBroadPhase's static test."""
@@ -268,7 +284,8 @@ def _place(planner: Planner, collision: Collision, owner: dict[int, Group]) -> N
         if group.assembled or group.direct:
             planner.unsupported(
                 planner.checked.of(model.state.component),
-                "penalty contact in an assembled system (a direct solver) is not compiled yet; use CGLinearSolver",
+                "penalty contact in an assembled system (a direct solver) is not compiled yet; "
+                "use CGLinearSolver",
             )
             continue
         where = f"contact forces on {model.origin}"
