@@ -27,6 +27,7 @@ from sofac.plan.ir import (
     Buffer,
     Call,
     Collision,
+    CollisionModel,
     Constant,
     Count,
     Element,
@@ -335,30 +336,56 @@ class _GroupView:
 _SIDE = {"triangle": "kTriangle", "line": "kLine", "point": "kPoint", "sphere": "kSphere"}
 
 
-def _model_view(index: int, model: Any) -> str:
+_VIEW = {"triangle": "TriangleModel", "line": "LineModel", "point": "PointModel"}
+
+
+def _model_view(index: int, model: CollisionModel) -> str:
     """The runtime's view of a collision model on the instance's buffers (proximity.h)."""
     x, cd = _ptr(model.state.x), repr(model.contact_distance)
-    here = f"C.models[{index}]"
     if model.kind == "triangle":
-        normals = f"{here}.normals.data()"
-        return (
-            f"const sofac::collide::TriangleModel m{index}{{{x}, {_ptr(model.cells)}, {here}.flags.data(), "
-            f"{normals}, {model.elements}, {cd}}};"
-        )
+        here = f"C.models[{index}]"
+        flags, normals = f"{here}.flags.data()", f"{here}.normals.data()"
+        return f"{{{x}, {_ptr(model.cells)}, {flags}, {normals}, {model.elements}, {cd}}}"
     if model.kind == "line":
-        return (
-            f"const sofac::collide::LineModel m{index}{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}};"
-        )
-    return f"const sofac::collide::PointModel m{index}{{{x}, {model.elements}, {cd}}};"
+        return f"{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}}"
+    return f"{{{x}, {model.elements}, {cd}}}"
 
 
 class _CollisionView:
-    """The compiled contacts as the template arranges them: setup lines, the step's detection."""
+    """The compiled contacts as the template arranges them: the setup at init (the pair table is
+    a buffer), the model views of a step (one array per kind), their trees' updates, and one
+    narrow-phase case per element test the scene has (the pairs sharing a test share its code)."""
 
     def __init__(self, collision: Collision) -> None:
         models = collision.models
         self.origin = collision.origin
         alarm, contact = repr(collision.alarm_distance), repr(collision.contact_distance)
+        self.method = f"const sofac::collide::Proximity method{{{alarm}, {contact}}};"
+        used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
+        self.views: list[str] = []
+        for kind, view in _VIEW.items():
+            members = sorted((i for i in used if models[i].kind == kind), key=lambda i: models[i].view)
+            if members:
+                items = ",\n        ".join(_model_view(i, models[i]) for i in members)
+                self.views.append(f"const sofac::collide::{view} {kind}s[] = {{\n        {items}}};")
+        self.updates = []
+        for i in used:
+            model = models[i]
+            normals = ""
+            if model.kind == "triangle":
+                normals = f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr"
+            tree, view = f"C.models[{i}].tree", f"{model.kind}s[{model.view}]"
+            self.updates.append(
+                f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, {view}{normals});"
+            )
+        self.cases = []
+        for number, test in enumerate(collision.tests):
+            first, second = test.kinds
+            flags = "".join(f", {'true' if o else 'false'}" for o in test.options)
+            views = f"{first}s[p.view[0]], e1, {second}s[p.view[1]], e2"
+            call = f"sofac::collide::{test.name}(method, {views}{flags}, out);"
+            lambda_ = f"[&](Index e1, Index e2, sofac::collide::OutputList& out) {{ {call} }}"
+            self.cases.append((number, test.name, f"C.narrow_phase(p, {lambda_});"))
         self.setup = [f"C.resize({len(models)}, {alarm}, {contact}, {collision.depth});"]
         for index, model in enumerate(models):
             here = f"C.models[{index}]"
@@ -378,44 +405,17 @@ class _CollisionView:
                     f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, "
                     f"{model.state.size}, {here}.flags.data());"
                 )
-        for pair in collision.pairs:
-            root = "true" if pair.root else "false"
-            self.setup.append(
-                f"C.add_pair({pair.first}, {pair.second}, {root}, {pair.id_bound});  // {pair.test}"
-            )
+        assert collision.table is not None
+        table, rows = _ptr(collision.table), len(collision.pairs)
+        self.setup.append(f"for (Index k = 0; k < {rows}; ++k) {{  // the pair table: {_VIEW_COLUMNS}")
+        self.setup.append(f"    const Index* row = {table} + 7 * k;")
+        self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
+        self.setup.append("}")
         self.setup.append("C.finish_setup();")
-        used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
-        self.views = [_model_view(i, models[i]) for i in used]
-        self.updates = []
-        for i in used:
-            model = models[i]
-            normals = (
-                (f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr")
-                if model.kind == "triangle"
-                else ""
-            )
-            tree = f"C.models[{i}].tree"
-            self.updates.append(
-                f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, m{i}{normals});"
-            )
-        self.cases = []
-        for index, pair in enumerate(collision.pairs):
-            a, b = models[pair.first], models[pair.second]
-            options = "".join(f", {'true' if o else 'false'}" for o in pair.options)
-            test = (
-                f"sofac::collide::{pair.test}(method, m{pair.first}, e1, m{pair.second}, e2{options}, out);"
-            )
-            self.cases.append(
-                (
-                    index,
-                    _comment(f"{a.origin} / {b.origin}"),
-                    f"sofac::collide::bvh_narrow_phase(C.models[{pair.first}].tree, {a.contact_distance!r}, "
-                    f"C.models[{pair.second}].tree, {b.contact_distance!r}, {collision.alarm_distance!r}, "
-                    f"C.pairs[{index}].stack, [&](Index e1, Index e2) {{ {test} }});",
-                )
-            )
-        self.positions = ", ".join(_ptr(m.state.x) for m in models)
-        self.method = f"const sofac::collide::Proximity method{{{alarm}, {contact}}};"
+        self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
+
+
+_VIEW_COLUMNS = "first, second, root, id bound, test, views"
 
 
 def generate_source(plan: Plan) -> str:

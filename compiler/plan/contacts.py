@@ -17,7 +17,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category
 
-from .ir import Collision, CollisionModel, ContactPair, Env, Group, Op, call, origin_of
+from .ir import Collision, CollisionModel, ContactPair, ElementTest, Env, Group, Op, call, origin_of
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -158,6 +158,7 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
         contact_distance=float(value(intersection.component, "contactDistance")),
         depth=int(value(pipeline.component, "depth")),
         models=models,
+        tests=[],
         pairs=[],
     )
     use_line_line = bool(value(intersection.component, "useLineLine")) if method == "new_proximity" else False
@@ -179,24 +180,30 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
                 options = (use_line_line,)
             elif kinds == ("triangle", "point") and method == "min_proximity":
                 options = (bool(value(intersection.component, "useSurfaceNormals")),)
+            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options)
+            if test not in collision.tests:
+                collision.tests.append(test)
             m1, m2 = models[first], models[second]
-            id_bound = (
-                3 * m1.elements + 12 * m2.elements
-                if kinds == ("triangle", "triangle")
-                else max(m1.elements, m2.elements) + 1
-            )
+            if kinds == ("triangle", "triangle"):
+                id_bound = 3 * m1.elements + 12 * m2.elements
+            else:
+                id_bound = max(m1.elements, m2.elements) + 1
             collision.pairs.append(
                 ContactPair(
-                    first=first,
-                    second=second,
-                    test=f"{method}::{kinds[0]}_{kinds[1]}",
-                    root=m1.simulated and m2.simulated,
-                    id_bound=id_bound,
-                    options=options,
+                    first, second, collision.tests.index(test), m1.simulated and m2.simulated, id_bound
                 )
             )
     if not collision.pairs:
         return collision
+    used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
+    for kind in _RANK:
+        for view, index in enumerate(i for i in used if models[i].kind == kind):
+            models[index].view = view
+    rows = [
+        (p.first, p.second, int(p.root), p.id_bound, p.test, models[p.first].view, models[p.second].view)
+        for p in collision.pairs
+    ]
+    collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
     _place(planner, collision, owner)
     return collision
 

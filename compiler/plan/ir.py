@@ -457,6 +457,21 @@ class CollisionModel:
     moving: bool  # boxes follow the points (False: computed at the first step only)
     simulated: bool
     compute_normals: bool = True  # triangle models' computeNormals
+    view: int = -1  # its place among the paired models of its kind (-1: in no pair)
+
+
+@dataclass(frozen=True)
+class ElementTest:
+    """An element test of runtime/sofac/proximity.h, ``<method>::<kind>_<kind>``, with its flags
+    after the two models (same_model, useLineLine, useSurfaceNormals)."""
+
+    name: str
+    options: tuple[bool, ...] = ()
+
+    @property
+    def kinds(self) -> tuple[str, str]:
+        first, second = self.name.split("::")[1].split("_")
+        return first, second
 
 
 @dataclass
@@ -465,10 +480,9 @@ class ContactPair:
 
     first: int
     second: int
-    test: str  # the element test: "<method>::<kind>_<kind>" of runtime/sofac/proximity.h
+    test: int  # index in Collision.tests
     root: bool  # both simulated: one explicit force per step (SOFA places it at the pipeline's node)
     id_bound: int  # the outputs' ids are below it (the de-duplication's table)
-    options: tuple[bool, ...] = ()  # the test's flags after the models (same_model, useLineLine)
 
 
 @dataclass
@@ -481,7 +495,10 @@ class Collision:
     contact_distance: float
     depth: int  # the bounding trees' depth (BVHNarrowPhase needs deep trees)
     models: list[CollisionModel]
+    tests: list[ElementTest]  # those the pairs use, each compiled once
     pairs: list[ContactPair]
+    # i64 rows (first, second, root, id_bound, test, first's view, second's view), one per pair
+    table: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
 

@@ -48,6 +48,10 @@ struct PenaltyModel {
 // One model pair the broad phase can produce (the compile-time table), with its response.
 struct PenaltyPair {
     Index model[2] = {0, 0};  // in the intersector's order
+    // The compiled element test (code generation numbers the (method, kinds) tests the scene
+    // has) and the two models' places among the models of their kind.
+    Index test = 0;
+    Index view[2] = {0, 0};
     bool root = false;         // both models simulated: evaluated once, at the start of the step
     OutputList outputs;
     NarrowPhaseStack stack;
@@ -72,11 +76,14 @@ public:
     }
 
     // A possible pair; `id_bound` bounds its outputs' ids (the dedup's table).
-    Index add_pair(Index first, Index second, bool root, Index id_bound) {
+    Index add_pair(Index first, Index second, bool root, Index id_bound, Index test, Index view1, Index view2) {
         PenaltyPair& p = pairs.emplace_back();
         p.model[0] = first;
         p.model[1] = second;
         p.root = root;
+        p.test = test;
+        p.view[0] = view1;
+        p.view[1] = view2;
         const Index n = static_cast<Index>(models.size());
         const Index index = static_cast<Index>(pairs.size()) - 1;
         pair_of[first * n + second] = index;
@@ -118,6 +125,15 @@ public:
 
     // A model's tree on its current points (`update` builds it from the view the caller made).
     bool needs_update(Index model) const { return models[model].moving || !models[model].tree.built(); }
+
+    // BVHNarrowPhase on one pair: `test(e1, e2, outputs)` is its element test.
+    template <class Test>
+    void narrow_phase(PenaltyPair& p, Test&& test) {
+        const PenaltyModel& a = models[p.model[0]];
+        const PenaltyModel& b = models[p.model[1]];
+        bvh_narrow_phase(a.tree, a.contact_distance, b.tree, b.contact_distance, alarm_distance_, p.stack,
+                         [&](Index e1, Index e2) { test(e1, e2, p.outputs); });
+    }
 
     // Broad phase, then the narrow phase of every pair found, in SOFA's order. `narrow(pair)` runs
     // the pair's BVH traversal with its element test into pairs[pair].outputs.
