@@ -17,13 +17,18 @@ FLOOR = DATA / "contact_particle_floor.scn"
 PARTICLES = DATA / "contact_two_particles.scn"
 
 
-def test_particle_rests_where_the_contact_force_balances_its_weight() -> None:
-    """ks = k1 k2 / d (d = the intersection's contactDistance: the models add none), and the
-    particle settles at the height h where ks (d - h) = m g."""
-    sim = sofac.load(FLOOR)
+@pytest.mark.parametrize(
+    ("scene", "radius"),
+    [(FLOOR, 0.0), (DATA / "contact_sphere_floor.scn", 0.1)],  # MinProximity point, NewProximity sphere
+)
+def test_body_rests_where_the_contact_force_balances_its_weight(scene: Path, radius: float) -> None:
+    """ks = k1 k2 / d, d = the intersection's contactDistance + the sphere's radius (the models add
+    no contactDistance), and the body settles at the height h where ks (d - h) = m g."""
+    sim = sofac.load(scene)
     sim.step(800)
-    ks = 10.0 * 10.0 / 0.2
-    expected = 0.2 - 1.0 * 9.81 / ks
+    distance = 0.2 + radius
+    ks = 10.0 * 10.0 / distance
+    expected = distance - 1.0 * 9.81 / ks
     (x, y, z) = sim["/Particle/dofs"].position[0]
     assert (x, z) == pytest.approx((0.1, -0.2), abs=1e-12)  # the floor pushes along its normal only
     assert y == pytest.approx(expected, abs=1e-9)
@@ -54,14 +59,14 @@ def test_two_simulated_particles_bounce_with_momentum_and_energy_kept() -> None:
 
 def test_pair_table_and_placement_in_the_effects() -> None:
     plan = plan_file(FLOOR)
-    assert plan.collision is not None and plan.contact_guard is None
-    (pair,) = plan.collision.pairs
-    assert plan.collision.tests[pair.test].name == "min_proximity::triangle_point"
+    assert plan.collisions and plan.contact_guard is None
+    (pair,) = plan.collisions[0].pairs
+    assert plan.collisions[0].tests[pair.test].name == "min_proximity::triangle_point"
     assert not pair.root  # a static partner: inside the particle's group
     rows = [e for e in plan.effects if e[0] == "contact pair"]
     assert len(rows) == 1 and "in the group of the simulated model" in rows[0][2]
     plan = plan_file(PARTICLES)
-    (pair,) = plan.collision.pairs  # type: ignore[union-attr]
+    (pair,) = plan.collisions[0].pairs
     assert pair.root
     source = generate(plan)
     assert source.count("case 0:  // min_proximity::point_point") == 1
@@ -73,8 +78,8 @@ def test_models_that_cannot_meet_get_no_collision_code(tmp_path: Path) -> None:
     text = FLOOR.read_text().replace("<PointCollisionModel", '<PointCollisionModel group="1"')
     scene.write_text(text.replace('simulated="0"', 'simulated="0" group="1"'))
     plan = plan_file(scene)
-    assert plan.collision is not None and not plan.collision.pairs
-    (left_out,) = plan.collision.left_out
+    assert plan.collisions and not plan.collisions[0].pairs
+    (left_out,) = plan.collisions[0].left_out
     assert left_out[2] == "they share a collision group"
     assert "collide(" not in generate(plan) and "penalty.h" not in generate(plan)
 

@@ -76,7 +76,7 @@ _ENV = {
     Env.KINETIC_OUT: "&kinetic",
     Env.POTENTIAL_OUT: "&potential",
     Env.NONE: "nullptr",
-    Env.CONTACTS: "*S.contacts",
+    Env.CONTACTS: "S.contacts",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
 
@@ -336,7 +336,7 @@ class _GroupView:
 _SIDE = {"triangle": "kTriangle", "line": "kLine", "point": "kPoint", "sphere": "kSphere"}
 
 
-_VIEW = {"triangle": "TriangleModel", "line": "LineModel", "point": "PointModel"}
+_VIEW = {"triangle": "TriangleModel", "line": "LineModel", "point": "PointModel", "sphere": "SphereModel"}
 
 
 def _model_view(index: int, model: CollisionModel) -> str:
@@ -348,7 +348,14 @@ def _model_view(index: int, model: CollisionModel) -> str:
         return f"{{{x}, {_ptr(model.cells)}, {flags}, {normals}, {model.elements}, {cd}}}"
     if model.kind == "line":
         return f"{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}}"
+    if model.kind == "sphere":
+        return f"{{{x}, 3, {_sphere_radii(model)}, {model.radius!r}, {model.elements}, {cd}}}"
     return f"{{{x}, {model.elements}, {cd}}}"
+
+
+def _sphere_radii(model: CollisionModel) -> str:
+    """A sphere model's listRadius and its length (SphereModel's radii, n_radii)."""
+    return f"{_ptr(model.radii)}, {_size(model.radii)}" if model.radii is not None else "nullptr, 0"
 
 
 class _CollisionView:
@@ -356,8 +363,9 @@ class _CollisionView:
     a buffer), the model views of a step (one array per kind), their trees' updates, and one
     narrow-phase case per element test the scene has (the pairs sharing a test share its code)."""
 
-    def __init__(self, collision: Collision) -> None:
+    def __init__(self, collision: Collision, index: int) -> None:
         models = collision.models
+        self.index = index
         self.origin = collision.origin
         alarm, contact = repr(collision.alarm_distance), repr(collision.contact_distance)
         self.method = f"const sofac::collide::Proximity method{{{alarm}, {contact}}};"
@@ -399,6 +407,12 @@ class _CollisionView:
             )
             if model.cells is not None:
                 self.setup.append(f"{here}.cells = {_ptr(model.cells)};")
+            if model.kind == "sphere":  # its radii, for the contacts' distances (x set by the response)
+                radii = _sphere_radii(model)
+                self.setup.append(
+                    f"{here}.sphere = {{nullptr, 3, {radii}, {model.radius!r}, {model.elements}, "
+                    f"{model.contact_distance!r}}};"
+                )
             if model.kind == "triangle":
                 self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
                 self.setup.append(
@@ -438,7 +452,7 @@ def generate_source(plan: Plan) -> str:
         dt=plan.dt,
         threads=plan.threads,
         guard=plan.contact_guard,
-        collision=_CollisionView(plan.collision) if plan.collision and plan.collision.pairs else None,
+        collisions=[_CollisionView(c, k) for k, c in enumerate(plan.collisions) if c.pairs],
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,

@@ -10,6 +10,7 @@ trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -60,50 +61,85 @@ _MIN_PROXIMITY_SWITCHES = {
 }
 
 
-def collision_models_in_order(planner: Planner, pipeline: Component) -> list[CheckedComponent]:
-    """The collision models below the pipeline's node as SOFA's get<CollisionModel>(SearchDown)
-    lists them: a node's objects, then its children, depth first."""
-    found: list[CheckedComponent] = []
+@dataclass
+class _Setup:
+    """One detection-and-response pipeline: a CollisionPipeline (its models are those below its
+    node; its phases and response the first found there) or a SubCollisionPipeline (all linked)."""
 
-    def visit(node: Node) -> None:
-        for component in node.objects:
-            checked = planner.checked.of(component)
-            if checked.category is Category.COLLISION_MODEL:
-                found.append(checked)
-        for child in node.children:
-            visit(child)
+    pipeline: CheckedComponent
+    parts: dict[str, CheckedComponent]  # broad_phase, narrow_phase, intersection, contact_manager
+    models: list[CheckedComponent]
 
-    visit(pipeline.node)
+
+_PARTS = {
+    "broad_phase": "broadPhaseDetection",
+    "narrow_phase": "narrowPhaseDetection",
+    "intersection": "intersectionMethod",
+    "contact_manager": "contactManager",
+}
+
+
+def _role(checked: CheckedComponent) -> str:
+    role = checked.spec.role if checked.spec else ""
+    return "intersection" if role in ("min_proximity", "new_proximity") else role
+
+
+def _setups(planner: Planner) -> list[_Setup] | str:
+    """The scene's pipelines in the order SOFA runs them, or why they are not compiled."""
+    pipelines = [
+        c for c in planner.checked if c.category is Category.COLLISION_PIPELINE and _role(c) in _PIPELINES
+    ]
+    if not pipelines:
+        return "a collision pipeline"
+    composite = next((c for c in pipelines if _role(c) == "composite_pipeline"), None)
+    setups: list[_Setup] = []
+    if composite is not None:
+        subs = composite.link_lists.get("subCollisionPipelines", [])
+        if not subs:
+            return "a CompositeCollisionPipeline with its subCollisionPipelines linked"
+        for sub in subs:
+            checked = planner.checked.of(sub)
+            parts = {role: checked.links.get(name) for role, name in _PARTS.items()}
+            if any(not isinstance(p, Component) for p in parts.values()):
+                return f"SubCollisionPipeline {sub.label!r} with its four phases linked (else SOFA skips it)"
+            models = [planner.checked.of(m) for m in checked.link_lists.get("collisionModels", [])]
+            setups.append(_Setup(checked, {r: planner.checked.of(p) for r, p in parts.items()}, models))
+        return setups
+    pipeline = pipelines[0]
+    found: dict[str, CheckedComponent] = {}
+    models = []
+    for checked in _below(planner, pipeline.component.node):
+        role = _role(checked)
+        if role in _PARTS:
+            found.setdefault(role, checked)
+        elif checked.category is Category.COLLISION_MODEL:
+            models.append(checked)
+    missing = [role for role in _PARTS if role not in found]
+    if missing:
+        return f"a CollisionPipeline with its {', '.join(missing)} below its node"
+    return [_Setup(pipeline, found, models)]
+
+
+_PIPELINES = ("pipeline", "composite_pipeline")
+
+
+def _below(planner: Planner, node: Node) -> list[CheckedComponent]:
+    """The components of a node and below, as SOFA's get(SearchDown) lists them: a node's objects,
+    then its children, depth first."""
+    found: list[CheckedComponent] = [planner.checked.of(c) for c in node.objects]
+    for child in node.children:
+        found += _below(planner, child)
     return found
-
-
-def _pipeline_parts(planner: Planner) -> dict[str, CheckedComponent] | None:
-    """The pipeline's components by role, or None (with a refusal) when the setup is not one sofac
-    compiles: a CollisionPipeline with BruteForceBroadPhase, BVHNarrowPhase, MinProximity or
-    NewProximity and a CollisionResponse giving PenalityContactForceField, under a DefaultAnimationLoop."""
-    parts: dict[str, CheckedComponent] = {}
-    for checked in planner.checked:
-        if checked.category is Category.COLLISION_PIPELINE and checked.spec is not None:
-            role = checked.spec.role or checked.spec.name
-            if role in ("min_proximity", "new_proximity"):
-                parts.setdefault("intersection", checked)
-            else:
-                parts.setdefault(role, checked)
-    needed = ("pipeline", "broad_phase", "narrow_phase", "intersection", "contact_manager")
-    return parts if all(role in parts for role in needed) else None
 
 
 def contact_setup_refusal(planner: Planner) -> str:
     """Why the scene's contacts cannot be compiled ("" when they can)."""
-    parts = _pipeline_parts(planner)
-    if parts is None:
+    setups = _setups(planner)
+    if isinstance(setups, str):
         return (
-            "penalty contact is compiled for a CollisionPipeline with BruteForceBroadPhase, BVHNarrowPhase, "
+            f"penalty contact is compiled for {setups}: BruteForceBroadPhase, BVHNarrowPhase, "
             "MinProximityIntersection or NewProximityIntersection and a CollisionResponse"
         )
-    response = str(planner.value(parts["contact_manager"].component, "response") or "")
-    if response != "PenalityContactForceField":
-        return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
     for checked in planner.checked:
         if (
             checked.category is Category.ANIMATION_LOOP
@@ -111,28 +147,45 @@ def contact_setup_refusal(planner: Planner) -> str:
             and checked.spec.name != "DefaultAnimationLoop"
         ):
             return f"contact response under {checked.spec.name} is not compiled yet (DefaultAnimationLoop is)"
-    models = collision_models_in_order(planner, parts["pipeline"].component)
-    for checked in models:
-        spec = checked.spec
-        assert spec is not None
-        if spec.role not in _RANK:
-            return f"{spec.name} takes no part in compiled contacts"
-        if checked.datatype is not None and checked.datatype.name != "Vec3d":
-            return f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
-        if planner.value(checked.component, "selfCollision"):
-            return "self-collision is not compiled yet"
-        if planner.value(checked.component, "contactResponse"):
-            return "a model's own contactResponse is not compiled yet"
-        if spec.role == "sphere":
-            return "sphere collision models' contacts are not compiled yet"
+    for setup in setups:
+        for role, checked in setup.parts.items():
+            spec = checked.spec
+            if spec is None or not spec.supported or (role == "intersection" and spec.role not in _TESTS):
+                return f"{checked.component.type_name} is not compiled yet"
+        response = str(planner.value(setup.parts["contact_manager"].component, "response") or "")
+        if response != "PenalityContactForceField":
+            return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
+        for checked in setup.models:
+            spec = checked.spec
+            assert spec is not None
+            if spec.role not in _RANK:
+                return f"{spec.name} takes no part in compiled contacts"
+            if checked.datatype is not None and checked.datatype.name != "Vec3d":
+                return (
+                    f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
+                )
+            if planner.value(checked.component, "selfCollision"):
+                return "self-collision is not compiled yet"
+            if planner.value(checked.component, "contactResponse"):
+                return "a model's own contactResponse is not compiled yet"
     return ""
 
 
-def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | None:
-    """The scene's compiled contacts, and their calls in the groups of the models they act on."""
-    parts = _pipeline_parts(planner)
-    assert parts is not None
-    pipeline, intersection = parts["pipeline"], parts["intersection"]
+def plan_collisions(planner: Planner, owner: dict[int, Group]) -> list[Collision]:
+    """The scene's compiled contacts, one per pipeline in SOFA's order, and their calls in the
+    groups of the models they act on."""
+    setups = _setups(planner)
+    assert not isinstance(setups, str)
+    collisions = []
+    for index, setup in enumerate(setups):
+        collision = _plan_collision(planner, setup, index, owner)
+        if collision is not None:
+            collisions.append(collision)
+    return collisions
+
+
+def _plan_collision(planner: Planner, setup: _Setup, number: int, owner: dict[int, Group]) -> Collision | None:
+    pipeline, intersection = setup.pipeline, setup.parts["intersection"]
     method = intersection.spec.role if intersection.spec else ""
     value = planner.value
     tests = set(_TESTS[method])
@@ -141,11 +194,7 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
             if value(intersection.component, switch) is False:
                 tests -= removed
     models: list[CollisionModel] = []
-    checked_models = [
-        c
-        for c in collision_models_in_order(planner, pipeline.component)
-        if value(c.component, "active") is not False
-    ]
+    checked_models = [c for c in setup.models if value(c.component, "active") is not False]
     for checked in checked_models:
         model = _model(planner, checked)
         if model is None:
@@ -216,7 +265,7 @@ def plan_collision(planner: Planner, owner: dict[int, Group]) -> Collision | Non
         for p in collision.pairs
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
-    _place(planner, collision, owner)
+    _place(planner, collision, number, owner)
     return collision
 
 
@@ -231,8 +280,12 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         return None
     kind = spec.role
     value = planner.value
-    cells_buffer = None
+    cells_buffer = radii = None
     elements = state.size
+    if kind == "sphere":
+        listed = value(checked.component, "listRadius")
+        if listed is not None and np.size(listed):
+            radii = planner.buffer(checked.component, "listRadius", listed)
     if kind in ("triangle", "line"):
         cells = _topology_cells(planner, checked) or {}
         if kind == "triangle":
@@ -265,6 +318,8 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         moving=bool(value(checked.component, "moving")),
         simulated=bool(value(checked.component, "simulated")),
         compute_normals=bool(value(checked.component, "computeNormals")) if kind == "triangle" else False,
+        radii=radii,
+        radius=float(value(checked.component, "radius")) if kind == "sphere" else 0.0,
     )
 
 
@@ -290,7 +345,7 @@ def _never(
     return ""
 
 
-def _place(planner: Planner, collision: Collision, owner: dict[int, Group]) -> None:
+def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[int, Group]) -> None:
     """Each simulated model's contact forces in the group integrating its state: in every force
     evaluation and, for its contacts with static models, in every K dx product."""
     in_pairs = {i for p in collision.pairs for i in (p.first, p.second)}
@@ -309,7 +364,9 @@ def _place(planner: Planner, collision: Collision, owner: dict[int, Group]) -> N
             continue
         where = f"contact forces on {model.origin}"
         state = model.state
-        group.forces.append(Op(where, [call("contact_add_force", Env.CONTACTS, index, state.f, state.x)]))
+        group.forces.append(
+            Op(where, [call("contact_add_force", Env.CONTACTS, pipeline, index, state.f, state.x)])
+        )
         static_partner = any(
             not collision.models[p.second if p.first == index else p.first].simulated
             for p in collision.pairs
@@ -317,5 +374,12 @@ def _place(planner: Planner, collision: Collision, owner: dict[int, Group]) -> N
         )
         if group.scheme == "implicit" and static_partner and state.dx is not None:
             group.stiffness_dx.append(
-                Op(where, [call("contact_add_dforce", Env.CONTACTS, index, state.df, state.dx, Env.KFACT)])
+                Op(
+                    where,
+                    [
+                        call(
+                            "contact_add_dforce", Env.CONTACTS, pipeline, index, state.df, state.dx, Env.KFACT
+                        )
+                    ],
+                )
             )

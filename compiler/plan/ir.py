@@ -55,7 +55,7 @@ class Env(enum.Enum):
     KINETIC_OUT = "kinetic_out"  # ... and their addresses, for kernels that add to both
     POTENTIAL_OUT = "potential_out"
     NONE = "none"  # an absent pointer
-    CONTACTS = "contacts"  # the scene's penalty contacts (runtime/sofac/penalty.h)
+    CONTACTS = "contacts"  # the scene's penalty contacts, one per pipeline (runtime/sofac/penalty.h)
 
 
 class FemMethod(enum.IntEnum):
@@ -458,6 +458,8 @@ class CollisionModel:
     simulated: bool
     compute_normals: bool = True  # triangle models' computeNormals
     view: int = -1  # its place among the paired models of its kind (-1: in no pair)
+    radii: Buffer | None = None  # sphere models: listRadius (spheres past it take `radius`)
+    radius: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -523,7 +525,7 @@ class Plan:
     threads: int = 1
     rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
     contact_guard: ContactGuard | None = None
-    collision: Collision | None = None  # compiled contacts (then there is no guard)
+    collisions: list[Collision] = field(default_factory=list)  # compiled contacts, one per pipeline
     # Compiled for threads, with groups that share no buffer: they step side by side.
     parallel_groups: bool = False
     interactive: bool = False  # with a point force on each state, set from Python (plan_scene)

@@ -101,8 +101,7 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
                     "before each step, which stops before a contact (response not compiled)",
                 )
             )
-    collision = planner.collision
-    if collision is not None:
+    for collision in planner.collisions:
         models = collision.models
         for pair in collision.pairs:
             first, second = models[pair.first], models[pair.second]

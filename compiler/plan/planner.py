@@ -21,7 +21,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
-from sofac.plan.contacts import contact_setup_refusal, plan_collision
+from sofac.plan.contacts import contact_setup_refusal, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
@@ -84,7 +84,7 @@ class Planner:
         self.guarded: list[CheckedComponent] = []  # collision models that could touch (ContactGuard)
         self.guard: ContactGuard | None = None
         self.colliding = False  # contacts compiled (plan/contacts.py) rather than guarded
-        self.collision: Collision | None = None
+        self.collisions: list[Collision] = []
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.refused: set[int] = set()  # components whose one refusal says all (no follow-up E222)
         self.lowered: list[Component] = []  # components whose kernels are in the step
@@ -170,7 +170,7 @@ class Planner:
             rigid_model=self.rigid_model,
             interactive=self.interactive,
             contact_guard=self.guard,
-            collision=self.collision,
+            collisions=self.collisions,
             parallel_groups=self.threads > 1
             and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
         )
@@ -365,7 +365,7 @@ class Planner:
             if group.routed:
                 route_through_mappings(self, group)
         if self.colliding:
-            self.collision = plan_collision(self, owner)
+            self.collisions = plan_collisions(self, owner)
         self.guard = contact_guard(self)
         if self.prune:
             leave_unread_out(self, list(groups.values()))

@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "contact.h"
@@ -41,6 +42,7 @@ struct PenaltyModel {
     std::vector<int> flags;       // triangle models: SOFA's vertex / edge ownership flags
     std::vector<double> normals;  // triangle models: the normals of the last tree update
     std::vector<double> external; // point / sphere models: the explicit contact forces of this step
+    SphereModel sphere{};         // sphere models: the radii (the response reads them)
     // Contact-point states under this model's node, in creation order: 2 * pair + side.
     std::vector<Index> children;
 };
@@ -309,9 +311,10 @@ private:
     }
 
     ContactSideModel side_model(PenaltyPair& p, int s, const double* x) {
-        const PenaltyModel& m = models[p.model[s]];
-        return ContactSideModel{m.kind, x, m.cells, nullptr, m.contact_distance, m.contact_stiffness,
-                                has_points(p, s) ? &p.points[s] : nullptr};
+        PenaltyModel& m = models[p.model[s]];
+        m.sphere.x = x;
+        return ContactSideModel{m.kind, x, m.cells, m.kind == ContactSide::kSphere ? &m.sphere : nullptr,
+                                m.contact_distance, m.contact_stiffness, has_points(p, s) ? &p.points[s] : nullptr};
     }
 
     // BarycentricPenalityContact::setDetectionOutputs, then the mappers' update() on positions.
@@ -336,20 +339,20 @@ private:
     StablePairMap<Index> outputs_map_, contacts_map_;
 };
 
-// --- the calls a compiled step makes (sofac::contact_*) ---------------------------------------
 }  // namespace sofac::collide
 
 namespace sofac {
 
-inline void contact_add_force(collide::PenaltyContacts& contacts, Index model, double* f, const double* x) {
-    contacts.add_force(model, f, x);
+// The scene's pipelines, in SOFA's order (a CompositeCollisionPipeline's sub-pipelines).
+using ContactPipelines = std::vector<std::unique_ptr<collide::PenaltyContacts>>;
+
+inline void contact_add_force(ContactPipelines& pipelines, Index pipeline, Index model, double* f, const double* x) {
+    pipelines[pipeline]->add_force(model, f, x);
 }
 
-inline void contact_add_dforce(collide::PenaltyContacts& contacts, Index model, double* df, const double* dx,
-                               double kfact) {
-    contacts.add_dforce(model, df, dx, kfact);
+inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
+                               const double* dx, double kfact) {
+    pipelines[pipeline]->add_dforce(model, df, dx, kfact);
 }
-
-inline double contact_energy(const collide::PenaltyContacts& contacts) { return contacts.energy(); }
 
 }  // namespace sofac

@@ -48,20 +48,23 @@ COLLISION_PIPELINE = ComponentSpec(
 
 COMPOSITE_COLLISION_PIPELINE = ComponentSpec(
     name="CompositeCollisionPipeline",
+    role="composite_pipeline",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
-    doc="Runs several SubCollisionPipelines.",
-    unsupported_reason="explicit composite collision pipelines are not supported yet (use CollisionPipeline)",
+    doc="Runs several SubCollisionPipelines, phase by phase, in link order.",
+    supported=True,
     effects=_COLLISION,
     fields=_COMPOSITE_FIELDS,
 )
 
 SUB_COLLISION_PIPELINE = ComponentSpec(
     name="SubCollisionPipeline",
+    role="sub_pipeline",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
-    doc="One collision pipeline over an explicit list of collision models.",
-    unsupported_reason="explicit composite collision pipelines are not supported yet (use CollisionPipeline)",
+    doc="One collision pipeline over an explicit list of collision models (run by a "
+    "CompositeCollisionPipeline).",
+    supported=True,
     effects=_COLLISION,
     fields=(
         _DEPTH,
