@@ -184,7 +184,9 @@ def plan_collisions(planner: Planner, owner: dict[int, Group]) -> list[Collision
     return collisions
 
 
-def _plan_collision(planner: Planner, setup: _Setup, number: int, owner: dict[int, Group]) -> Collision | None:
+def _plan_collision(
+    planner: Planner, setup: _Setup, number: int, owner: dict[int, Group]
+) -> Collision | None:
     pipeline, intersection = setup.pipeline, setup.parts["intersection"]
     method = intersection.spec.role if intersection.spec else ""
     value = planner.value
