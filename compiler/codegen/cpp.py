@@ -427,6 +427,8 @@ class _CollisionView:
         self.setup.append("}")
         self.setup.append("C.finish_setup();")
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
+        assert collision.report is not None
+        self.report = _ptr(collision.report)
 
 
 _VIEW_COLUMNS = "first, second, root, id bound, test, views"

@@ -501,6 +501,10 @@ class Collision:
     pairs: list[ContactPair]
     # i64 rows (first, second, root, id_bound, test, first's view, second's view), one per pair
     table: Buffer | None = None
+    # What the last step found, as ``<pipeline>.contactReport``: contacts, buffers that outgrew
+    # their capacity, degenerate outputs (NaN dropped or zero distance), and the seconds spent
+    # in detection and in response since the instance was created or reset.
+    report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
 
