@@ -267,7 +267,7 @@ def _plan_collision(
         for p in collision.pairs
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
-    collision.report = planner.buffer(pipeline.component, "contactReport", np.zeros(5), role="state")
+    collision.report = planner.buffer(pipeline.component, "contactReport", np.zeros(6), role="state")
     _place(planner, collision, number, owner)
     return collision
 

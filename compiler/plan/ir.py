@@ -487,6 +487,9 @@ class ContactPair:
     id_bound: int  # the outputs' ids are below it (the de-duplication's table)
 
 
+REPORT_FIELDS = ("contacts", "growths", "degenerate", "detection_seconds", "response_seconds", "fast_motions")
+
+
 @dataclass
 class Collision:
     """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
@@ -501,9 +504,10 @@ class Collision:
     pairs: list[ContactPair]
     # i64 rows (first, second, root, id_bound, test, first's view, second's view), one per pair
     table: Buffer | None = None
-    # What the last step found, as ``<pipeline>.contactReport``: contacts, buffers that outgrew
-    # their capacity, degenerate outputs (NaN dropped or zero distance), and the seconds spent
-    # in detection and in response since the instance was created or reset.
+    # What the steps found, as ``<pipeline>.contactReport`` (REPORT_FIELDS): the last step's
+    # contacts; since the instance was created or reset, buffers that outgrew their capacity,
+    # degenerate outputs (NaN dropped or zero distance), the seconds spent in detection and in
+    # response, and the pairs a model came near after moving farther than the detection's reach.
     report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)

@@ -12,6 +12,7 @@ import contextlib
 import importlib.util
 import sys
 import threading
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,13 @@ class PrunedEffectError(SofacError):
 
 class ParameterNeedsReset(SofacError):
     """A parameter read only when the simulation is initialised was changed between steps."""
+
+
+class ContactWarning(UserWarning):
+    """A compiled contact pipeline saw something the run's user should know: a buffer that outgrew
+    the capacity reserved at init (the step then allocated), detection outputs SOFA would have made
+    of NaN or of a zero distance, or a model that moved farther in one step than the detection's
+    reach while near a partner (a contact may have been missed: tunnelling; reduce dt)."""
 
 
 class ContactNotCompiled(SofacError):
@@ -313,6 +321,7 @@ class Simulation:
         self._solver_of = {s.path: spec.solvers[s.solver] for s in spec.states if s.solver >= 0}
         self._independent = [s for s in self._states.values() if not s.info.mapped]
         self._touching = self._views[spec.contact.touching] if spec.contact else None
+        self._contact_seen = [np.zeros(3) for _ in spec.contact_reports]  # counters already reported
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
         # The buffers a step carries over ("state": positions, velocities, solver history): copied
@@ -409,6 +418,8 @@ class Simulation:
             remaining -= count
             if self._touching is not None and self._touching[0] >= 0:
                 raise self._contact_error(int(self._touching[0]))
+            if self.spec.contact_reports:
+                self._report_contacts()
             if done < count or not self._finite():
                 raise self._non_finite_error()
             if energy_bound is not None or self._energy_guard is not None:
@@ -431,6 +442,22 @@ class Simulation:
                 if not self._finite():
                     break  # step() reports it
         return done
+
+    def _report_contacts(self) -> None:
+        """A ContactWarning for each contact counter that grew since it was last reported."""
+        what = (
+            "contact buffers outgrew their reserved capacity (the step allocated)",
+            "detection outputs were degenerate (NaN dropped, or a zero distance given the normal (1, 0, 0))",
+            "times a model moved farther in one step than the detection's reach while near a partner: "
+            "contacts may have been missed (tunnelling); reduce dt or raise alarmDistance",
+        )
+        for (origin, index), seen in zip(self.spec.contact_reports, self._contact_seen, strict=True):
+            counters = self._views[index][[1, 2, 5]]
+            for k in np.flatnonzero(counters > seen):
+                count = int(counters[k] - seen[k])
+                where = f"step {self._steps} (t={self.time:g}), {origin}"
+                warnings.warn(ContactWarning(f"{where}: {count} {what[k]}"), stacklevel=4)
+            seen[:] = np.maximum(seen, counters)
 
     def _contact_error(self, pair: int) -> ContactNotCompiled:
         contact = self.spec.contact
@@ -692,6 +719,8 @@ class Simulation:
         self._native.time = 0.0
         self._steps = 0
         self._kept = None
+        for seen in self._contact_seen:
+            seen[:] = 0.0
         self._native.init()
         self._init_values = [view.copy() for _, view in self._init_params]
 

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -43,6 +44,9 @@ struct PenaltyModel {
     std::vector<double> normals;  // triangle models: the normals of the last tree update
     std::vector<double> external; // point / sphere models: the explicit contact forces of this step
     SphereModel sphere{};         // sphere models: the radii (the response reads them)
+    Box last_root{};              // the root box of the previous detection
+    Box swept{};                  // the union of that box and this step's
+    double motion = 0.0;          // how far a side of its root box moved since then
     // Contact-point states under this model's node, in creation order: 2 * pair + side.
     std::vector<Index> children;
 };
@@ -142,6 +146,7 @@ public:
     template <class Narrow>
     void detect(Narrow&& narrow) {
         const Index n = static_cast<Index>(models.size());
+        watch_fast_motion();
         const Index found = brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
         auto& outputs = outputs_map_.map();
         for (auto& entry : outputs) pairs[entry.second].outputs.clear();  // beginNarrowPhase
@@ -257,6 +262,10 @@ public:
             n += p.outputs.growths + p.dedup.growths + p.ff.growths + p.points[0].growths + p.points[1].growths;
         return n;
     }
+    // Steps x pairs where a model moved farther than the detection's reach near its partner: the
+    // detection at the start of each step may have missed a contact in between (tunnelling).
+    Index fast_motions() const { return fast_motions_; }
+
     // Outputs SOFA would have made of NaN (dropped) or of a zero distance (normal (1, 0, 0)).
     Index degenerate_outputs() const {
         Index n = 0;
@@ -270,6 +279,36 @@ public:
     std::vector<Index> pair_of;  // n x n index into pairs, -1: none
 
 private:
+    // Before each detection: how far each model's root box moved since the previous one, and the
+    // pairs whose swept boxes meet while one of them moved farther than the pair's reach.
+    void watch_fast_motion() {
+        for (PenaltyModel& m : models) {
+            if (!m.tree.built() || m.tree.empty()) continue;
+            const Box& now = m.tree.root().box;
+            m.swept = now;
+            m.motion = 0.0;
+            if (watching_) {
+                for (int c = 0; c < 3; ++c) {
+                    m.motion = std::max({m.motion, std::abs(now.min[c] - m.last_root.min[c]),
+                                         std::abs(now.max[c] - m.last_root.max[c])});
+                    m.swept.min[c] = std::min(now.min[c], m.last_root.min[c]);
+                    m.swept.max[c] = std::max(now.max[c], m.last_root.max[c]);
+                }
+            }
+            m.last_root = now;
+        }
+        if (watching_) {
+            for (const PenaltyPair& p : pairs) {
+                const PenaltyModel& a = models[p.model[0]];
+                const PenaltyModel& b = models[p.model[1]];
+                if (a.tree.empty() || b.tree.empty()) continue;
+                const double reach = alarm_distance_ + a.contact_distance + b.contact_distance;
+                if ((a.motion > reach || b.motion > reach) && boxes_meet(a.swept, b.swept, reach)) ++fast_motions_;
+            }
+        }
+        watching_ = true;
+    }
+
     bool has_points(const PenaltyPair& p, int side) const {
         const ContactSide kind = models[p.model[side]].kind;
         return kind == ContactSide::kTriangle || kind == ContactSide::kLine;
@@ -332,6 +371,8 @@ private:
     }
 
     double alarm_distance_ = 0.0, contact_distance_ = 0.0;
+    bool watching_ = false;  // a detection ran before: root boxes to compare with
+    Index fast_motions_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;
     std::vector<Index> broad_pairs_;
