@@ -600,7 +600,7 @@ def test_floorless_scene_beams_fall_as_cantilevers(floorless: sofac.Simulation) 
     grid = np.linspace(0.0, 7.0, 15)
     points = np.array([[x, y, z] for z in (-0.1, 0.1) for y in (-0.1, 0.1) for x in grid])
     surface = floorless["/beam-withTriangulatedCubeCollision/Collision/surface"].position
-    np.testing.assert_allclose(surface, points + [0.0, 0.0, -1.0], atol=1e-15)  # frames at z = -1
+    np.testing.assert_allclose(surface, points + np.array([0.0, 0.0, -1.0]), atol=1e-15)  # frames at z = -1
     floorless.step(30)
     first = floorless["/beam-withPointCollision/DOFs"].position
     second = floorless["/beam-withTriangulatedCubeCollision/DOFs"].position
