@@ -18,7 +18,10 @@ REPO = Path(__file__).resolve().parents[1]
 
 def _runtime_values(tmp_path: Path, expressions: list[str]) -> list[int]:
     body = "\n".join(f'    std::printf("%d\\n", int({e}));' for e in expressions)
-    source = f'#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\n#include "sofac/beam.h"\nint main() {{\n{body}\n}}\n'
+    source = (
+        '#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\n#include "sofac/beam.h"\n'
+        f"int main() {{\n{body}\n}}\n"
+    )
     (tmp_path / "layout.cpp").write_text(source)
     binary = tmp_path / "layout"
     includes = ["-I", str(REPO / "runtime"), "-isystem", str(build.eigen_include())]
