@@ -614,3 +614,46 @@ def test_floorless_scene_beams_fall_as_cantilevers(floorless: sofac.Simulation) 
     expected = sofa_beam_mapping(second, first_frame, local, np.ones(60))
     surface = floorless["/beam-withTriangulatedCubeCollision/Collision/surface"].position
     np.testing.assert_allclose(surface, expected, rtol=0, atol=1e-12)
+
+
+# --- what is refused -----------------------------------------------------------------------------
+
+REFUSED = """<?xml version="1.0"?>
+<Node name="root" dt="0.01">
+  <Node name="beam">
+    <EulerImplicitSolver/>
+    <{solver}/>
+    <MechanicalObject template="{template}" position="{positions}"/>
+    <MeshTopology lines="{lines}"/>
+    <UniformMass totalMass="1"/>
+    <BeamFEMForceField radius="0.1"/>
+  </Node>
+</Node>
+"""
+
+RIGID3 = "0 0 0 0 0 0 1  1 0 0 0 0 0 1  2 0 0 0 0 0 1"
+
+
+@pytest.mark.parametrize(
+    ("solver", "template", "positions", "lines", "code", "line", "reason"),
+    [
+        # beams between frames 0 and 2: not block-tridiagonal
+        ("BTDLinearSolver", "Rigid3d", RIGID3, "0 1 0 2", "E222", 9, "consecutive DOFs"),
+        ("BTDLinearSolver subpartSolve='1'", "Rigid3d", RIGID3, "0 1 1 2", "E222", 5, "subpartSolve"),
+        ("CGLinearSolver", "Vec3d", "0 0 0  1 0 0  2 0 0", "0 1 1 2", "E210", 9, "Rigid3d"),
+    ],
+)
+def test_what_sofac_cannot_compile_is_refused_at_its_line(
+    tmp_path: Path, solver: str, template: str, positions: str, lines: str, code: str, line: int, reason: str
+) -> None:
+    """`sofac check`'s diagnostics (the planner's refusals included) name the line and why."""
+    from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
+
+    scene = tmp_path / "refused.scn"
+    scene.write_text(REFUSED.format(solver=solver, template=template, positions=positions, lines=lines))
+    checked, diags = check_file(scene)
+    add_compile_refusals(checked, diags)
+    errors = [d for d in diags if d.severity.name == "ERROR"]
+    assert [(d.code, d.loc.line) for d in errors] == [(code, line)], [str(d) for d in diags]
+    assert reason in errors[0].message
