@@ -657,3 +657,47 @@ def test_what_sofac_cannot_compile_is_refused_at_its_line(
     errors = [d for d in diags if d.severity.name == "ERROR"]
     assert [(d.code, d.loc.line) for d in errors] == [(code, line)], [str(d) for d in diags]
     assert reason in errors[0].message
+
+
+@pytest.mark.parametrize(("counts", "internal"), [((4, 3, 5), False), ((4, 3, 5), True), ((5, 1, 3), False)])
+def test_cube_topology_points_edges_and_quads(
+    tmp_path: Path, counts: tuple[int, int, int], internal: bool
+) -> None:
+    """CubeTopology evaluated at compile time: SOFA's point count (the box's surface unless
+    internalPoints or a flat axis), each point at p0 + i dx + j dy + k dz, its surface edges and
+    quads as many as SOFA reserves, each quad a unit square of the lattice on the box's surface."""
+    from sofac.check.checker import check_file
+
+    nx, ny, nz = counts
+    scene = tmp_path / "cube.scn"
+    scene.write_text(
+        f'<Node name="root"><CubeTopology name="cube" nx="{nx}" ny="{ny}" nz="{nz}" min="-1 0 2" '
+        f'max="2 1 4" internalPoints="{int(internal)}"/><MechanicalObject/></Node>'
+    )
+    checked, diags = check_file(scene)
+    assert not diags.has_errors()
+    cube = next(c.component for c in checked if c.component.type_name == "CubeTopology")
+    points = np.asarray(checked.value(cube, "position")).reshape(-1, 3)
+    surface = not internal and min(counts) > 1
+    assert len(points) == (nx * ny * 2 + (nz - 2) * (2 * nx + 2 * ny - 4) if surface else nx * ny * nz)
+    steps = [
+        (hi - lo) / (n - 1) if n > 1 else 0.0 for lo, hi, n in zip((-1, 0, 2), (2, 1, 4), counts, strict=True)
+    ]
+    lattice = np.rint((points - [-1.0, 0.0, 2.0]) / np.where(np.array(steps) > 0, steps, 1.0))
+    np.testing.assert_allclose(points, [-1.0, 0.0, 2.0] + lattice * steps, atol=1e-14)
+    assert len({tuple(p) for p in lattice}) == len(points)  # no point twice
+    edges = np.asarray(checked.value(cube, "edges")).reshape(-1, 2)
+    if min(counts) > 1:  # the edges along the box's surface (SOFA's reserve)
+        expected_edges = (nx - 1) * (2 * ny + 2 * nz - 4) + (ny - 1) * (2 * nx + 2 * nz - 4)
+        expected_edges += (nz - 1) * (2 * nx + 2 * ny - 4)
+    else:  # a flat box: every lattice edge is on its surface
+        expected_edges = (nx - 1) * ny * nz + nx * (ny - 1) * nz + nx * ny * (nz - 1)
+    assert len(edges) == expected_edges
+    assert np.all(np.abs(lattice[edges[:, 0]] - lattice[edges[:, 1]]).sum(axis=1) == 1)
+    quads = np.asarray(checked.value(cube, "quads")).reshape(-1, 4)
+    expected_quads = (nx - 1) * (ny - 1) * (2 if nz > 1 else 1)
+    expected_quads += (nx - 1) * (nz - 1) * (2 if ny > 1 else 1) + (ny - 1) * (nz - 1) * (2 if nx > 1 else 1)
+    assert len(quads) == expected_quads
+    for quad in quads:
+        corners = lattice[quad]
+        assert np.all(np.abs(np.diff(corners[[0, 1, 2, 3, 0]], axis=0)).sum(axis=1) == 1)
