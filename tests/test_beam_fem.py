@@ -535,11 +535,11 @@ CANTILEVER = """<?xml version="1.0"?>
 """
 
 
-def cantilever(tmp_path: Path, solver: str, template: str, segments: int = 6) -> sofac.Simulation:
+def cantilever(folder: Path, solver: str, template: str, segments: int = 6) -> sofac.Simulation:
     length, radius, young, load = 3.0, 0.05, 1.0e7, -0.01
     positions = "  ".join(f"{length * i / segments} 0 0 0 0 0 1" for i in range(segments + 1))
     lines = " ".join(f"{i} {i + 1}" for i in range(segments))
-    path = tmp_path / f"cantilever_{solver}.scn"
+    path = folder / f"cantilever_{solver}.scn"
     path.write_text(
         CANTILEVER.format(
             solver=solver,
@@ -555,11 +555,17 @@ def cantilever(tmp_path: Path, solver: str, template: str, segments: int = 6) ->
     return sofac.load(path)
 
 
-def test_cantilever_tip_deflection_and_rotation_are_euler_bernoulli(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def btd_cantilever(tmp_path_factory: pytest.TempPathFactory) -> sofac.Simulation:
+    return cantilever(tmp_path_factory.mktemp("cantilever"), "BTDLinearSolver", "BTDMatrix6d")
+
+
+def test_cantilever_tip_deflection_and_rotation_are_euler_bernoulli(btd_cantilever: sofac.Simulation) -> None:
     """A clamped beam under a small tip load P: tip deflection P L^3 / (3 E I) and rotation
     P L^2 / (2 E I) (cubic beam elements are exact at the nodes for a tip load; the load is small
     enough that the corotational formulation's geometric terms stay below 1e-5)."""
-    sim = cantilever(tmp_path, "BTDLinearSolver", "BTDMatrix6d")
+    sim = btd_cantilever
+    sim.reset()
     sim.step(1)
     inertia = math.pi * 0.05**4 / 4
     ei = 1.0e7 * inertia
@@ -576,9 +582,12 @@ def test_cantilever_tip_deflection_and_rotation_are_euler_bernoulli(tmp_path: Pa
     )
 
 
-def test_btd_and_a_sparse_direct_solve_agree_on_a_cantilever(tmp_path: Path) -> None:
-    btd = cantilever(tmp_path, "BTDLinearSolver", "BTDMatrix6d")
+def test_btd_and_a_sparse_direct_solve_agree_on_a_cantilever(
+    btd_cantilever: sofac.Simulation, tmp_path: Path
+) -> None:
+    btd = btd_cantilever
     ldl = cantilever(tmp_path, "SparseLDLSolver", "CompressedRowSparseMatrixMat3x3d")
+    btd.reset()
     btd.step(1)
     ldl.step(1)
     np.testing.assert_allclose(btd["frames"].position, ldl["frames"].position, rtol=0, atol=1e-12)
