@@ -440,7 +440,7 @@ CASES = [
     Case(
         "unsupported",
         "E222",
-        dyn("    <QuadBendingFEMForceField/>\n"),
+        dyn("    <TopologicalChangeProcessor/>\n"),
         6,
         hint="--allow-unsupported",
     ),

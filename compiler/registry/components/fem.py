@@ -24,6 +24,9 @@ _BEAMS = "beam elements are not supported yet"
 _VON_MISES = FieldSpec(
     "computeVonMisesStress", Int(), 0, "von Mises stress: 0 none, 1 from the corotational strain, 2 full"
 )
+# float(numpy.float32(0.0001)) and float(numpy.float32(0.9)): SOFA's float literals as doubles
+_FLOAT_0_0001 = 9.999999747378752e-05
+_FLOAT_0_9 = 0.8999999761581421
 _GATHER = (
     FieldSpec("gatherPt", Text(), doc="GPU version only: DOFs gathered per thread"),
     FieldSpec("gatherBsize", Text(), doc="GPU version only: gather block size"),
@@ -61,10 +64,15 @@ TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
             "assemble a global stiffness matrix",
             aliases=("assembling",),
         ),
+        # SOFA's defaults are float literals ((Real)0.0001f, (Real)0.9f): their double values here
         FieldSpec("plasticMaxThreshold", Real(), 0.0, "plasticity: maximum plastic strain (2-norm)"),
-        FieldSpec("plasticYieldThreshold", Real(), 0.0001, "plasticity: yield strain (2-norm)"),
+        FieldSpec("plasticYieldThreshold", Real(), _FLOAT_0_0001, "plasticity: yield strain (2-norm)"),
         FieldSpec(
-            "plasticCreep", Real(), 0.9, "plasticity: creep factor times dt", valid=MUST_BE_IN_UNIT_INTERVAL
+            "plasticCreep",
+            Real(),
+            _FLOAT_0_9,
+            "plasticity: creep factor times dt",
+            valid=MUST_BE_IN_UNIT_INTERVAL,
         ),
         FieldSpec("initialPoints", Coords(), doc="rest positions (default: the state's)"),
         FieldSpec("updateStiffness", Bool(), False, "recompute precomputed data from changed parameters"),
@@ -316,17 +324,19 @@ QUAD_BENDING_FEM_FORCE_FIELD = ComponentSpec(
     name="QuadBendingFEMForceField",
     category=Category.FORCEFIELD,
     module=_MODULE,
-    doc="Quad plate elements with membrane and bending stiffness.",
+    lowering="quad_bending",
+    doc="Quad plate elements in world coordinates: a bilinear membrane on x, y and the transverse "
+    "shear of w with the rotations held at zero (SOFA's small method, runtime/sofac/quad_bending.h).",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="QuadBendingFEMForceField (plate bending) is not implemented yet",
+    supported=True,
     effects=_FEM_EFFECTS,
     fields=(
         FieldSpec(
             "method",
             Enum(values=("small", "large"), case_sensitive=True),
             "small",
-            "small or large displacements",
+            "SOFA reads it nowhere: every quad uses the small-displacement method",
         ),
         FieldSpec(
             "youngModulus",
