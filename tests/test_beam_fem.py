@@ -176,7 +176,7 @@ class Beams:
         self.lib.add_force(
             indices(self.edges),
             indices(self.used),
-            self.count,
+            len(self.used),
             doubles(self.kloc),
             doubles(self.rest),
             doubles(x),
@@ -191,7 +191,7 @@ class Beams:
         self.lib.add_dforce(
             indices(self.edges),
             indices(self.used),
-            self.count,
+            len(self.used),
             doubles(self.kloc),
             doubles(self.frames),
             doubles(dx),
@@ -371,6 +371,19 @@ def test_a_small_bend_gives_the_beam_forces(lib: ctypes.CDLL) -> None:
     f = beams.force(moved(rest, d, 1.0))
     expected = -euler_bernoulli(2.0, RADIUS) @ d.ravel()
     np.testing.assert_allclose(f, expected, rtol=0, atol=1e-6 * np.abs(expected).max())
+
+
+def test_list_segment_restricts_the_forces_to_its_beams(lib: ctypes.CDLL) -> None:
+    """listSegment: only the listed beams act; the forces of two subsets add up to all beams'."""
+    rest = straight_rest(5, n=4)
+    beams = Beams(lib, rest)
+    x = moved(rest, np.random.default_rng(1).standard_normal((4, 6)), 0.01)
+    every = beams.force(x)
+    beams.used = np.array([1], dtype=np.int64)
+    middle = beams.force(x)
+    assert np.all(middle[:6] == 0.0) and np.all(middle[18:] == 0.0)  # frames 0 and 3: not in beam 1
+    beams.used = np.array([0, 2], dtype=np.int64)
+    np.testing.assert_allclose(middle + beams.force(x), every, rtol=1e-12, atol=1e-9)
 
 
 # --- BTDLinearSolver -----------------------------------------------------------------------------
