@@ -202,6 +202,99 @@ def grid(ctx: Context) -> Outputs:
     }
 
 
+def cube_topology(ctx: Context) -> Outputs:
+    """CubeTopology (without splitNormals): the points of the box's surface (all grid points with
+    internalPoints, or when an axis has one point), p0 + i dx + j dy + k dz, numbered as
+    SOFA's getPoint; its edges along the surface and its quads, in SOFA's order (updateEdges/updateQuads)."""
+    n = [
+        int(_numbers(ctx, name, 1, integer=True)[0]) if ctx.is_set(name) else 0 for name in ("nx", "ny", "nz")
+    ]
+    if ctx.value("splitNormals"):
+        return {}
+    if any(c < 1 for c in n):
+        raise EvaluationError(f"CubeTopology resolution {n} must be >= 1 per axis", "nx", code="E207")
+    refused = limits.too_many_points(n)
+    if refused:
+        raise EvaluationError(f"cube resolution {refused}", "nx", code="E207")
+    nx, ny, nz = n
+    legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+    if all(ctx.is_set(name) for name in legacy_bounds):
+        # SOFA's parse reads them (and scale) as single-precision floats, multiplied in float
+        scale = np.float32(_numbers(ctx, "scale", 1)[0]) if ctx.is_set("scale") else np.float32(1.0)
+        bounds = [float(np.float32(np.float32(_numbers(ctx, b, 1)[0]) * scale)) for b in legacy_bounds]
+        low, high = bounds[:3], bounds[3:]
+    else:
+        low = [float(v) for v in _numbers(ctx, "min", 3)]
+        high = [float(v) for v in _numbers(ctx, "max", 3)]
+    step = [(high[k] - low[k]) / (n[k] - 1) if n[k] > 1 else 0.0 for k in range(3)]
+    surface = not ctx.value("internalPoints") and nx > 1 and ny > 1 and nz > 1
+
+    def index(x: int, y: int, z: int) -> int:  # CubeTopology::point
+        if not surface:
+            return x + nx * (y + ny * z)
+        if z == 0:
+            return x + nx * y
+        if z == nz - 1:
+            return x + nx * (y + ny)
+        base = nx * ny * 2 + (2 * nx + 2 * ny - 4) * (z - 1)
+        if y == 0:
+            return base + x
+        if y == ny - 1:
+            return base + x + nx
+        if x == 0:
+            return base + 2 * nx + (y - 1)
+        return base + 2 * nx + (ny - 2) + (y - 1)
+
+    count = nx * ny * 2 + (nz - 2) * (2 * nx + 2 * ny - 4) if surface else nx * ny * nz
+    points = np.zeros((count, 3))
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if surface and 0 < z < nz - 1 and 0 < y < ny - 1 and 0 < x < nx - 1:
+                    continue
+                points[index(x, y, z)] = [low[k] + step[k] * (x, y, z)[k] for k in range(3)]
+    edges = []
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if x < nx - 1 and (y in (0, ny - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x + 1, y, z)))
+                if y < ny - 1 and (x in (0, nx - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x, y + 1, z)))
+                if z < nz - 1 and (x in (0, nx - 1) or y in (0, ny - 1)):
+                    edges.append((index(x, y, z), index(x, y, z + 1)))
+    quads = []
+    for y in range(ny - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, y, 0), index(x, y + 1, 0), index(x + 1, y + 1, 0), index(x + 1, y, 0)))
+    if nz > 1:
+        for y in range(ny - 1):
+            for x in range(nx - 1):
+                z = nz - 1
+                quads.append((index(x, y, z), index(x + 1, y, z), index(x + 1, y + 1, z), index(x, y + 1, z)))
+    for z in range(nz - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, 0, z), index(x + 1, 0, z), index(x + 1, 0, z + 1), index(x, 0, z + 1)))
+    if ny > 1:
+        for z in range(nz - 1):
+            for x in range(nx - 1):
+                y = ny - 1
+                quads.append((index(x, y, z), index(x, y, z + 1), index(x + 1, y, z + 1), index(x + 1, y, z)))
+    for z in range(nz - 1):
+        for y in range(ny - 1):
+            quads.append((index(0, y, z), index(0, y, z + 1), index(0, y + 1, z + 1), index(0, y + 1, z)))
+    if nx > 1:
+        for z in range(nz - 1):
+            for y in range(ny - 1):
+                x = nx - 1
+                quads.append((index(x, y, z), index(x, y + 1, z), index(x, y + 1, z + 1), index(x, y, z + 1)))
+    return {
+        "position": points.ravel(),
+        "edges": np.asarray(edges, dtype=np.int64).reshape(-1),
+        "quads": np.asarray(quads, dtype=np.int64).reshape(-1),
+    }
+
+
 def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     """The edges of triangles as SOFA's createEdgeSetArray makes them: for each triangle t and
     j = 0, 1, 2 the edge (t[j+1], t[j+2]) (indices mod 3), in the order first met, once each."""
@@ -588,6 +681,7 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "cube_topology": cube_topology,
     "sparse_grid": sparse_grid,
     "sparse_grid_ramification": sparse_grid_ramification,
     "box_roi": box_roi,

@@ -193,7 +193,7 @@ def _headers(plan: Plan) -> list[str]:
             extra = (projection.mark if matrix else None, projection.position, projection.project_velocity)
             statements += [c for c in extra if c is not None]
     index = _header_of()
-    needed = set()
+    needed = {index["BlockTridiagonal"]} if any(group.btd for group in plan.groups) else set()
     for name in {n for item in statements for n in _names(item)}:
         if name not in index:
             raise KeyError(f"no runtime header defines sofac::{name}")

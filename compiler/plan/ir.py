@@ -363,6 +363,7 @@ class Group:
     llt: bool = False  # the direct solver factors L L^T (registry role "llt"), else L D L^T
     assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
+    btd: bool = False  # BTDLinearSolver: the direct solve is the block-tridiagonal Thomas algorithm (6x6)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
     minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance

@@ -43,7 +43,7 @@ from sofac.plan.passes import (
     leave_unread_out,
     route_through_mappings,
 )
-from sofac.plan.solvers import new_group, screen_variational
+from sofac.plan.solvers import new_group, screen_btd, screen_variational
 from sofac.registry import Category
 from sofac.registry.datatypes import DATATYPES
 
@@ -367,6 +367,8 @@ class Planner:
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)
+            if group.btd:
+                screen_btd(self, group)
             if group.routed:
                 route_through_mappings(self, group)
         if self.colliding:

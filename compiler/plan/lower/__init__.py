@@ -4,6 +4,7 @@ function here that turns it into calls of the step.
 
 from __future__ import annotations
 
+from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
@@ -80,4 +81,6 @@ LOWERINGS: dict[str, Lowering] = {
     "rigid_mapping": lower_rigid_mapping,
     "identity_mapping": lower_subset_mapping,
     "subset_mapping": lower_subset_mapping,
+    "beam_fem": lower_beam_fem,
+    "beam_linear_mapping": lower_beam_linear_mapping,
 }

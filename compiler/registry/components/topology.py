@@ -161,6 +161,7 @@ CUBE_TOPOLOGY = ComponentSpec(
     doc="Surface of a box between min and max: points, edges and quads (nx ny nz points per side).",
     supported=True,
     effects=_GENERATED,
+    compute="cube_topology",
     fields=(
         *(
             FieldSpec(name, Int(), 0, f"resolution along {name[1]}", valid=MUST_BE_NONNEGATIVE)
