@@ -416,7 +416,7 @@ class _CollisionView:
             if model.kind == "triangle":
                 self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
                 self.setup.append(
-                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, "
+                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.flagged}, "
                     f"{model.state.size}, {here}.flags.data());"
                 )
         assert collision.table is not None

@@ -461,6 +461,7 @@ class CollisionModel:
     view: int = -1  # its place among the paired models of its kind (-1: in no pair)
     radii: Buffer | None = None  # sphere models: listRadius (spheres past it take `radius`)
     radius: float = 0.0
+    flagged: int = 0  # triangle models: the leading triangles that get SOFA's flags (not quads')
 
 
 @dataclass(frozen=True)

@@ -364,6 +364,8 @@ class Planner:
                 continue
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
+        if self.colliding:  # before J is routed: contacts add blocks on mapped collision states
+            self.collisions = plan_collisions(self, owner)
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)
@@ -371,8 +373,6 @@ class Planner:
                 screen_btd(self, group)
             if group.routed:
                 route_through_mappings(self, group)
-        if self.colliding:
-            self.collisions = plan_collisions(self, owner)
         self.guard = contact_guard(self)
         if self.prune:
             leave_unread_out(self, list(groups.values()))

@@ -49,6 +49,7 @@ struct PenaltyModel {
     double motion = 0.0;          // how far a side of its root box moved since then
     // Contact-point states under this model's node, in creation order: 2 * pair + side.
     std::vector<Index> children;
+    std::vector<double> element_k;  // add_k's blocks, element by element
 };
 
 // One model pair the broad phase can produce (the compile-time table), with its response.
@@ -243,6 +244,49 @@ public:
         }
     }
 
+    // A += kfact K for the contacts on `model` with static partners (the group's assembled system):
+    // -ks kfact w_a w_b n n^T between the points a, b of each contact point's element, w the contact
+    // point's weights. Every element's blocks are added at every call, zeros included, so that
+    // the assembler's recorded pattern (all couplings within an element) never changes.
+    template <class Assembler>
+    void add_k(Index model, Assembler& A, Index offset, double kfact) {
+        PenaltyModel& m = models[model];
+        const int width = m.kind == ContactSide::kTriangle ? 3 : (m.kind == ContactSide::kLine ? 2 : 1);
+        const std::size_t per = static_cast<std::size_t>(9 * width * width);
+        m.element_k.assign(per * static_cast<std::size_t>(m.elements), 0.0);
+        for (const auto& entry : contacts_map_.map()) {
+            const PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            if (s < 0) continue;
+            for (const PenaltyContact& c : p.ff.contacts) {
+                if (!(c.pen > 0)) continue;
+                const Index element = s == 0 ? c.element1 : c.element2;
+                double w[3] = {1.0, 0.0, 0.0};
+                if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
+                double* block = m.element_k.data() + per * static_cast<std::size_t>(element);
+                const double k = c.ks * kfact;
+                for (int a = 0; a < width; ++a)
+                    for (int b = 0; b < width; ++b)
+                        for (int i = 0; i < 3; ++i)
+                            for (int j = 0; j < 3; ++j)
+                                block[9 * (width * a + b) + 3 * i + j] -= k * w[a] * w[b] * c.normal[i] * c.normal[j];
+            }
+        }
+        for (Index e = 0; e < m.elements; ++e) {
+            const double* block = m.element_k.data() + per * static_cast<std::size_t>(e);
+            for (int a = 0; a < width; ++a) {
+                const Index pa = width == 1 ? e : m.cells[width * e + a];
+                for (int b = 0; b < width; ++b) {
+                    const Index pb = width == 1 ? e : m.cells[width * e + b];
+                    for (int i = 0; i < 3; ++i)
+                        for (int j = 0; j < 3; ++j)
+                            A.add(offset + 3 * pa + i, offset + 3 * pb + j, block[9 * (width * a + b) + 3 * i + j]);
+                }
+            }
+        }
+    }
+
     // Potential energy of the active contacts (sum of ks pen^2 / 2).
     double energy() const {
         double e = 0.0;
@@ -389,6 +433,12 @@ using ContactPipelines = std::vector<std::unique_ptr<collide::PenaltyContacts>>;
 
 inline void contact_add_force(ContactPipelines& pipelines, Index pipeline, Index model, double* f, const double* x) {
     pipelines[pipeline]->add_force(model, f, x);
+}
+
+template <class Assembler>
+inline void contact_assemble(ContactPipelines& pipelines, Index pipeline, Index model, Assembler& A, Index offset,
+                             double kfact) {
+    pipelines[pipeline]->add_k(model, A, offset, kfact);
 }
 
 inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
