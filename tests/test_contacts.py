@@ -119,6 +119,10 @@ def test_alarm_distance_below_contact_distance_is_refused(tmp_path: Path) -> Non
 SCENES = [
     "Component/SolidMechanics/Spring/MeshSpringForceField.scn",  # NewProximity triangle-triangle
     "Demos/chainHybrid.scn",  # + rigid tori (barycentric contact points on a RigidMapped surface)
+    # two SubCollisionPipelines; NewProximity sphere (IdentityMapping Rigid3d -> Vec3d) vs triangles,
+    # lines and points of static tori
+    "Component/Collision/Detection/CompositeCollisionPipeline.scn",
+    "Demos/collisionMultiple.scn",  # MinProximity; spring grids onto a static floor after ~65 steps
 ]
 
 
