@@ -68,11 +68,11 @@ void forces_g0(Instance& S) {
     sofac::clear(S.b9_force.data(), Index(S.b9_force.size()));
     sofac::clear(S.b14_force.data(), Index(S.b14_force.size()));
     // SpringForceField '/F13' (hybrid_pendulum.scn:51)
-    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, true, false>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b12_position.data(), S.b13_velocity.data(), S.b14_force.data(), nullptr);
+    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b12_position.data(), S.b13_velocity.data(), S.b14_force.data(), nullptr);
     // UniformMass '/deformableBody/M1' (hybrid_pendulum.scn:56)
     sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 2, S.b23_vertexMass.data(), 0, S.b1_gravity.data());
     // SpringForceField '/deformableBody/F1' (hybrid_pendulum.scn:58)
-    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, true, false>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), nullptr);
+    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), nullptr);
     // UniformMass '/rigidBody/M2' (hybrid_pendulum.scn:64)
     sofac::mass_gravity<sofac::Rigid3d>(S.b9_force.data(), 1, S.b32_vertexMass.data(), 0, S.b1_gravity.data());
     // J^T: RigidMapping '/rigidBody/rigidParticles/Map23' (hybrid_pendulum.scn:69)
