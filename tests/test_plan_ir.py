@@ -167,3 +167,13 @@ def test_calls_are_spelled_out_only_by_codegen() -> None:
 def test_cpp_text_is_refused_as_an_argument() -> None:
     with pytest.raises(TypeError, match="not a plan argument"):
         call("mass_gravity", "S.b1_x.data()")
+
+
+def test_a_rest_position_no_call_reads_is_not_allocated() -> None:
+    from sofac.pipeline import plan_file
+
+    oscillator = {b.key for b in plan_file(REPO / "scenes" / "oscillator.scn").buffers}
+    assert "/oscillator/dofs.position" in oscillator
+    assert "/oscillator/dofs.rest_position" not in oscillator  # springs and a mass: nobody reads it
+    liver = {b.key for b in plan_file(REPO / "scenes" / "liver.scn").buffers}
+    assert "/Liver/dofs.rest_position" in liver  # TetrahedronFEMForceField's init reads it

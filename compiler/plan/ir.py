@@ -327,7 +327,7 @@ class StatePlan:
     x: Buffer
     v: Buffer
     f: Buffer
-    rest: Buffer
+    rest: Buffer | None  # None when no call reads it (passes.drop_unread_rest_positions)
     simulated: bool = False  # an ODE solver in its node or above
     acc: Buffer | None = None  # a = M⁻¹ f (explicit) or Δv (implicit), independent states only
     dx: Buffer | None = None  # implicit schemes: the vector a matrix-free product reads ...

@@ -4,7 +4,9 @@ systems, mapped states nobody reads left out, init-only parameters, and the effe
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import dataclasses
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
@@ -12,6 +14,7 @@ from sofac.plan.ir import (
     INPUT_OFFSET,
     OFFSET,
     STEP_PHASES,
+    Buffer,
     Call,
     ContactGuard,
     Group,
@@ -266,3 +269,30 @@ def add_point_forces(planner: Planner, groups: list[Group]) -> None:
             )
             pull = call(kernel("point_force", state.datatype.name), state.f, point, force, state.size)
             group.forces.append(Op(f"point force on {state.path} (set from Python)", [pull]))
+
+
+def _calls_in(value: Any) -> Iterator[Call]:
+    """Every call held anywhere in ``value`` (groups, their phases, mappings, projections)."""
+    if isinstance(value, Call):
+        yield value
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            yield from _calls_in(item)
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from _calls_in(item)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, (Buffer, StatePlan)):
+        for field in dataclasses.fields(value):
+            yield from _calls_in(getattr(value, field.name))
+
+
+def drop_unread_rest_positions(planner: Planner, groups: list[Group]) -> None:
+    """A MechanicalObject's rest_position is allocated only when a call takes it (a FEM's init, a
+    RestShapeSpringsForceField, a mapping's set-up): read from the calls themselves, those of the
+    step, of init, of the mappings (computed on read too) and of the projections."""
+    used = buffers_of(list(_calls_in(groups)))
+    for state in planner.states.values():
+        if state.rest is not None and state.rest.ident not in used:
+            rest = state.rest
+            planner.buffers = [b for b in planner.buffers if b is not rest]
+            state.rest = None
