@@ -290,26 +290,34 @@ def add_point_forces(planner: Planner, groups: list[Group]) -> None:
             group.forces.append(Op(f"point force on {state.path} (set from Python)", [pull]))
 
 
-def _calls_in(value: Any) -> Iterator[Call]:
-    """Every call held anywhere in ``value`` (groups, their phases, mappings, projections)."""
+def _buffers_held(value: Any) -> Iterator[str]:
+    """The idents of every buffer a call in ``value`` takes, or a plan object (a collision model, a
+    guard) holds, walking the plan's own types; a state's own vectors are not a use of them."""
     if isinstance(value, Call):
-        yield value
+        yield from (b.ident for b in value.buffers())
+    elif isinstance(value, Buffer):
+        yield value.ident
     elif isinstance(value, (list, tuple)):
         for item in value:
-            yield from _calls_in(item)
+            yield from _buffers_held(item)
     elif isinstance(value, dict):
         for item in value.values():
-            yield from _calls_in(item)
-    elif dataclasses.is_dataclass(value) and not isinstance(value, (Buffer, StatePlan)):
+            yield from _buffers_held(item)
+    elif (
+        dataclasses.is_dataclass(value)
+        and type(value).__module__ == Call.__module__
+        and not isinstance(value, StatePlan)
+    ):
         for field in dataclasses.fields(value):
-            yield from _calls_in(getattr(value, field.name))
+            yield from _buffers_held(getattr(value, field.name))
 
 
 def drop_unread_rest_positions(planner: Planner, groups: list[Group]) -> None:
     """A MechanicalObject's rest_position is allocated only when a call takes it (a FEM's init, a
-    RestShapeSpringsForceField, a mapping's set-up): read from the calls themselves, those of the
-    step, of init, of the mappings (computed on read too) and of the projections."""
-    used = buffers_of(list(_calls_in(groups)))
+    RestShapeSpringsForceField, a mapping's set-up): read from the plan itself, the calls of the
+    groups (step, init, mappings computed in the step or on read, projections) and what the
+    collision pipeline and the contact guard hold."""
+    used = set(_buffers_held([groups, planner.collisions, planner.guard]))
     for state in planner.states.values():
         if state.rest is not None and state.rest.ident not in used:
             rest = state.rest
