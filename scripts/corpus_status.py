@@ -1,7 +1,7 @@
-"""Print the README's "Corpus status" section: how the SOFA corpus fares under ``sofac check``.
+"""Print the "Corpus status" section of docs/components.md: how the SOFA corpus fares under ``sofac check``.
 
     python scripts/corpus_status.py                  # print the section (Markdown)
-    python scripts/corpus_status.py --update-readme  # rewrite it in README.md, between the markers
+    python scripts/corpus_status.py --update-readme  # rewrite it in docs/components.md, between the markers
 
 Reads ``shared/corpus/sofa`` (``../shared`` beside the checkout, else ``$SOFAC_SHARED``): the 126
 scenes of its ``manifest.json`` are classified as clean (no errors), failing only with unsupported
@@ -29,7 +29,7 @@ from sofac.front.parse import parse_scene
 from sofac.pipeline import add_compile_refusals
 
 REPO = Path(__file__).resolve().parents[1]
-README = REPO / "README.md"
+README = REPO / "docs" / "components.md"  # the page that holds the section
 BEGIN, END = "<!-- corpus-status -->", "<!-- /corpus-status -->"
 _FILE_IN_MESSAGE = re.compile(r"file '([^']*)' not found")
 # What the diagnostics alone do not say about some scenes (printed only while they still fail).
@@ -213,7 +213,9 @@ def update_readme(section: str, readme: Path = README) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Print (or update) the README's corpus status section.")
+    parser = argparse.ArgumentParser(
+        description="Print (or update) the corpus status section of docs/components.md."
+    )
     parser.add_argument("--update-readme", action="store_true", help=f"rewrite the section in {README.name}")
     args = parser.parse_args(argv)
     shared = find_shared()

@@ -42,6 +42,8 @@ from sofac.plan.ir import (
     Plan,
     Projection,
     Slot,
+    SpringDamping,
+    SpringFlags,
     Statement,
     StatePlan,
     TemplateArg,
@@ -91,6 +93,8 @@ def _template(arg: TemplateArg) -> str:
         return "true" if arg else "false"
     if isinstance(arg, Constant):
         return _CONSTANTS[arg]
+    if isinstance(arg, (SpringDamping, SpringFlags)):
+        return f"sofac::{type(arg).__name__}::{arg.value}"
     if isinstance(arg, int):
         return str(arg)
     return cpp_type(arg)

@@ -67,6 +67,21 @@ class FemMethod(enum.IntEnum):
     SVD = 3
 
 
+class SpringDamping(enum.Enum):
+    """spring_forces' damping variant (kernels.h): Undamped when the plan proves every damping is 0."""
+
+    UNDAMPED = "Undamped"
+    DAMPED = "Damped"
+
+
+class SpringFlags(enum.Enum):
+    """spring_forces' flags variant (kernels.h): None when every spring is enabled and none is
+    elongation-only, so the per-spring flags are not read."""
+
+    NONE = "None"
+    PER_SPRING = "PerSpring"
+
+
 class Constant(enum.Enum):
     """Layout constants of the runtime, named rather than copied (their values live in C++)."""
 
@@ -136,7 +151,8 @@ class Aggregate:
 
 
 Arg = Union[Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
-TemplateArg = Union[str, int, bool, Constant]  # noqa: UP007  (str: a DataType name, "Vec3d")
+# str: a DataType name ("Vec3d"); the enums: a kernel's variant, spelt as the runtime's enum class
+TemplateArg = Union[str, int, bool, Constant, SpringDamping, SpringFlags]  # noqa: UP007
 
 
 @dataclass(frozen=True)
@@ -312,7 +328,7 @@ class StatePlan:
     x: Buffer
     v: Buffer
     f: Buffer
-    rest: Buffer
+    rest: Buffer | None  # None when no call reads it (passes.drop_unread_rest_positions)
     simulated: bool = False  # an ODE solver in its node or above
     acc: Buffer | None = None  # a = M⁻¹ f (explicit) or Δv (implicit), independent states only
     dx: Buffer | None = None  # implicit schemes: the vector a matrix-free product reads ...

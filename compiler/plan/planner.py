@@ -38,6 +38,7 @@ from sofac.plan.lower.common import _mapping_inputs, _topology_of
 from sofac.plan.passes import (
     add_point_forces,
     contact_guard,
+    drop_unread_rest_positions,
     effects,
     init_only,
     leave_unread_out,
@@ -378,6 +379,7 @@ class Planner:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:
             add_point_forces(self, list(groups.values()))
+        drop_unread_rest_positions(self, list(groups.values()))
         return list(groups.values())
 
     def _attach_mapped(self, owner: dict[int, Group]) -> None:

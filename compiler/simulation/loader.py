@@ -29,6 +29,7 @@ if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (no
     from sofac.plan import ir as plan
 
 _host: ModuleType | None = None
+_host_built: build.Built | None = None  # the cache entry _host was loaded from
 
 
 class PrunedEffectError(SofacError):
@@ -123,18 +124,25 @@ def _rebuild_diverged(cls: type[SimulationDiverged], message: str, attributes: d
     return error
 
 
-def host() -> ModuleType:
-    """The host extension module (built on first use, then taken from the cache)."""
-    global _host
+def host(known: build.Built | None = None) -> ModuleType:
+    """The host extension module (built on first use, then taken from the cache). ``known`` is a
+    valid cache entry of it, from a warm record: loading it skips computing the host's cache key,
+    which runs the C++ compiler for its version line."""
+    global _host, _host_built
     if _host is None:
-        built = build.build_host()
+        built = known if known is not None else build.build_host()
         spec = importlib.util.spec_from_file_location("_sofac_host", built.library)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         sys.modules.setdefault("_sofac_host", module)
-        _host = module
+        _host, _host_built = module, built
     return _host
+
+
+def host_built() -> build.Built | None:
+    """The cache entry of the host module loaded in this process (None before the first load)."""
+    return _host_built
 
 
 class _EnergyGuard(NamedTuple):
@@ -250,6 +258,7 @@ class Compiled:
         recompute: Callable[[], Compiled] | None = None,
         rebuild: Callable[..., Compiled] | None = None,
         warnings: tuple[Diagnostic, ...] = (),
+        known_host: build.Built | None = None,
     ) -> None:
         self.spec = spec
         self.warnings = warnings  # the scene's warnings (sofac check's W codes), issued by load()
@@ -259,7 +268,7 @@ class Compiled:
         # (checked, prune=, rigid_model=, threads=) -> Compiled: the pipeline's compile, for recompile()
         self._rebuild = rebuild
         self.warm = recompute is not None  # taken from a warm record, not compiled in this process
-        self._library = host().Library(str(built.library))
+        self._library = host(known_host).Library(str(built.library))
 
     def _full(self) -> None:
         if self._plan is None:

@@ -216,11 +216,14 @@ struct Springs {
 // (ks - F/d) n n^T + (F/d) I with F the whole intensity (elastic and damping), as SOFA does, in
 // factored form: S + 2 numbers per spring, c = ks - F/d, t = F/d and n (spring_block rebuilds
 // entry (i, j) as (c n_i) n_j [+ t], the very numbers a stored S x S block would hold).
-// `Damped` = false leaves out the damping term (the plan proves every damping is zero: no velocity
-// is read); `Flagged` = false skips the per-spring enabled / elongation-only flags (all springs
-// enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
+// `SpringDamping::Undamped` leaves out the damping term (the plan proves every damping is zero: no
+// velocity is read); `SpringFlags::None` skips the per-spring enabled / elongation-only flags (all
+// springs enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
 // fixed-size expressions use (left to right), so every variant gives the same numbers bit for bit.
-template <class D1, class D2, bool Damped = true, bool Flagged = true>
+enum class SpringDamping { Undamped, Damped };
+enum class SpringFlags { None, PerSpring };
+
+template <class D1, class D2, SpringDamping Damping = SpringDamping::Damped, SpringFlags Flags = SpringFlags::PerSpring>
 inline void spring_forces(const Springs& s, const double* x1, const double* v1, double* f1, const double* x2,
                           const double* v2, double* f2, double* jacobians) {
     static_assert(D1::spatial == D2::spatial, "springs join points of the same dimension");
@@ -242,7 +245,7 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         for (int i = 1; i < S; ++i) squared += u[i] * u[i];
         const double d = std::sqrt(squared);
         bool active = d > 1.0e-9;
-        if constexpr (Flagged) active = active && s.enabled[k] && !(s.elongation_only[k] && !(d > rest[k]));
+        if constexpr (Flags == SpringFlags::PerSpring) active = active && s.enabled[k] && !(s.elongation_only[k] && !(d > rest[k]));
         if (!active) {
             if (jacobians) {
                 SOFAC_UNROLL
@@ -255,7 +258,7 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         for (int i = 0; i < S; ++i) u[i] *= inverse_length;
         const double ks = stiffness[k];
         double intensity = ks * (d - rest[k]);
-        if constexpr (Damped) {
+        if constexpr (Damping == SpringDamping::Damped) {
             const double* const va = v1 + D1::deriv * a;
             const double* const vb = v2 + D2::deriv * b;
             double relative_speed = u[0] * (vb[0] - va[0]);
