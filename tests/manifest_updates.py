@@ -8,4 +8,9 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/ODESolver/Backward/VariationalSymplecticSolver.scn": "VariationalSymplecticSolver",
     # rendering only: accepted and left out of the step (issue 19)
     "Component/Visual/RecordedCamera.scn": "RecordedCamera",
+    # compiled since issue 19 (comp19)
+    "Component/LinearSolver/Direct/FEMBAR_SVDLinearSolver.scn": "SVDLinearSolver",
+    "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
+        "LinearMovementProjectiveConstraint"
+    ),
 }
