@@ -272,6 +272,7 @@ def render_tree(tree: Path, steps: int | None) -> str:
         not_running: list[str] = []
         for path in clean:
             outcome = run_outcome(path, steps)
+            print(f"{outcome}\t{path.relative_to(tree).as_posix()}", file=sys.stderr, flush=True)  # progress
             outcomes[outcome.split(":")[0] if outcome.startswith("internal") else outcome] += 1
             if outcome != "runs":
                 not_running.append(f"- `{path.relative_to(tree).as_posix()}`: {outcome}")
