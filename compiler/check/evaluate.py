@@ -411,6 +411,31 @@ def tetra_to_triangle(ctx: Context) -> Outputs:
     return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
 
 
+def quad_to_triangle(ctx: Context) -> Outputs:
+    """Quad2TriangleTopologicalMapping: two triangles per input quad (p1 p2 p0) (p3 p0 p2), or with
+    ``swapping`` on the quads where (i mod s) xor (i div s) is odd, (p0 p1 p3) (p2 p3 p1); s is the
+    grid's nx - 1 (ny - 1 when nx is 1), 2 when the input is not a grid (SOFA's init)."""
+    quads = ctx.linked("input", "quads")
+    if quads is None or not np.size(quads):
+        raise UnknownInput("the input topology's quads are not known at compile time")
+    cells = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    resolution = ctx.linked("input", "resolution")
+    nx, ny = (int(resolution[0]) - 1, int(resolution[1]) - 1) if resolution is not None else (2, 1)
+    if nx == 0 and ny == 0:
+        raise EvaluationError(
+            "the input grid has one point along x and y: SOFA's Quad2TriangleTopologicalMapping is "
+            "invalid for it",
+            "input",
+            code="E207",
+        )
+    scale = nx if nx else ny
+    index = np.arange(len(cells))
+    swapped = (((index % scale) ^ (index // scale)) & 1).astype(bool) & bool(ctx.value("swapping"))
+    straight = np.stack([cells[:, [1, 2, 0]], cells[:, [3, 0, 2]]], axis=1)
+    turned = np.stack([cells[:, [0, 1, 3]], cells[:, [2, 3, 1]]], axis=1)
+    return {"triangles": np.where(swapped[:, None, None], turned, straight).reshape(-1)}
+
+
 def hexa_to_quad(ctx: Context) -> Outputs:
     """Hexa2QuadTopologicalMapping: the boundary quads of the input hexahedra, outward."""
     from sofac.geometry.fem_topology import HEXA_FACES
@@ -534,6 +559,7 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "quad_to_triangle": quad_to_triangle,
     "sparse_grid": sparse_grid,
     "box_roi": box_roi,
 }
