@@ -46,6 +46,7 @@ from sofac.plan.lower.springs import (
     lower_quad_bending_springs,
     lower_springs,
     lower_triangular_bending_springs,
+    lower_vector_springs,
 )
 
 LOWERINGS: dict[str, Lowering] = {
@@ -70,6 +71,7 @@ LOWERINGS: dict[str, Lowering] = {
     "diagonal_mass": lower_diagonal_mass,
     "springs": lower_springs,
     "mesh_springs": lower_mesh_springs,
+    "vector_springs": lower_vector_springs,
     "constant_force": lower_constant_force,
     "rest_shape_springs": lower_rest_shape,
     "fixed": lower_fixed,
