@@ -461,6 +461,27 @@ def _tetrahedral_container_edges(tetrahedra: np.ndarray) -> np.ndarray:
     return np.asarray(edges, dtype=np.int64).reshape(-1, 2)
 
 
+# MergeVectors' input Data the registry declares (SOFA creates nbInputs of them).
+_MERGE_INPUTS = 8
+
+
+def merge_vectors(ctx: Context) -> Outputs:
+    """MergeVectors: input1, ..., input<nbInputs> one after the other (an unset input is empty)."""
+    count = int(ctx.value("nbInputs") or 0)
+    if count > _MERGE_INPUTS:
+        raise EvaluationError(
+            f"nbInputs={count}: sofac evaluates MergeVectors with at most {_MERGE_INPUTS} inputs",
+            "nbInputs",
+            code="E222",
+        )
+    parts = []
+    for i in range(1, count + 1):
+        value = ctx.value(f"input{i}")
+        if value is not None and np.size(value):
+            parts.append(np.asarray(value).ravel())
+    return {"output": np.concatenate(parts) if parts else np.zeros(0)}
+
+
 def transform_engine(ctx: Context) -> Outputs:
     """TransformEngine on Vec3 points: scale then translation, in SOFA's order (each operation one
     rounding); inverse: translation by -t first, then scale by 1/s. Rotations are not evaluated."""
@@ -560,6 +581,7 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "sphere_loader": sphere_loader,
     "grid": grid,
     "quad_to_triangle": quad_to_triangle,
+    "merge_vectors": merge_vectors,
     "sparse_grid": sparse_grid,
     "box_roi": box_roi,
 }
