@@ -170,7 +170,11 @@ def grid(ctx: Context) -> Outputs:
         raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
-    lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    # p0, when the scene sets it, replaces the origin setPos derives from min (SOFA's d_p0.isSet())
+    p0 = tuple(map(float, _numbers(ctx, "p0", 3))) if ctx.is_set("p0") else None
+    lattice = RegularGrid(
+        tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)), p0=p0
+    )
     with np.errstate(all="ignore"):  # bounds near the float range: said below, not warned about
         points = lattice.points()
     if not np.isfinite(points).all():
@@ -187,6 +191,99 @@ def grid(ctx: Context) -> Outputs:
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
         **cells,
+    }
+
+
+def cube_topology(ctx: Context) -> Outputs:
+    """CubeTopology (without splitNormals): the points of the box's surface (all grid points with
+    internalPoints, or when an axis has one point), p0 + i dx + j dy + k dz, numbered as
+    SOFA's getPoint; its edges along the surface and its quads, in SOFA's order (updateEdges/updateQuads)."""
+    n = [
+        int(_numbers(ctx, name, 1, integer=True)[0]) if ctx.is_set(name) else 0 for name in ("nx", "ny", "nz")
+    ]
+    if ctx.value("splitNormals"):
+        return {}
+    if any(c < 1 for c in n):
+        raise EvaluationError(f"CubeTopology resolution {n} must be >= 1 per axis", "nx", code="E207")
+    refused = limits.too_many_points(n)
+    if refused:
+        raise EvaluationError(f"cube resolution {refused}", "nx", code="E207")
+    nx, ny, nz = n
+    legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+    if all(ctx.is_set(name) for name in legacy_bounds):
+        # SOFA's parse reads them (and scale) as single-precision floats, multiplied in float
+        scale = np.float32(_numbers(ctx, "scale", 1)[0]) if ctx.is_set("scale") else np.float32(1.0)
+        bounds = [float(np.float32(np.float32(_numbers(ctx, b, 1)[0]) * scale)) for b in legacy_bounds]
+        low, high = bounds[:3], bounds[3:]
+    else:
+        low = [float(v) for v in _numbers(ctx, "min", 3)]
+        high = [float(v) for v in _numbers(ctx, "max", 3)]
+    step = [(high[k] - low[k]) / (n[k] - 1) if n[k] > 1 else 0.0 for k in range(3)]
+    surface = not ctx.value("internalPoints") and nx > 1 and ny > 1 and nz > 1
+
+    def index(x: int, y: int, z: int) -> int:  # CubeTopology::point
+        if not surface:
+            return x + nx * (y + ny * z)
+        if z == 0:
+            return x + nx * y
+        if z == nz - 1:
+            return x + nx * (y + ny)
+        base = nx * ny * 2 + (2 * nx + 2 * ny - 4) * (z - 1)
+        if y == 0:
+            return base + x
+        if y == ny - 1:
+            return base + x + nx
+        if x == 0:
+            return base + 2 * nx + (y - 1)
+        return base + 2 * nx + (ny - 2) + (y - 1)
+
+    count = nx * ny * 2 + (nz - 2) * (2 * nx + 2 * ny - 4) if surface else nx * ny * nz
+    points = np.zeros((count, 3))
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if surface and 0 < z < nz - 1 and 0 < y < ny - 1 and 0 < x < nx - 1:
+                    continue
+                points[index(x, y, z)] = [low[k] + step[k] * (x, y, z)[k] for k in range(3)]
+    edges = []
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if x < nx - 1 and (y in (0, ny - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x + 1, y, z)))
+                if y < ny - 1 and (x in (0, nx - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x, y + 1, z)))
+                if z < nz - 1 and (x in (0, nx - 1) or y in (0, ny - 1)):
+                    edges.append((index(x, y, z), index(x, y, z + 1)))
+    quads = []
+    for y in range(ny - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, y, 0), index(x, y + 1, 0), index(x + 1, y + 1, 0), index(x + 1, y, 0)))
+    if nz > 1:
+        for y in range(ny - 1):
+            for x in range(nx - 1):
+                z = nz - 1
+                quads.append((index(x, y, z), index(x + 1, y, z), index(x + 1, y + 1, z), index(x, y + 1, z)))
+    for z in range(nz - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, 0, z), index(x + 1, 0, z), index(x + 1, 0, z + 1), index(x, 0, z + 1)))
+    if ny > 1:
+        for z in range(nz - 1):
+            for x in range(nx - 1):
+                y = ny - 1
+                quads.append((index(x, y, z), index(x, y, z + 1), index(x + 1, y, z + 1), index(x + 1, y, z)))
+    for z in range(nz - 1):
+        for y in range(ny - 1):
+            quads.append((index(0, y, z), index(0, y, z + 1), index(0, y + 1, z + 1), index(0, y + 1, z)))
+    if nx > 1:
+        for z in range(nz - 1):
+            for y in range(ny - 1):
+                x = nx - 1
+                quads.append((index(x, y, z), index(x, y + 1, z), index(x, y + 1, z + 1), index(x, y, z + 1)))
+    return {
+        "position": points.ravel(),
+        "edges": np.asarray(edges, dtype=np.int64).reshape(-1),
+        "quads": np.asarray(quads, dtype=np.int64).reshape(-1),
     }
 
 
@@ -291,19 +388,8 @@ def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
     return {}
 
 
-def sparse_grid(ctx: Context) -> Outputs:
-    """SparseGridTopology voxelising a surface mesh file (see voxelize.py): its points and hexahedra,
-    plus what its barycentric mapper needs (the regular grid, each regular cube's sparse index or -1,
-    which sparse cubes are BOUNDARY). Like SOFA's, it derives no edges, triangles or quads."""
-    from sofac.geometry import voxelize
-
-    levels = int(ctx.value("nbVirtualFinerLevels") or 0)
-    if levels:
-        raise EvaluationError(
-            f"nbVirtualFinerLevels={levels} (virtual finer grids) is not supported yet; remove it",
-            "nbVirtualFinerLevels",
-            code="E222",
-        )
+def _voxel_surface(ctx: Context) -> meshes.Mesh:
+    """The surface a sparse grid voxelises: its fileTopology, an .obj mesh."""
     path = ctx.file("filename")
     if path is None:
         if ctx.is_set("filename"):
@@ -333,15 +419,42 @@ def sparse_grid(ctx: Context) -> Outputs:
             given[0],
             code="E222",
         )
+    return mesh
 
-    def triple(name: str) -> tuple[float, float, float]:
-        x, y, z = (float(v) for v in np.asarray(ctx.value(name), dtype=float).ravel()[:3])
-        return x, y, z
 
+def _triple(ctx: Context, name: str) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in np.asarray(ctx.value(name), dtype=float).ravel()[:3])
+    return x, y, z
+
+
+_EMPTY_GRID = (
+    "the surface encloses no cell of the grid (SOFA leaves the topology invalid); "
+    "check the mesh and n/min/max"
+)
+
+
+def sparse_grid(ctx: Context) -> Outputs:
+    """SparseGridTopology voxelising a surface mesh file (see voxelize.py): its points and hexahedra,
+    plus what its barycentric mapper needs (the regular grid, each regular cube's sparse index or -1,
+    which sparse cubes are BOUNDARY). Like SOFA's, it derives no edges, triangles or quads."""
+    from sofac.geometry import voxelize
+
+    levels = int(ctx.value("nbVirtualFinerLevels") or 0)
+    if levels:
+        raise EvaluationError(
+            f"nbVirtualFinerLevels={levels} (virtual finer grids) is not supported yet; remove it",
+            "nbVirtualFinerLevels",
+            code="E222",
+        )
+    mesh = _voxel_surface(ctx)
     try:
-        nx, ny, nz = (int(c) for c in triple("n"))
+        nx, ny, nz = (int(c) for c in _triple(ctx, "n"))
         grid = voxelize.regular_grid(
-            mesh.positions, (nx, ny, nz), triple("min"), triple("max"), float(ctx.value("cellWidth") or 0.0)
+            mesh.positions,
+            (nx, ny, nz),
+            _triple(ctx, "min"),
+            _triple(ctx, "max"),
+            float(ctx.value("cellWidth") or 0.0),
         )
         triangles = voxelize.triangulate(mesh.triangles, mesh.quads)
         voxels = voxelize.classify(grid, mesh.positions, triangles)
@@ -349,12 +462,7 @@ def sparse_grid(ctx: Context) -> Outputs:
         raise EvaluationError(str(error), error.attribute, code="E207") from None
     sparse = voxelize.sparse_grid(voxels, only_inside=bool(ctx.value("onlyInsideCells")))
     if not len(sparse.hexahedra):
-        raise EvaluationError(
-            "the surface encloses no cell of the grid (SOFA leaves the topology invalid); check the "
-            "mesh and n/min/max",
-            "filename",
-            code="E207",
-        )
+        raise EvaluationError(_EMPTY_GRID, "filename", code="E207")
     return {
         "position": sparse.points.ravel(),
         "hexahedra": sparse.hexahedra.ravel(),
@@ -362,6 +470,45 @@ def sparse_grid(ctx: Context) -> Outputs:
         "grid_bounds": np.concatenate([grid.min, grid.max]).astype(float),
         "regular_to_sparse": sparse.regular_to_sparse,
         "boundary_cells": sparse.boundary.astype(np.int64),
+    }
+
+
+def sparse_grid_ramification(ctx: Context) -> Outputs:
+    """SparseGridRamificationTopology (see ramification.py): the sparse grid's outputs, with the
+    hexahedra duplicated where the surface inside a cell is in disconnected pieces, the per-cell
+    coefficients SOFA derives through its virtual finer levels, and what its findCube reads (the
+    finest grid and each of its cubes' hexahedron)."""
+    from sofac.geometry import ramification, voxelize
+
+    mesh = _voxel_surface(ctx)
+    try:
+        nx, ny, nz = (int(c) for c in _triple(ctx, "n"))
+        grid = ramification.ramified_grid(
+            mesh.positions,
+            mesh.triangles,
+            (nx, ny, nz),
+            _triple(ctx, "min"),
+            _triple(ctx, "max"),
+            virtual_levels=int(ctx.value("nbVirtualFinerLevels") or 0),
+            finest_connectivity=ctx.value("finestConnectivity") is not False,
+            fill_weighted=ctx.value("fillWeighted") is not False,
+            only_inside=bool(ctx.value("onlyInsideCells")),
+            cell_width=float(ctx.value("cellWidth") or 0.0),
+            quads=mesh.quads,
+        )
+    except voxelize.VoxelError as error:
+        raise EvaluationError(str(error), error.attribute, code="E207") from None
+    coarse, finest = grid.coarse, grid.finest
+    return {
+        "position": grid.points.ravel(),
+        "hexahedra": grid.hexahedra.ravel(),
+        "grid_resolution": np.asarray(coarse.resolution(), dtype=np.int64),
+        "grid_bounds": np.concatenate([coarse.min, coarse.max]).astype(float),
+        "boundary_cells": grid.boundary.astype(np.int64),
+        "cell_coefficients": grid.coefficients.astype(np.float64),
+        "finest_grid_resolution": np.asarray(finest.resolution(), dtype=np.int64),
+        "finest_grid_bounds": np.concatenate([finest.min, finest.max]).astype(float),
+        "finest_to_hexa": grid.finest_to_hexa,
     }
 
 
@@ -639,6 +786,8 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "grid": grid,
     "quad_to_triangle": quad_to_triangle,
     "merge_vectors": merge_vectors,
+    "cube_topology": cube_topology,
     "sparse_grid": sparse_grid,
+    "sparse_grid_ramification": sparse_grid_ramification,
     "box_roi": box_roi,
 }

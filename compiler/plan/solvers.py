@@ -348,6 +348,8 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
             ),
         }
         return True
+    if checked_linear.spec.lowering == "btd":
+        return plan_btd(planner, checked_linear, group)
     if checked_linear.spec.lowering not in ("cg", "direct", "precomputed"):
         planner.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
         return False
@@ -390,6 +392,32 @@ def direct_kind(planner: Planner, linear: CheckedComponent, group: Group) -> Non
             [1e-6 if threshold is None else float(threshold)],
             role="param",
         )
+
+
+def plan_btd(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
+    """BTDLinearSolver: the assembled, projected system read as a block-tridiagonal matrix of 6x6
+    blocks (SOFA's BTDMatrix6d keeps no entry outside the three block diagonals), inverted by
+    SOFA's Thomas algorithm every step. Its partial solves (subpartSolve) are not compiled."""
+    if planner.value(linear.component, "subpartSolve"):
+        planner.unsupported(linear, "subpartSolve=true is not compiled yet")
+        return False
+    if not assembles_everything(planner, linear):
+        return False
+    group.linear_solver = linear.component
+    group.assembled = group.direct = group.btd = True
+    return True
+
+
+def screen_btd(planner: Planner, group: Group) -> None:
+    """BTDLinearSolver's 6x6 blocks are the DOFs of Rigid3d (or Vec6d) states."""
+    for state in group.states:
+        if state.datatype.deriv_size != 6:
+            planner.unsupported(
+                planner.checked.of(group.linear_solver),
+                f"BTDLinearSolver on a {state.datatype.name} state is not compiled "
+                "(6x6 blocks: Rigid3d, Vec6d)",
+            )
+            return
 
 
 def assembles_everything(planner: Planner, linear: CheckedComponent) -> bool:

@@ -4,8 +4,10 @@ function here that turns it into calls of the step.
 
 from __future__ import annotations
 
+from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
-from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_trifem_optim
+from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
+from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
     lower_constant_force,
     lower_interaction_ellipsoid,
@@ -59,6 +61,8 @@ LOWERINGS: dict[str, Lowering] = {
     "hexa_fem": lower_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
+    "quad_bending": lower_quad_bending,
+    "hyperelastic": lower_hyperelastic,
     "quad_bending_springs": lower_quad_bending_springs,
     "triangular_bending_springs": lower_triangular_bending_springs,
     "interaction_ellipsoid": lower_interaction_ellipsoid,
@@ -89,4 +93,6 @@ LOWERINGS: dict[str, Lowering] = {
     "rigid_mapping": lower_rigid_mapping,
     "identity_mapping": lower_subset_mapping,
     "subset_mapping": lower_subset_mapping,
+    "beam_fem": lower_beam_fem,
+    "beam_linear_mapping": lower_beam_linear_mapping,
 }

@@ -252,7 +252,8 @@ BTD_LINEAR_SOLVER = ComponentSpec(
     doc="Thomas algorithm on a block-tridiagonal matrix (6x6 blocks, beams).",
     templates=(BTD_MATRIX,),
     default_template=BTD_MATRIX,
-    unsupported_reason="BTDLinearSolver (block-tridiagonal) is not implemented yet",
+    lowering="btd",
+    supported=True,
     effects=_SOLVE,
     fields=(
         FieldSpec("verbose", Bool(), False, "dump the system every iteration"),

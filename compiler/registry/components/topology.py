@@ -145,8 +145,9 @@ SPARSE_GRID_RAMIFICATION_TOPOLOGY = ComponentSpec(
     module=_GRID,
     doc="Sparse grid that duplicates cells crossed by several disconnected parts of the surface.",
     former_names=("SparseGridRamification",),
-    unsupported_reason="SparseGridRamificationTopology is not supported yet",
+    supported=True,
     effects=_GENERATED,
+    compute="sparse_grid_ramification",
     fields=(
         FieldSpec("finestConnectivity", Bool(), True, "test connectivity at the finest level"),
         *_SPARSE_GRID_FIELDS,
@@ -160,6 +161,7 @@ CUBE_TOPOLOGY = ComponentSpec(
     doc="Surface of a box between min and max: points, edges and quads (nx ny nz points per side).",
     supported=True,
     effects=_GENERATED,
+    compute="cube_topology",
     fields=(
         *(
             FieldSpec(name, Int(), 0, f"resolution along {name[1]}", valid=MUST_BE_NONNEGATIVE)
