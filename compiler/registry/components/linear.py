@@ -229,7 +229,7 @@ EIGEN_CHOLMOD_SUPERNODAL_LLT = ComponentSpec(
     module="SofaCHOLMOD",
     doc="CHOLMOD's supernodal L L^T (SofaCHOLMOD plugin): sofac's direct solvers factor L L^T with "
     "CHOLMOD's analysis and supernodal kernel.",
-    templates=(CRS_SCALAR,),
+    templates=_SPARSE_DIRECT_TEMPLATES,
     default_template=CRS_SCALAR,
     supported=True,
     effects=_SOLVE,
