@@ -185,15 +185,7 @@ def grid(ctx: Context) -> Outputs:
             "xmin" if legacy else "min",
             code="E206",
         )
-    cells = _grid_cells(counts)
-    if "quads" in cells and ctx.value("computeTriangleList") is not False:
-        # A 2-D grid: SOFA's GridUpdate also splits each quad (q0 q1 q2) (q0 q2 q3) and, from those
-        # triangles, derives the edges.
-        quads = cells["quads"].reshape(-1, 4)
-        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
-        cells["triangles"] = triangles.ravel()
-        if ctx.value("computeEdgeList") is not False:
-            cells["edges"] = triangle_edges(triangles).ravel()
+    cells = _grid_update(counts, {flag: ctx.value(flag) is not False for flag in _GRID_FLAGS})
     return {
         "position": points.ravel(),
         "resolution": counts.astype(np.int64),
@@ -302,6 +294,71 @@ def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     keys = np.sort(ends, axis=1)
     _, first = np.unique(keys, axis=0, return_index=True)
     return ends[np.sort(first)]
+
+
+_GRID_FLAGS = ("computeHexaList", "computeQuadList", "computeTriangleList", "computeEdgeList")
+
+
+def _grid_update(counts: np.ndarray, flags: dict[str, bool]) -> dict[str, np.ndarray]:
+    """The elements SOFA's GridTopology::GridUpdate makes, in its order, for a grid of any
+    dimension: hexahedra; quads in the XY, then XZ, then YZ planes; triangles (q0 q1 q2) (q0 q2 q3)
+    of each quad (made from the quads even without computeQuadList); edges from those triangles as
+    createEdgeSetArray does, or, without triangles, the grid lines along X, then Y, then Z."""
+    nx, ny, nz = (int(c) for c in counts)
+
+    def point(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+        return x + nx * (y + ny * z)
+
+    def lattice(sx: int, sy: int, sz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x fastest, then y, then z: SOFA's loops over x < sx, y < sy, z < sz."""
+        z, y, x = np.meshgrid(
+            np.arange(max(sz, 0)), np.arange(max(sy, 0)), np.arange(max(sx, 0)), indexing="ij"
+        )
+        return x.ravel(), y.ravel(), z.ravel()
+
+    cells: dict[str, np.ndarray] = {}
+    if flags["computeHexaList"]:
+        x, y, z = lattice(nx - 1, ny - 1, nz - 1)
+        corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+        if len(x):
+            cells["hexahedra"] = np.stack([point(x + a, y + b, z + c) for a, b, c in corners], axis=1).ravel()
+    quads = np.zeros((0, 4), dtype=np.int64)
+    if flags["computeQuadList"] or flags["computeTriangleList"]:
+        planes = []
+        x, y, z = lattice(nx - 1, ny - 1, nz)  # XY
+        planes.append(
+            np.stack([point(x, y, z), point(x + 1, y, z), point(x + 1, y + 1, z), point(x, y + 1, z)], 1)
+        )
+        x, y, z = lattice(nx - 1, ny, nz - 1)  # XZ
+        planes.append(
+            np.stack([point(x, y, z), point(x + 1, y, z), point(x + 1, y, z + 1), point(x, y, z + 1)], 1)
+        )
+        x, y, z = lattice(nx, ny - 1, nz - 1)  # YZ
+        planes.append(
+            np.stack([point(x, y, z), point(x, y + 1, z), point(x, y + 1, z + 1), point(x, y, z + 1)], 1)
+        )
+        quads = np.concatenate(planes).astype(np.int64).reshape(-1, 4)
+        if len(quads):
+            cells["quads"] = quads.ravel()
+    triangles = np.zeros((0, 3), dtype=np.int64)
+    if flags["computeTriangleList"] and len(quads):
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+        cells["triangles"] = triangles.ravel()
+    if flags["computeEdgeList"]:
+        if len(triangles):
+            edges = triangle_edges(triangles)
+        else:
+            lines = []
+            x, y, z = lattice(nx - 1, ny, nz)
+            lines.append(np.stack([point(x, y, z), point(x + 1, y, z)], 1))
+            x, y, z = lattice(nx, ny - 1, nz)
+            lines.append(np.stack([point(x, y, z), point(x, y + 1, z)], 1))
+            x, y, z = lattice(nx, ny, nz - 1)
+            lines.append(np.stack([point(x, y, z), point(x, y, z + 1)], 1))
+            edges = np.concatenate(lines).astype(np.int64).reshape(-1, 2)
+        if len(edges):
+            cells["edges"] = edges.ravel()
+    return {kind: np.asarray(value, dtype=np.int64) for kind, value in cells.items()}
 
 
 def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
@@ -558,6 +615,31 @@ def tetra_to_triangle(ctx: Context) -> Outputs:
     return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
 
 
+def quad_to_triangle(ctx: Context) -> Outputs:
+    """Quad2TriangleTopologicalMapping: two triangles per input quad (p1 p2 p0) (p3 p0 p2), or with
+    ``swapping`` on the quads where (i mod s) xor (i div s) is odd, (p0 p1 p3) (p2 p3 p1); s is the
+    grid's nx - 1 (ny - 1 when nx is 1), 2 when the input is not a grid (SOFA's init)."""
+    quads = ctx.linked("input", "quads")
+    if quads is None or not np.size(quads):
+        raise UnknownInput("the input topology's quads are not known at compile time")
+    cells = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    resolution = ctx.linked("input", "resolution")
+    nx, ny = (int(resolution[0]) - 1, int(resolution[1]) - 1) if resolution is not None else (2, 1)
+    if nx == 0 and ny == 0:
+        raise EvaluationError(
+            "the input grid has one point along x and y: SOFA's Quad2TriangleTopologicalMapping is "
+            "invalid for it",
+            "input",
+            code="E207",
+        )
+    scale = nx if nx else ny
+    index = np.arange(len(cells))
+    swapped = (((index % scale) ^ (index // scale)) & 1).astype(bool) & bool(ctx.value("swapping"))
+    straight = np.stack([cells[:, [1, 2, 0]], cells[:, [3, 0, 2]]], axis=1)
+    turned = np.stack([cells[:, [0, 1, 3]], cells[:, [2, 3, 1]]], axis=1)
+    return {"triangles": np.where(swapped[:, None, None], turned, straight).reshape(-1)}
+
+
 def hexa_to_quad(ctx: Context) -> Outputs:
     """Hexa2QuadTopologicalMapping: the boundary quads of the input hexahedra, outward."""
     from sofac.geometry.fem_topology import HEXA_FACES
@@ -581,6 +663,27 @@ def _tetrahedral_container_edges(tetrahedra: np.ndarray) -> np.ndarray:
                 seen.add(key)
                 edges.append(key)
     return np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+
+
+# MergeVectors' input Data the registry declares (SOFA creates nbInputs of them).
+_MERGE_INPUTS = 8
+
+
+def merge_vectors(ctx: Context) -> Outputs:
+    """MergeVectors: input1, ..., input<nbInputs> one after the other (an unset input is empty)."""
+    count = int(ctx.value("nbInputs") or 0)
+    if count > _MERGE_INPUTS:
+        raise EvaluationError(
+            f"nbInputs={count}: sofac evaluates MergeVectors with at most {_MERGE_INPUTS} inputs",
+            "nbInputs",
+            code="E222",
+        )
+    parts = []
+    for i in range(1, count + 1):
+        value = ctx.value(f"input{i}")
+        if value is not None and np.size(value):
+            parts.append(np.asarray(value).ravel())
+    return {"output": np.concatenate(parts) if parts else np.zeros(0)}
 
 
 def transform_engine(ctx: Context) -> Outputs:
@@ -681,6 +784,8 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "quad_to_triangle": quad_to_triangle,
+    "merge_vectors": merge_vectors,
     "cube_topology": cube_topology,
     "sparse_grid": sparse_grid,
     "sparse_grid_ramification": sparse_grid_ramification,

@@ -193,8 +193,12 @@ def _headers(plan: Plan) -> list[str]:
             statements += [c for c in (mapping.transpose, mapping.geometric) if c is not None]
         matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
         for projection in group.projections:
-            statements += [projection.project]
-            extra = (projection.mark if matrix else None, projection.position, projection.project_velocity)
+            extra = (
+                projection.project,
+                projection.mark if matrix else None,
+                projection.position,
+                projection.project_velocity,
+            )
             statements += [c for c in extra if c is not None]
     index = _header_of()
     needed = {index["BlockTridiagonal"]} if any(group.btd for group in plan.groups) else set()
@@ -289,12 +293,16 @@ class _ProjectionView:
         self.origin = projection.origin
         self.velocity = projection.velocity
         project = projection.project
-        self.on_v = _bound(projection.project_velocity or project, {VECTOR: state.v})
-        self.on_x = _bound(projection.position, {VECTOR: state.x}) if projection.position else ""
-        self.on_acc = _bound(project, {VECTOR: state.acc}) if state.acc else ""
-        self.on_f = _bound(project, {VECTOR: state.f})
-        self.on_df = _bound(project, {VECTOR: state.df}) if state.df else ""
-        self.on_r = _bound(project, {VECTOR: state.stages["r"]}) if "r" in state.stages else ""
+
+        def on(call: Call | None, vector: Buffer | None) -> str:
+            return _bound(call, {VECTOR: vector}) if call is not None and vector is not None else ""
+
+        self.on_v = on(projection.project_velocity or project, state.v)
+        self.on_x = on(projection.position, state.x)
+        self.on_acc = on(project, state.acc)
+        self.on_f = on(project, state.f)
+        self.on_df = on(project, state.df)
+        self.on_r = on(project, state.stages.get("r"))
 
 
 class _GroupView:

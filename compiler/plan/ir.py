@@ -308,7 +308,7 @@ class Projection:
 
     origin: str
     state: StatePlan
-    project: Call
+    project: Call | None  # None: responses are left alone (a constraint on positions only)
     velocity: bool = False  # also projects the velocity after the update
     # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (at OFFSET).
     mark: Call | None = None
@@ -377,6 +377,8 @@ class Group:
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
     llt: bool = False  # the direct solver factors L L^T (registry role "llt"), else L D L^T
+    # SVDLinearSolver (registry role "svd"): a dense SVD instead; its minSingularValue buffer.
+    svd_threshold: Buffer | None = None
     assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     btd: bool = False  # BTDLinearSolver: the direct solve is the block-tridiagonal Thomas algorithm (6x6)

@@ -92,7 +92,7 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
         spec = planner.checked.of(linear).spec if linear is not None else None
         if spec is not None and spec.lowering == "direct":
             group.linear_solver, group.assembled = linear, True
-            group.llt = spec.role == "llt"
+            direct_kind(planner, planner.checked.of(linear), group)
     return group
 
 
@@ -359,7 +359,7 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
             return False
         group.assembled = group.direct = True
         group.factor_once = checked_linear.spec.lowering == "precomputed"
-        group.llt = checked_linear.spec.role == "llt"
+        direct_kind(planner, checked_linear, group)
         return True
     if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:
         # SOFA assembles the system matrix and runs CG on it (CRS, sparse or full: the same numbers)
@@ -377,6 +377,21 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
         "solves": planner.buffer(linear, "solves", [0], "i64", role="scratch"),
     }
     return True
+
+
+def direct_kind(planner: Planner, linear: CheckedComponent, group: Group) -> None:
+    """The factorisation of a direct solver: L L^T (role "llt"), a dense SVD (role "svd", with
+    SVDLinearSolver's minSingularValue) or L D L^T."""
+    role = linear.spec.role if linear.spec is not None else ""
+    group.llt = role == "llt"
+    if role == "svd":
+        threshold = planner.value(linear.component, "minSingularValue")
+        group.svd_threshold = planner.buffer(
+            linear.component,
+            "minSingularValue",
+            [1e-6 if threshold is None else float(threshold)],
+            role="param",
+        )
 
 
 def plan_btd(planner: Planner, linear: CheckedComponent, group: Group) -> bool:

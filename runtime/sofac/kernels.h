@@ -212,6 +212,46 @@ struct Springs {
     Index count;
 };
 
+// VectorSpringForceField (Vec3d): spring k joins a[k] of object1 and b[k] of object2, with rest
+// vector rest[k]; one stiffness and one damping for all (SOFA's default springs).
+struct VectorSprings {
+    const Index* a;
+    const Index* b;
+    const double* rest;  // count x 3
+    const double* stiffness;
+    const double* damping;
+    Index count;
+};
+
+// f = (d - r) ks + (v2 - v1) kd with d = x2[b] - x1[a], in SOFA's order; f1[a] += f, f2[b] -= f.
+inline void vector_spring_forces(const VectorSprings& s, const double* x1, const double* v1, double* f1,
+                                 const double* x2, const double* v2, double* f2) {
+    const double ks = s.stiffness[0], kd = s.damping[0];
+    for (Index k = 0; k < s.count; ++k) {
+        const Index i = 3 * s.a[k], j = 3 * s.b[k];
+        for (int c = 0; c < 3; ++c) {
+            const double squash = (x2[j + c] - x1[i + c]) - s.rest[3 * k + c];
+            const double force = squash * ks + (v2[j + c] - v1[i + c]) * kd;
+            f1[i + c] += force;
+            f2[j + c] -= force;
+        }
+    }
+}
+
+// df = (dx2[b] - dx1[a]) (ks kfact): SOFA's addDForce, no damping term.
+inline void vector_spring_dforces(const VectorSprings& s, const double* dx1, double* df1, const double* dx2,
+                                  double* df2, double kfact) {
+    const double factor = s.stiffness[0] * kfact;
+    for (Index k = 0; k < s.count; ++k) {
+        const Index i = 3 * s.a[k], j = 3 * s.b[k];
+        for (int c = 0; c < 3; ++c) {
+            const double dforce = (dx2[j + c] - dx1[i + c]) * factor;
+            df1[i + c] += dforce;
+            df2[j + c] -= dforce;
+        }
+    }
+}
+
 // With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces,
 // (ks - F/d) n n^T + (F/d) I with F the whole intensity (elastic and damping), as SOFA does, in
 // factored form: S + 2 numbers per spring, c = ks - F/d, t = F/d and n (spring_block rebuilds
