@@ -261,6 +261,7 @@ class _StateView:
         self.rigid = state.datatype.rigid
         self.stages = state.stages
         self.path_comment = _comment(state.path)
+        self.when = ""  # a condition on clearing its forces (see _GroupView)
 
 
 class _MappingView:
@@ -277,6 +278,9 @@ class _MappingView:
         fixed = {Slot("parent", vector="dx"): parent.dx, Slot("parent", vector="df"): parent.df}
         usable = geometric is not None and parent.dx is not None and parent.df is not None
         self.geometric_df = _bound(geometric, fixed) if usable else ""  # type: ignore[arg-type]
+        # J and J^T of a state only contacts read: only while its model is in contact.
+        touching = mapping.while_in_contact
+        self.when = f"if (S.contacts[{touching[0]}]->in_contact({touching[1]})) " if touching else ""
 
 
 def _mapping_slots(mapping: MappingOp, vector: str) -> dict[Slot, Arg]:
@@ -315,6 +319,12 @@ class _GroupView:
         self.states = [_StateView(s) for s in group.states]
         self.mapped = [_StateView(s) for s in group.mapped]
         self.all_states = [_StateView(s) for s in (*group.states, *group.mapped)]
+        # A state only contacts read holds forces only while its model is in contact.
+        when = {id(m.child): _MappingView(m).when for m in group.mappings}
+        for view, state in zip(self.all_states, (*group.states, *group.mapped), strict=True):
+            view.when = when.get(id(state), "")
+        for view, state in zip(self.mapped, group.mapped, strict=True):
+            view.when = when.get(id(state), "")
         self.mappings = [_MappingView(m) for m in group.mappings]
         self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
         self.on_read = [_MappingView(m) for m in group.on_read]

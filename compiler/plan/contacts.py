@@ -18,7 +18,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category
 
-from .ir import Collision, CollisionModel, ContactPair, ElementTest, Env, Group, Op, call, origin_of
+from .ir import Call, Collision, CollisionModel, ContactPair, ElementTest, Env, Group, Op, call, origin_of
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -402,3 +402,28 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     ],
                 )
             )
+
+
+def map_contact_states_while_touching(planner: Planner, groups: list[Group]) -> None:
+    """A collision model's state that nothing but its contacts reads (a surface mapped onto the
+    mechanics for collision only): the J and J^T of its mapping, in every force evaluation and
+    every product of the solve, run only while the model has a contact; its forces are zero
+    otherwise. Its positions are still mapped every step, for the next detection."""
+    from .ir import buffers_of
+
+    contact_of = {
+        id(model.state): (number, index)
+        for number, collision in enumerate(planner.collisions)
+        for index, model in enumerate(collision.models)
+    }
+    for group in groups:
+        others = [c for c in group.calls() if not (isinstance(c, Call) and c.kernel.startswith("contact_"))]
+        used = buffers_of(others)
+        for mapping in group.mappings:
+            child = mapping.child
+            if id(child) not in contact_of:
+                continue
+            a_parent = any(m.parent is child or child in m.inputs for m in group.mappings)
+            vectors = {b.ident for b in (child.f, child.dx, child.df) if b is not None}
+            if not a_parent and not vectors & used:
+                mapping.while_in_contact = contact_of[id(child)]

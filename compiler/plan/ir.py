@@ -299,6 +299,9 @@ class MappingOp:
     # Assembler::kMapped) from INPUT_OFFSET (the parent's); None: J is not assembled yet.
     assembly: list[Call] | None = None
     inputs: tuple[StatePlan, ...] = ()  # a multi-mapping's other parents (Slot("parent", input=1)...)
+    # A collision model's state that only its contacts read: J and J^T of forces and products run
+    # only while the model is in contact, (pipeline, model); positions are mapped every step.
+    while_in_contact: tuple[int, int] | None = None
 
 
 @dataclass

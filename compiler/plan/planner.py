@@ -21,7 +21,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
-from sofac.plan.contacts import contact_setup_refusal, plan_collisions
+from sofac.plan.contacts import contact_setup_refusal, map_contact_states_while_touching, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
@@ -379,6 +379,8 @@ class Planner:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:
             add_point_forces(self, list(groups.values()))
+        if self.collisions:  # after the point forces: a state they pull is not contact-only
+            map_contact_states_while_touching(self, list(groups.values()))
         drop_unread_rest_positions(self, list(groups.values()))
         return list(groups.values())
 

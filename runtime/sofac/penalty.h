@@ -116,6 +116,7 @@ public:
         const Index n = static_cast<Index>(models.size());
         broad_.resize(models.size());
         static_x_.assign(models.size(), nullptr);
+        live_pairs_.assign(models.size(), 0);
         broad_pairs_.assign(static_cast<std::size_t>(n * (n + 1)), 0);
         for (std::size_t i = 0; i < models.size(); ++i) {
             PenaltyModel& m = models[i];
@@ -287,6 +288,9 @@ public:
         }
     }
 
+    // Whether a contact of this step involves the model (else its contact forces are zero).
+    bool in_contact(Index model) const { return live_pairs_[static_cast<std::size_t>(model)] > 0; }
+
     // Potential energy of the active contacts (sum of ks pen^2 / 2).
     double energy() const {
         double e = 0.0;
@@ -380,12 +384,16 @@ private:
     void create(Index index) {  // createMapping on side 1, then side 2: the contact-point nodes
         PenaltyPair& p = pairs[index];
         p.live = true;
+        ++live_pairs_[static_cast<std::size_t>(p.model[0])];
+        ++live_pairs_[static_cast<std::size_t>(p.model[1])];
         for (int s = 0; s < 2; ++s)
             if (has_points(p, s)) models[p.model[s]].children.push_back(2 * index + s);
     }
     void destroy(Index index) {
         PenaltyPair& p = pairs[index];
         p.live = false;
+        --live_pairs_[static_cast<std::size_t>(p.model[0])];
+        --live_pairs_[static_cast<std::size_t>(p.model[1])];
         p.ff.clear();
         for (int s = 0; s < 2; ++s) {
             auto& children = models[p.model[s]].children;
@@ -421,6 +429,7 @@ private:
     std::vector<BroadPhaseModel> broad_;
     std::vector<Index> broad_pairs_;
     std::vector<const double*> static_x_;
+    std::vector<Index> live_pairs_;  // per model: its live pairs
     StablePairMap<Index> outputs_map_, contacts_map_;
 };
 
