@@ -88,6 +88,8 @@ CODES: dict[str, CodeInfo] = {
     "W230": _w("anisotropic rigid inertia on a rotating body (SOFA applies it in world axes)"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
+    "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),
+    "E246": _e("Lagrangian constraint on a state without a constraint correction"),
     # --- usage
     "E002": _e("usage error"),
 }

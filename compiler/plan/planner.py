@@ -24,6 +24,7 @@ from sofac.front.model import Component, Node
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
+    ConstraintPhase,
     ContactGuard,
     Group,
     Op,
@@ -33,6 +34,7 @@ from sofac.plan.ir import (
 )
 from sofac.plan.lower import LOWERINGS
 from sofac.plan.lower.common import _mapping_inputs, _topology_of
+from sofac.plan.lower.constraints import finish_constraint_phase
 from sofac.plan.passes import (
     add_point_forces,
     contact_guard,
@@ -88,6 +90,7 @@ class Planner:
         self.buffer_count = 0  # buffers ever made: identifiers stay unique when one is dropped
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
+        self.constraints: ConstraintPhase | None = None  # FreeMotionAnimationLoop's constraint phase
 
     # --- helpers -------------------------------------------------------------------------------
     def value(self, component: Component, name: str) -> Any:
@@ -166,6 +169,7 @@ class Planner:
             rigid_model=self.rigid_model,
             interactive=self.interactive,
             contact_guard=self.guard,
+            constraints=self.constraints,
             parallel_groups=self.threads > 1
             and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
         )
@@ -350,6 +354,7 @@ class Planner:
                 continue
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
+        self.constraints = finish_constraint_phase(self, list(groups.values()))
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)

@@ -5,6 +5,7 @@ function here that turns it into calls of the step.
 from __future__ import annotations
 
 from sofac.plan.lower.common import Lowering
+from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_trifem_optim
 from sofac.plan.lower.loads import (
     lower_constant_force,
@@ -77,4 +78,6 @@ LOWERINGS: dict[str, Lowering] = {
     "rigid_mapping": lower_rigid_mapping,
     "identity_mapping": lower_subset_mapping,
     "subset_mapping": lower_subset_mapping,
+    "constraint_solver": lower_constraint_solver,
+    "constraint_correction": lower_constraint_correction,
 }

@@ -176,7 +176,7 @@ def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: di
         planner.unsupported(
             checked,
             f"with {_matrix_solver(group)} it is compiled only when active at every step (keyTimes "
-            f"starting at 0 or before, continueAfterEnd=\"1\"); {_matrix_free_hint(group)}",
+            f'starting at 0 or before, continueAfterEnd="1"); {_matrix_free_hint(group)}',
         )
         return
     coordinates = _indices(planner, checked, "coordinates", 0, all_if_empty=False)
