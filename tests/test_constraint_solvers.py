@@ -43,9 +43,9 @@ struct DenseCorrections {
 };
 
 // method: 0 BGS, 1 NNCG, 2 UGS (W_block for the resolutions, W for the corrections), 3 LCP
-API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree, double* f,
-               const int* kinds, const double* parameters, double* previous, Index blocks, Index max_iterations,
-               double tolerance, double sor, int scale, int all_verified, double* out) {
+API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree,
+               double* f, const int* kinds, const double* parameters, double* previous, Index blocks,
+               Index max_iterations, double tolerance, double sor, int scale, int all_verified, double* out) {
     std::vector<double> w(W_block ? W_block : W, (W_block ? W_block : W) + n * n), d(n), scratch(3 * n + 1);
     std::vector<double> free(dfree, dfree + n);
     std::vector<sofac::RowBlock> rows(blocks);
@@ -84,8 +84,8 @@ API void solve(int method, Index n, const double* W, const double* W_block, cons
 // W = J C J^T factor for a state of `dofs` DOFs (Vec3d: comp per DOF; Rigid3d: the 7 numbers),
 // J given dense (rows x dofs*deriv), stored as SOFA's sparse rows (zero blocks left out).
 template <class DT>
-void compliance(Index rows, Index dofs, const double* dense, const double* comp, Index comp_size, double comp0,
-                double factor, double* W) {
+void compliance(Index rows, Index dofs, const double* dense, const double* comp, Index comp_size,
+                double comp0, double factor, double* W) {
     std::vector<Index> row_index(rows), start(rows + 1, 0), dof;
     std::vector<double> values;
     for (Index r = 0; r < rows; ++r) {
@@ -104,8 +104,8 @@ void compliance(Index rows, Index dofs, const double* dense, const double* comp,
     sofac::uncoupled_add_compliance<DT>(W, rows, J, comp0, comp, comp_size, factor, scaled.data());
 }
 
-API void compliance_vec3(Index rows, Index dofs, const double* J, const double* comp, Index comp_size, double comp0,
-                         double factor, double* W) {
+API void compliance_vec3(Index rows, Index dofs, const double* J, const double* comp, Index comp_size,
+                         double comp0, double factor, double* W) {
     compliance<sofac::Vec3d>(rows, dofs, J, comp, comp_size, comp0, factor, W);
 }
 
@@ -251,7 +251,8 @@ def solve(
         int(all_verified),
         _d(out),
     )
-    report = dict(zip(("iterations", "sweeps", "error", "converged", "singular", "stalled"), out, strict=True))
+    names = ("iterations", "sweeps", "error", "converged", "singular", "stalled")
+    report = dict(zip(names, out, strict=True))
     return f, report
 
 
@@ -413,7 +414,9 @@ def test_uncoupled_compliance_is_factor_j_c_jt(lib: ctypes.CDLL) -> None:
 
 
 @pytest.mark.parametrize("mass", [0.1, 3.0])
-def test_a_particle_on_a_bilateral_attachment_rests_with_multiplier_m_g(lib: ctypes.CDLL, mass: float) -> None:
+def test_a_particle_on_a_bilateral_attachment_rests_with_multiplier_m_g(
+    lib: ctypes.CDLL, mass: float
+) -> None:
     g, dt = 9.81, 0.01
     out = np.zeros(9)
     lib.hanging(mass, g, dt, 50, _d(out))
