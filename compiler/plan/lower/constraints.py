@@ -164,10 +164,18 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
             phase.frozen.append((state, group))
             phase.saved[state.ident] = (
                 planner.buffer(
-                    state.component, "frozen_position", state.x.initial, state.x.columns, role="scratch"
+                    state.component,
+                    "frozen_position",
+                    state.x.initial,
+                    columns=state.x.columns,
+                    role="scratch",
                 ),
                 planner.buffer(
-                    state.component, "frozen_velocity", state.v.initial, state.v.columns, role="scratch"
+                    state.component,
+                    "frozen_velocity",
+                    state.v.initial,
+                    columns=state.v.columns,
+                    role="scratch",
                 ),
             )
             planner.diags.add(
