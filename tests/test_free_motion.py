@@ -172,3 +172,23 @@ def test_linear_velocity_projective_constraint_scene_passes(shared_dir: Path) ->
     )
     assert result.status is Status.PASS, (result.status, result.message, result.error)
     assert result.error == 0.0
+
+
+def test_the_schedule_shows_the_constraint_phase(tmp_path: Path) -> None:
+    from sofac.plan.planner import plan_scene
+    from sofac.plan.report import format_effects, format_schedule
+
+    path = write(tmp_path, "frozen.scn", loop=FREE_MOTION, particle_correction=UNCOUPLED.format(t="Vec3d"))
+    checked, _ = check_file(path)
+    assert checked is not None
+    plan = plan_scene(checked)
+    schedule = format_schedule(plan)
+    assert "block_gauss_seidel (maxIterations=100.0, tolerance=1e-06," in schedule
+    assert "constraint rows: 0 (x = x_free, v = v_free" in schedule
+    assert "UncoupledConstraintCorrection '/Particle/UncoupledConstraintCorrection" in schedule
+    assert (
+        "frozen (no constraint correction, SOFA never writes its free motion back): /Frame/frame" in schedule
+    )
+    effects = format_effects(plan)
+    assert "kept out          FreeMotionAnimationLoop" not in effects
+    assert "constraint_solve  FreeMotionAnimationLoop" in effects

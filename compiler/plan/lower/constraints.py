@@ -156,6 +156,11 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
     phase = constraint_phase(planner)
     if phase is None:
         return None
+    loop = _free_motion_loop(planner)
+    assert loop is not None
+    # The loop is the step's driver, not a bystander: its effects are listed, it is not "kept out".
+    planner.ignored = [(c, why) for c, why in planner.ignored if c is not loop.component]
+    planner.lowered.append(loop.component)
     corrected = {id(c.state) for c in phase.corrections}
     for group in groups:
         for state in group.states:
