@@ -594,4 +594,67 @@ inline void apply_motion_correction(double* x, const double* x_free, double* v, 
     }
 }
 
+// ---- the compiled constraint phase (FreeMotionAnimationLoop) ----------------------------------
+
+// GenericConstraintProblem::clear(n): W, dfree, f and d zeroed.
+inline void constraint_clear(double* W, double* dfree, double* f, double* d, Index n) {
+    for (Index i = 0; i < n * n; ++i) W[i] = 0.0;
+    for (Index i = 0; i < n; ++i) dfree[i] = f[i] = d[i] = 0.0;
+}
+
+// BilateralLagrangianConstraint<Vec3d>::getPositionViolation: rows first + 3 p + k get
+// x2_free[m2[p]] - x1_free[m1[p]] (- rest[p] when given).
+inline void bilateral_violation(double* dfree, Index first, const double* x1, const double* x2, const Index* m1,
+                                const Index* m2, Index pairs, const double* rest, Index rest_count) {
+    for (Index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 3; ++k) {
+            double value = x2[3 * m2[p] + k] - x1[3 * m1[p] + k];
+            if (p < rest_count) value -= rest[3 * p + k];
+            dfree[first + 3 * p + k] = value;
+        }
+}
+
+// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameter, offset
+// of its kept forces in `previous` or -1); K blocks, on the stack. report: solves, iterations and
+// error of the last solve, solves that hit the iteration limit, the time of the last such solve.
+template <int K>
+inline void solve_constraints(int method, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
+                              const Index* first, const Index* kind, const double* parameter, const Index* kept,
+                              double* previous, double max_iterations, double tolerance, double sor,
+                              double scale_tolerance, double all_verified, double regularization, double* report,
+                              double time) {
+    RowBlock blocks[K];
+    for (int k = 0; k < K; ++k) {
+        blocks[k].first = first[k];
+        blocks[k].kind = Resolution(kind[k]);
+        blocks[k].parameter = parameter[k];
+        blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
+    }
+    if (regularization > std::numeric_limits<double>::epsilon())
+        for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
+    ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
+    const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
+                                      all_verified != 0.0};
+    const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (!result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+    }
+}
+
+// UncoupledConstraintCorrection on a Vec state after the solve: lambda = J^T f, dx = C lambda,
+// x = x_free + position_factor dx, v = v_free + velocity_factor dx (x, v hold the free motion).
+template <class DT>
+inline void uncoupled_correct(double* x, double* v, double* lambda, double* dx, const JacobianRows& J, const double* f,
+                              Index dofs, double comp0, const double* comp, Index comp_size, double position_factor,
+                              double velocity_factor) {
+    for (Index i = 0; i < DT::deriv * dofs; ++i) lambda[i] = 0.0;
+    add_jacobian_transpose<DT>(lambda, J, f);
+    uncoupled_dx<DT>(dx, lambda, dofs, comp0, comp, comp_size);
+    apply_motion_correction<DT>(x, x, v, v, dx, dofs, position_factor, velocity_factor);
+}
+
 }  // namespace sofac
