@@ -18,6 +18,7 @@ import jinja2
 from sofac import __version__
 from sofac.plan.ir import (
     CHILD,
+    CONSTRAINT_PHASES,
     OFFSET,
     PARENT,
     STEP_PHASES,
@@ -352,6 +353,11 @@ def generate_source(plan: Plan) -> str:
         buffers=buffers,
         groups=[_GroupView(g, plan.constraints) for g in plan.groups],
         constraints=plan.constraints,
+        constraint_phases=[
+            (name, [_OpView(op) for op in getattr(plan.constraints, name)]) for name in CONSTRAINT_PHASES
+        ]
+        if plan.constraints
+        else [],
         any_direct=any(g.direct or g.preconditioner for g in plan.groups),
         on_read=any(g.on_read for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),

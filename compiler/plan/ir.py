@@ -444,8 +444,8 @@ class ContactGuard:
 
 # The phases of FreeMotionAnimationLoop's constraint step, in step order (each a list of Ops):
 # J rows built on the constraints' states and carried up the mappings (applyJT), violations read
-# from the free vectors, W from the corrections, then each correction's x, v update.
-CONSTRAINT_PHASES = ("rows", "violation", "compliance", "correction")
+# from the free vectors, W from the corrections, the solve, then each correction's x, v update.
+CONSTRAINT_PHASES = ("rows", "violation", "compliance", "solve", "correction")
 
 
 @dataclass
@@ -456,6 +456,7 @@ class Correction:
     kind: str  # "uncoupled" (a per-DOF compliance) or "linear_solver" (A^-1 of the group's solve)
     state: StatePlan
     group: Group
+    checked: CheckedComponent | None = None
 
 
 @dataclass
@@ -479,6 +480,14 @@ class ConstraintPhase:
     frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)
     saved: dict[str, tuple[Buffer, Buffer]] = field(default_factory=dict)  # frozen state ident -> (x, v)
     capacity: int = 0  # constraint rows the phase can hold
+    # Row blocks in row order: (first row, runtime Resolution, parameter, offset of its kept forces
+    # in ``kept`` or -1), and the forces kept across steps (bilateral warm start).
+    blocks: list[tuple[int, int, float, int]] = field(default_factory=list)
+    kept: Buffer | None = None
+    # Jacobian entries per constrained state (ident): (row, dof, derivative values), SOFA's
+    # MatrixDeriv before it is sorted into rows.
+    entries: dict[str, list[tuple[int, int, tuple[float, ...]]]] = field(default_factory=dict)
+    solve: list[Op] = field(default_factory=list)  # the solver on W, dfree, f (after ``compliance``)
     rows: list[Op] = field(default_factory=list)
     violation: list[Op] = field(default_factory=list)
     compliance: list[Op] = field(default_factory=list)

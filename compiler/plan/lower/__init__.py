@@ -5,7 +5,7 @@ function here that turns it into calls of the step.
 from __future__ import annotations
 
 from sofac.plan.lower.common import Lowering
-from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
+from sofac.plan.lower.constraints import lower_bilateral, lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_trifem_optim
 from sofac.plan.lower.loads import (
     lower_constant_force,
@@ -80,4 +80,5 @@ LOWERINGS: dict[str, Lowering] = {
     "subset_mapping": lower_subset_mapping,
     "constraint_solver": lower_constraint_solver,
     "constraint_correction": lower_constraint_correction,
+    "bilateral_constraint": lower_bilateral,
 }

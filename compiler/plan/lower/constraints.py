@@ -17,7 +17,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
-from sofac.plan.ir import ConstraintPhase, Correction, Group, origin_of
+from sofac.plan.ir import (
+    Aggregate,
+    ConstraintPhase,
+    Correction,
+    Element,
+    Env,
+    Group,
+    Op,
+    StatePlan,
+    call,
+    kernel,
+    origin_of,
+)
 from sofac.registry import Category
 from sofac.registry.spec import Effect
 
@@ -103,6 +115,7 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
         report=report,
     )
     planner.constraint_phase = phase  # type: ignore[attr-defined]
+    planner.pending_violations = []  # type: ignore[attr-defined]
     planner.constraint_solver = solver  # type: ignore[attr-defined]
     return phase
 
@@ -147,7 +160,284 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
     if any(c.state is state for c in phase.corrections):
         planner.unsupported(checked, f"{state.path!r} already has a constraint correction")
         return
-    phase.corrections.append(Correction(origin_of(checked.component), kind, state, group))
+    phase.corrections.append(Correction(origin_of(checked.component), kind, state, group, checked))
+
+
+# The runtime's Resolution values (runtime/sofac/constraints.h).
+BILATERAL_3 = 0
+
+# The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
+_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1}
+
+
+def _values(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
+    """A list field's values (empty when unset)."""
+    value = planner.value(component, name)
+    return np.asarray(value if value is not None else [], dtype=dtype).ravel()
+
+
+def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """BilateralLagrangianConstraint<Vec3d>: three rows per pair of points, -e_k on object1's point
+    and +e_k on object2's (buildConstraintMatrix), the violation x2_free - x1_free (- rest)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if checked.datatype is None or checked.datatype.name != "Vec3d":
+        planner.unsupported(checked, "it is compiled for Vec3d only")
+        return
+    if planner.value(component, "activate") is False:
+        planner.ignored.append((component, "activate=0: no constraint"))
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    states = []
+    for name in ("object1", "object2"):
+        linked = checked.links.get(name)
+        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
+        if state is None:
+            planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
+            return
+        if state.mapped:
+            planner.unsupported(checked, f"constraint rows through mappings are not compiled yet ({name})")
+            return
+        states.append(state)
+    if states[0] is states[1]:
+        planner.unsupported(checked, "object1 and object2 are the same state: not compiled yet")
+        return
+    first_points, second_points = (
+        _values(planner, component, name, np.int64) for name in ("first_point", "second_point")
+    )
+    pairs = min(len(first_points), len(second_points))
+    if pairs == 0:
+        planner.ignored.append((component, "no pair of points: no constraint row"))
+        return
+    first_row = phase.capacity
+    phase.capacity += 3 * pairs
+    if phase.kept is None:
+        phase.kept = planner.buffer(
+            planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
+        )
+    kept_offset = len(phase.kept.initial)
+    phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
+    load = float(planner.value(component, "load"))
+    for p in range(pairs):
+        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p))
+        for k in range(3):
+            unit = tuple(1.0 if c == k else 0.0 for c in range(3))
+            row = first_row + 3 * p + k
+            phase.entries.setdefault(states[0].ident, []).append(
+                (row, int(first_points[p]), tuple(-u for u in unit))
+            )
+            phase.entries.setdefault(states[1].ident, []).append((row, int(second_points[p]), unit))
+    rest = planner.value(component, "rest_vector")
+    rest = np.asarray(rest if rest is not None else [], dtype=float).reshape(-1, 3)
+    m1 = planner.buffer(component, "first_point", first_points[:pairs], "i64")
+    m2 = planner.buffer(component, "second_point", second_points[:pairs], "i64")
+    rest_buffer = planner.buffer(component, "rest_vector", rest, columns=3)
+    planner.pending_violations.append(  # type: ignore[attr-defined]
+        (
+            origin_of(component),
+            first_row,
+            states[0],
+            states[1],
+            m1,
+            m2,
+            pairs,
+            rest_buffer,
+            len(rest),
+        )
+    )
+
+
+def _jacobian_rows(
+    planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
+) -> Aggregate:
+    """A state's J as SOFA's MatrixDeriv holds it: rows ascending, each row's DOFs ascending, the
+    values of one (row, DOF) summed (addCol)."""
+    merged: dict[tuple[int, int], list[float]] = {}
+    for row, dof, values in entries:
+        if (row, dof) in merged:
+            merged[(row, dof)] = [a + b for a, b in zip(merged[(row, dof)], values, strict=True)]
+        else:
+            merged[(row, dof)] = list(values)
+    rows = sorted({row for row, _ in merged})
+    starts, dofs, values = [0], [], []
+    for row in rows:
+        for (r, dof), value in sorted(merged.items()):
+            if r == row:
+                dofs.append(dof)
+                values.extend(value)
+        starts.append(len(dofs))
+    width = state.datatype.deriv_size
+    buffers = (
+        planner.buffer(state.component, "J_rows", rows, "i64"),
+        planner.buffer(state.component, "J_starts", starts, "i64"),
+        planner.buffer(state.component, "J_dofs", dofs, "i64"),
+        planner.buffer(state.component, "J_values", values, columns=width),
+    )
+    return Aggregate("JacobianRows", (len(rows), *buffers))
+
+
+def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
+    """The calls of a phase that has rows: violations, W from the corrections, the solve, the
+    corrections, on buffers sized by the rows."""
+    solver = getattr(planner, "constraint_solver", None)
+    n = phase.capacity
+    if phase.method not in _ROW_SOLVERS:
+        if solver is not None:
+            planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
+        return
+    W = planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch")
+    dfree = planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch")
+    f = planner.buffer("/", "constraint_f", np.zeros(n), role="scratch")
+    d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
+    scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
+    phase.rows.append(Op(phase.loop, [call("constraint_clear", W, dfree, f, d, n)]))
+    for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
+        phase.violation.append(
+            Op(
+                origin,
+                [call("bilateral_violation", dfree, first, s1.x, s2.x, m1, m2, pairs, rest, rest_count)],
+            )
+        )
+    for correction in phase.corrections:
+        entries = phase.entries.get(correction.state.ident)
+        if not entries:
+            continue
+        checked = correction.checked
+        assert checked is not None
+        state = correction.state
+        if correction.kind != "uncoupled" or state.datatype.rigid:
+            planner.unsupported(
+                checked, "with constraint rows, UncoupledConstraintCorrection on Vec3d is compiled"
+            )
+            continue
+        group = correction.group
+        if group.scheme != "implicit" or group.static or group.newmark or group.variational:
+            planner.unsupported(
+                checked, "with constraint rows, it is compiled under EulerImplicitSolver only"
+            )
+            continue
+        component = checked.component
+        J = _jacobian_rows(planner, state, entries)
+        comp = _values(planner, component, "compliance", np.float64)
+        comp_buffer = planner.buffer(component, "compliance", comp)
+        scaled = planner.buffer(component, "scaled_compliance", np.zeros(len(comp) + 1), role="scratch")
+        comp0 = Element(
+            planner.buffer(
+                component,
+                "defaultCompliance",
+                [float(planner.value(component, "defaultCompliance"))],
+                role="param",
+            )
+        )
+        dt = float(planner.dt.initial[0])
+        use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
+        # EulerImplicitSolver: position factor dt, velocity factor 1 (its integration factors)
+        factor = dt if use_ode else 1.0
+        position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
+        velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
+        t = state.datatype.name
+        phase.compliance.append(
+            Op(
+                correction.origin,
+                [
+                    call(
+                        kernel("uncoupled_add_compliance", t),
+                        W,
+                        n,
+                        J,
+                        comp0,
+                        comp_buffer,
+                        len(comp),
+                        factor,
+                        scaled,
+                    )
+                ],
+            )
+        )
+        lam = planner.buffer(
+            component, "lambda", np.zeros_like(state.v.initial), columns=state.v.columns, role="scratch"
+        )
+        dx = planner.buffer(
+            component,
+            "constraint_dx",
+            np.zeros_like(state.v.initial),
+            columns=state.v.columns,
+            role="scratch",
+        )
+        phase.correction.append(
+            Op(
+                correction.origin,
+                [
+                    call(
+                        kernel("uncoupled_correct", t),
+                        state.x,
+                        state.v,
+                        lam,
+                        dx,
+                        J,
+                        f,
+                        state.size,
+                        comp0,
+                        comp_buffer,
+                        len(comp),
+                        position,
+                        velocity,
+                    )
+                ],
+            )
+        )
+    firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
+    kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
+    parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
+    kept = planner.buffer("/", "constraint_block_kept", [b[3] for b in phase.blocks], "i64")
+    assert phase.kept is not None
+    settings = (
+        [
+            Element(phase.settings[name])
+            for name in (
+                "maxIterations",
+                "tolerance",
+                "sor",
+                "scaleTolerance",
+                "allVerified",
+                "regularizationTerm",
+            )
+        ]
+        if phase.settings
+        else []
+    )
+    if not settings:  # SOFA's default BlockGaussSeidelConstraintSolver
+        settings = [1000.0, 0.001, 1.0, 1.0, 0.0, 0.0]
+    phase.solve.append(
+        Op(
+            phase.solver or phase.loop,
+            [
+                call(
+                    kernel("solve_constraints", len(phase.blocks)),
+                    _ROW_SOLVERS[phase.method],
+                    W,
+                    dfree,
+                    f,
+                    d,
+                    scratch,
+                    n,
+                    firsts,
+                    kinds,
+                    parameters,
+                    kept,
+                    phase.kept,
+                    *settings,
+                    phase.report,
+                    Env.TIME,
+                )
+            ],
+        )
+    )
 
 
 def finish_constraint_phase(planner: Planner, groups: list[Group]) -> ConstraintPhase | None:
@@ -190,4 +480,6 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
                 "writes its free motion back, so it does not move",
                 "add an UncoupledConstraintCorrection or a LinearSolverConstraintCorrection next to it",
             )
+    if phase.capacity:
+        _phase_with_rows(planner, phase)
     return phase

@@ -199,7 +199,8 @@ BILATERAL_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec3d", "Rigid3d"),
     default_template="Vec3d",
     renamed_from=("BilateralInteractionConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="bilateral_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("first_point", Ints(), doc="constrained DOFs of object1", indexes="object1"),
