@@ -473,8 +473,8 @@ class ConstraintPhase:
     method: str  # "block_gauss_seidel", "unbuilt_gauss_seidel", "nncg", "lcp"
     # maxIterations, tolerance, sor, regularization, scaleTolerance, allVerified (LCP: mu, minW...)
     settings: dict[str, Buffer]
-    # f64 [5]: solves, iterations and residual of the last solve, solves that hit the iteration
-    # limit, the step of the last such solve (the run report's warning)
+    # f64 [7]: solves, iterations and residual of the last solve, solves that hit the iteration
+    # limit, and the time, residual and iterations of the last such solve (the run's warning)
     report: Buffer
     corrections: list[Correction] = field(default_factory=list)
     frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)

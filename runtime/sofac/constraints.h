@@ -616,7 +616,8 @@ inline void bilateral_violation(double* dfree, Index first, const double* x1, co
 
 // The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameter, offset
 // of its kept forces in `previous` or -1); K blocks, on the stack. report: solves, iterations and
-// error of the last solve, solves that hit the iteration limit, the time of the last such solve.
+// error of the last solve, solves that hit the iteration limit, and the time, error and iterations
+// of the last such solve.
 template <int K>
 inline void solve_constraints(int method, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
                               const Index* first, const Index* kind, const double* parameter, const Index* kept,
@@ -642,6 +643,8 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     if (!result.converged) {
         report[3] += 1.0;
         report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
     }
 }
 

@@ -106,7 +106,7 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
         for name in names:
             value = planner.value(solver.component, name)
             settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
-    report = planner.buffer(loop.component, "constraint_report", np.zeros(5), role="scratch")
+    report = planner.buffer(loop.component, "constraint_report", np.zeros(7), role="state")
     phase = ConstraintPhase(
         loop=origin_of(loop.component),
         solver=origin_of(solver.component) if solver is not None else "",
