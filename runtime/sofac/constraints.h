@@ -648,6 +648,21 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     }
 }
 
+// RigidMapping::applyJT on constraint rows: entry e of the frame's rows gets (n, r x n), n the
+// mapped point's direction and r its rotated offset (the mapping's last apply).
+inline void rigid_constraint_jacobian(double* values, const Index* points, const double* directions,
+                                      const double* offsets, Index count) {
+    for (Index e = 0; e < count; ++e) {
+        const double* n = directions + 3 * e;
+        const double* r = offsets + 3 * points[e];
+        double* out = values + 6 * e;
+        out[0] = n[0], out[1] = n[1], out[2] = n[2];
+        out[3] = r[1] * n[2] - r[2] * n[1];
+        out[4] = r[2] * n[0] - r[0] * n[2];
+        out[5] = r[0] * n[1] - r[1] * n[0];
+    }
+}
+
 // UncoupledConstraintCorrection on a Vec state after the solve: lambda = J^T f, dx = C lambda,
 // x = x_free + position_factor dx, v = v_free + velocity_factor dx (x, v hold the free motion).
 template <class DT>

@@ -18,14 +18,20 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
 from sofac.plan.ir import (
+    CHILD,
+    PARENT,
     Aggregate,
+    Buffer,
+    Call,
     ConstraintPhase,
     Correction,
     Element,
     Env,
     Group,
+    MappingOp,
     Op,
     StatePlan,
+    bind,
     call,
     kernel,
     origin_of,
@@ -200,8 +206,11 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
         if state is None:
             planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
             return
-        if state.mapped:
-            planner.unsupported(checked, f"constraint rows through mappings are not compiled yet ({name})")
+        if state.mapped and not _rigidly_mapped(planner, state):
+            planner.unsupported(
+                checked,
+                f"constraint rows through mappings other than one RigidMapping are not compiled yet ({name})",
+            )
             return
         states.append(state)
     if states[0] is states[1]:
@@ -256,7 +265,10 @@ def _jacobian_rows(
     planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
 ) -> Aggregate:
     """A state's J as SOFA's MatrixDeriv holds it: rows ascending, each row's DOFs ascending, the
-    values of one (row, DOF) summed (addCol)."""
+    values of one (row, DOF) summed (addCol). A rigid state's rows come from its mapped points
+    (``_carry_through_rigid_mappings``), their values computed each step."""
+    if state.ident in getattr(planner, "rigid_rows", {}):
+        return planner.rigid_rows[state.ident]  # type: ignore[attr-defined]
     merged: dict[tuple[int, int], list[float]] = {}
     for row, dof, values in entries:
         if (row, dof) in merged:
@@ -296,23 +308,23 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
     scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
     phase.rows.append(Op(phase.loop, [call("constraint_clear", W, dfree, f, d, n)]))
+    free_x = _mapped_free_motion(planner, phase)
     for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
+        x1, x2 = free_x.get(s1.ident, s1.x), free_x.get(s2.ident, s2.x)
         phase.violation.append(
-            Op(
-                origin,
-                [call("bilateral_violation", dfree, first, s1.x, s2.x, m1, m2, pairs, rest, rest_count)],
-            )
+            Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
         )
+    _carry_through_rigid_mappings(planner, phase)
     for correction in phase.corrections:
         entries = phase.entries.get(correction.state.ident)
-        if not entries:
+        if entries is None:
             continue
         checked = correction.checked
         assert checked is not None
         state = correction.state
-        if correction.kind != "uncoupled" or state.datatype.rigid:
+        if correction.kind != "uncoupled" or state.datatype.name not in ("Vec3d", "Rigid3d"):
             planner.unsupported(
-                checked, "with constraint rows, UncoupledConstraintCorrection on Vec3d is compiled"
+                checked, "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d is compiled"
             )
             continue
         group = correction.group
@@ -324,6 +336,11 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         component = checked.component
         J = _jacobian_rows(planner, state, entries)
         comp = _values(planner, component, "compliance", np.float64)
+        if state.datatype.rigid and len(comp) != 7:
+            found = _rigid_compliance(planner, checked, group, state)
+            if found is None:
+                continue
+            comp = found
         comp_buffer = planner.buffer(component, "compliance", comp)
         scaled = planner.buffer(component, "scaled_compliance", np.zeros(len(comp) + 1), role="scratch")
         comp0 = Element(
@@ -440,6 +457,171 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     )
 
 
+def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """Mapped by one RigidMapping from an independent Rigid3d state."""
+    mapping = planner.checked.mapping_of(state.component)
+    spec = mapping.spec if mapping is not None else None
+    parent = mapping.links.get("input") if mapping is not None else None
+    parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
+    return (
+        spec is not None
+        and spec.lowering == "rigid_mapping"
+        and parent_state is not None
+        and not parent_state.mapped
+        and parent_state.datatype.name == "Rigid3d"
+    )
+
+
+def _mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
+    for group in planner.constraint_groups:  # type: ignore[attr-defined]
+        for mapping in group.mappings:
+            if mapping.child is state:
+                return mapping
+    return None
+
+
+def _mapped_free_motion(planner: Planner, phase: ConstraintPhase) -> dict[str, Buffer]:
+    """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
+    the parent (propagateDx, with the mapping's rotated points of the last apply), then
+    x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
+    free: dict[str, Buffer] = {}
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = _mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        zeros_v, zeros_x = np.zeros_like(state.v.initial), np.zeros_like(state.x.initial)
+        v_free = planner.buffer(
+            state.component, "freeVelocity", zeros_v, columns=state.v.columns, role="scratch"
+        )
+        x_free = planner.buffer(
+            state.component, "freePosition", zeros_x, columns=state.x.columns, role="scratch"
+        )
+        jacobian = bind(mapping.jacobian, {PARENT: mapping.parent.v, CHILD: v_free})
+        t = state.datatype.name
+        advance = call(kernel("advance", t), x_free, state.x, v_free, Element(planner.dt), state.size)
+        phase.rows.append(Op(mapping.origin, [jacobian, advance]))
+        free[state.ident] = x_free
+    return free
+
+
+def _carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> None:
+    """RigidMapping::applyJT on the constraint matrix: a mapped point's entry n on a row becomes its
+    frame's (n, r x n), r the point's rotated offset; rows keep their index."""
+    planner.rigid_rows = {}  # type: ignore[attr-defined]
+    by_parent: dict[str, list[tuple[int, int, int, tuple[float, ...], MappingOp]]] = {}
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = _mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        frames = mapping.jacobian.args[2]
+        assert isinstance(frames, Buffer)
+        for row, point, values in phase.entries[state.ident]:
+            frame = int(frames.initial[point])
+            by_parent.setdefault(mapping.parent.ident, []).append((row, frame, point, values, mapping))
+    for parent_ident, items in by_parent.items():
+        parent = next(s for s in planner.states.values() if s.ident == parent_ident)
+        keys = [(row, frame) for row, frame, _, _, _ in items]
+        if (
+            len(set(keys)) != len(keys)
+            or parent_ident in phase.entries
+            or len({id(i[4]) for i in items}) != 1
+        ):
+            planner.unsupported(
+                planner.checked.of(parent.component),
+                "constraint rows from several mapped states, or several entries of one row on one frame, "
+                "are not compiled yet",
+            )
+            continue
+        order = sorted(range(len(items)), key=lambda i: keys[i])
+        rows = sorted({row for row, _ in keys})
+        starts, dofs, points, directions = [0], [], [], []
+        for row in rows:
+            for i in order:
+                if items[i][0] == row:
+                    dofs.append(items[i][1])
+                    points.append(items[i][2])
+                    directions.extend(items[i][3])
+            starts.append(len(dofs))
+        mapping = items[0][4]
+        offsets = mapping.jacobian.args[3]
+        assert isinstance(offsets, Buffer)
+        values = planner.buffer(
+            parent.component, "J_values", np.zeros(6 * len(dofs)), columns=6, role="scratch"
+        )
+        buffers = (
+            planner.buffer(parent.component, "J_rows", rows, "i64"),
+            planner.buffer(parent.component, "J_starts", starts, "i64"),
+            planner.buffer(parent.component, "J_dofs", dofs, "i64"),
+            values,
+        )
+        point_buffer = planner.buffer(parent.component, "J_points", points, "i64")
+        direction_buffer = planner.buffer(parent.component, "J_directions", directions, columns=3)
+        kernel_call = call(
+            "rigid_constraint_jacobian", values, point_buffer, direction_buffer, offsets, len(dofs)
+        )
+        phase.rows.append(Op(mapping.origin, [kernel_call]))
+        planner.rigid_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))  # type: ignore[attr-defined]
+        phase.entries[parent_ident] = []  # rows known: the correction finds them
+
+
+def _invert3(m: list[float]) -> list[float]:
+    """SOFA's type::invertMatrix for 3x3, operation for operation (runtime invert3)."""
+    det = (
+        m[0] * m[4] * m[8]
+        + m[3] * m[7] * m[2]
+        + m[6] * m[1] * m[5]
+        - m[0] * m[7] * m[5]
+        - m[3] * m[1] * m[8]
+        - m[6] * m[4] * m[2]
+    )
+    out = [0.0] * 9
+    out[0] = (m[4] * m[8] - m[7] * m[5]) / det
+    out[3] = (m[5] * m[6] - m[8] * m[3]) / det
+    out[6] = (m[3] * m[7] - m[6] * m[4]) / det
+    out[1] = (m[7] * m[2] - m[1] * m[8]) / det
+    out[4] = (m[8] * m[0] - m[2] * m[6]) / det
+    out[7] = (m[6] * m[1] - m[0] * m[7]) / det
+    out[2] = (m[1] * m[5] - m[4] * m[2]) / det
+    out[5] = (m[2] * m[3] - m[5] * m[0]) / det
+    out[8] = (m[0] * m[4] - m[3] * m[1]) / det
+    return out
+
+
+def _rigid_compliance(
+    planner: Planner, checked: CheckedComponent, group: Group, state: StatePlan
+) -> np.ndarray | None:
+    """UncoupledConstraintCorrection<Rigid3d>::init without 7 compliance values: 1/m and the inverse
+    of inertia * m from the node's UniformMass (or defaultCompliance and a unit mass's inverse)."""
+    component = checked.component
+    use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
+    dt = float(planner.dt.initial[0])
+    ode_factor = 1.0 if use_ode else dt * dt
+    if component.get("defaultCompliance") is not None:
+        first = float(planner.value(component, "defaultCompliance"))
+        inertia_mass = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    else:
+        masses = [
+            c.args[3]
+            for op in group.mass_dx
+            for c in op.calls
+            if isinstance(c, Call) and c.kernel == "mass_multiply" and c.args[0] is state.df
+        ]
+        mass = masses[0].initial if len(masses) == 1 and isinstance(masses[0], Buffer) else None
+        if mass is None or len(mass) != 10:
+            planner.unsupported(
+                checked, "its compliance needs the state's one UniformMass (or compliance, defaultCompliance)"
+            )
+            return None
+        first = ode_factor / float(mass[0])
+        inertia_mass = [float(v) for v in mass[1:10]]
+    inverse = _invert3(inertia_mass)
+    return np.array([first, *(ode_factor * inverse[i] for i in (0, 1, 2, 4, 5, 8))])
+
+
 def finish_constraint_phase(planner: Planner, groups: list[Group]) -> ConstraintPhase | None:
     """The phase once every component is lowered: which independent states SOFA leaves frozen
     (no correction), with the buffers that keep their x and v over the groups' step."""
@@ -481,5 +663,6 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
                 "add an UncoupledConstraintCorrection or a LinearSolverConstraintCorrection next to it",
             )
     if phase.capacity:
+        planner.constraint_groups = groups  # type: ignore[attr-defined]
         _phase_with_rows(planner, phase)
     return phase
