@@ -135,3 +135,25 @@ def test_supernodal_cholesky_does_not_allocate_in_a_step(shim: Path, tmp_path: P
     path = tmp_path / "w3_beam_cholesky_8x8x20.scn"
     path.write_text(scenegen.beam_scene("cholesky", 8, 8, 20))
     assert allocations(shim, [path]) == {str(path): [0, 0]}
+
+
+def test_contact_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path, tmp_path: Path) -> None:
+    # Penalty contact (runtime/sofac/penalty.h): trees refitted, broad and narrow phase, the stable
+    # maps' nodes from their pool, contact points and forces in buffers reserved at init.
+    data = REPO / "tests" / "data"
+    touching = tmp_path / "two_particles_touching.scn"  # in contact from the first step
+    touching.write_text(
+        (data / "contact_two_particles.scn")
+        .read_text()
+        .replace('"-0.5 0 0"', '"-0.2 0 0"')
+        .replace('"0.5 0.01 0"', '"0.2 0.01 0"')
+    )
+    scenes = [
+        data / "contact_particle_floor.scn",  # a static partner: in the particle's group (CG)
+        touching,  # two simulated models: explicit, at the step's start
+        data / "contact_sphere_floor.scn",
+        # a chain of tori held by contacts: NewProximity triangle-triangle, barycentric contact points
+        shared_dir / "corpus/sofa/Component/SolidMechanics/Spring/MeshSpringForceField.scn",
+    ]
+    counts = allocations(shim, scenes)
+    assert counts == {str(path): [0, 0] for path in scenes}

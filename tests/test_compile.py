@@ -435,26 +435,3 @@ def test_rigid_frames_linked_to_grid_points_get_identity_orientations(tmp_path: 
     sim = sofac.load(scene(tmp_path, body))
     expected = [[0, 1, z, 0, 0, 0, 1] for z in (0.0, 1.0, 2.0)]
     assert np.array_equal(sim["frames"].position, expected)
-
-
-@pytest.mark.parametrize(
-    ("attributes", "why"),
-    [
-        ('plasticMaxThreshold="0.025" plasticYieldThreshold="0.01"', "plasticity (plasticMaxThreshold > 0)"),
-        ('updateStiffnessMatrix="true"', "updateStiffnessMatrix=true"),
-    ],
-)
-def test_fem_options_that_change_the_physics_are_refused(tmp_path: Path, attributes: str, why: str) -> None:
-    """Options sofac's tetrahedral FEM does not reproduce are refused, never silently ignored."""
-    scene = tmp_path / "options.scn"
-    scene.write_text(
-        '<Node name="root" dt="0.01"><DefaultAnimationLoop/>\n'
-        '<EulerImplicitSolver/><CGLinearSolver/><RegularGridTopology n="2 2 2" min="0 0 0" max="1 1 1"/>\n'
-        '<MechanicalObject/><UniformMass totalMass="1"/>\n'
-        f'<TetrahedronFEMForceField method="large" {attributes}/>\n</Node>\n'
-    )
-    with pytest.raises(sofac.SceneError) as refused:
-        sofac.load(scene)
-    first = refused.value.diagnostics[0]
-    assert first.code == "E222" and first.loc.line == 4
-    assert f"{why} is not compiled yet" in first.message

@@ -1,5 +1,7 @@
-"""Collision models that could touch: the step runs while their boxes stay apart, and stops with
-ContactNotCompiled before the first step whose start has two of them within reach."""
+"""Collision models that could touch, with a response sofac does not compile (StickContactForceField
+here; penalty contact is compiled, tests/test_contacts.py): the step runs while their boxes stay
+apart, and stops with ContactNotCompiled before the first step whose start has two of them within
+reach."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ from sofac.pipeline import compile_scene
 
 TWO_BALLS = """<Node name="root" gravity="0 0 0" dt="0.1"><DefaultAnimationLoop/>
   <CollisionPipeline/><BruteForceBroadPhase/><BVHNarrowPhase/>{intersection}
-  <CollisionResponse response="PenalityContactForceField"/>
+  <CollisionResponse response="StickContactForceField"/>
   <Node name="left"><EulerExplicitSolver symplectic="1"/>
     <MechanicalObject name="dofs" position="0 0 0" velocity="1 0 0"/><UniformMass vertexMass="1"/>
     <SphereCollisionModel radius="{radius}"{left}/></Node>

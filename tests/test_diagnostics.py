@@ -410,9 +410,23 @@ CASES = [
     <MeshOBJLoader name="loader" filename="missing.obj"/>
     <Node name="v">
         <OglModel src="@../loader"/>
+        <MechanicalObject src="@../loader"/>
     </Node>
 """),
         6,
+        "filename",
+    ),
+    Case(
+        "visual-only-loader-missing-file",
+        "W231",
+        dyn("""\
+    <Node name="v">
+        <MeshOBJLoader name="loader" filename="missing.obj"/>
+        <OglModel name="visual" src="@loader"/>
+        <BarycentricMapping input="@.." output="@visual"/>
+    </Node>
+"""),
+        7,
         "filename",
     ),
     Case(
@@ -440,7 +454,7 @@ CASES = [
     Case(
         "unsupported",
         "E222",
-        dyn("    <QuadBendingFEMForceField/>\n"),
+        dyn("    <TopologicalChangeProcessor/>\n"),
         6,
         hint="--allow-unsupported",
     ),

@@ -10,7 +10,7 @@ from pathlib import Path
 from sofac.build import compiler as build
 from sofac.plan.ir import FemMethod
 from sofac.plan.lower.common import TETRA_LANES
-from sofac.plan.lower.fem import DATA_SIZE_FUNCTIONS, FEM_KINDS
+from sofac.plan.lower.fem import DATA_SIZE_FUNCTIONS, FEM_KINDS, QUAD_BENDING_DATA
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -18,7 +18,9 @@ REPO = Path(__file__).resolve().parents[1]
 def _runtime_values(tmp_path: Path, expressions: list[str]) -> list[int]:
     body = "\n".join(f'    std::printf("%d\\n", int({e}));' for e in expressions)
     source = (
-        f'#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\nint main() {{\n{body}\n}}\n'
+        '#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\n'
+        '#include "sofac/quad_bending.h"\n'
+        f"int main() {{\n{body}\n}}\n"
     )
     (tmp_path / "layout.cpp").write_text(source)
     binary = tmp_path / "layout"
@@ -38,8 +40,8 @@ def _runtime_values(tmp_path: Path, expressions: list[str]) -> list[int]:
 
 
 def test_planner_layout_matches_the_runtime(tmp_path: Path) -> None:
-    expressions = ["sofac::TETRA_LANES"]
-    expected = [TETRA_LANES]
+    expressions = ["sofac::TETRA_LANES", "sofac::QUAD_BENDING_DATA"]
+    expected = [TETRA_LANES, QUAD_BENDING_DATA]
     for method in FemMethod:
         expressions.append(f"sofac::FEM_{method.name}")
         expected.append(int(method))

@@ -133,7 +133,7 @@ class _Checker:
         self.diags = diagnostics
         self.checked = CheckedScene(scene)
         self.checked.resolver = self
-        self._referenced: set[int] | None = None  # ids of components some link names
+        self._readers: dict[int, list[CheckedComponent]] | None = None  # who links to each component
 
     # ------------------------------------------------------------------------------------------
     def run(self) -> CheckedScene:
@@ -172,6 +172,9 @@ class _Checker:
         for checked in self.checked:
             if checked.spec is not None and checked.spec.lowering == "uniform_mass":
                 self._check_rigid_inertia(checked)
+        for checked in self.checked:
+            if checked.spec is not None and checked.spec.validate is not None:
+                self._check_rule(checked)
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)
         return self.checked
@@ -917,6 +920,21 @@ class _Checker:
                 field_spec.doc,
             )
 
+    def _check_rule(self, checked: CheckedComponent) -> None:
+        """The spec's own rule across its fields (ComponentSpec.validate)."""
+        assert checked.spec is not None and checked.spec.validate is not None
+        component = checked.component
+        problem = checked.spec.validate(lambda name: self.checked.value(component, name))
+        if problem is None:
+            return
+        code, attribute, message, hint = problem
+        self.diags.add(
+            code,
+            component.attribute_loc(self._attribute_name(checked, attribute)),
+            f"{checked.spec.name} {component.label!r} at line {component.loc.line}: {message}",
+            hint,
+        )
+
     # --- mappings ----------------------------------------------------------------------------
     def _check_mappings(self) -> None:
         edges: dict[int, list[tuple[Component, CheckedComponent]]] = {}
@@ -1240,30 +1258,46 @@ class _Checker:
                 continue
             if field_spec.type.output:
                 continue
-            self.file_of(checked, name, report=True, unused=self._unused_loader(checked))
+            self.file_of(checked, name, report=True)
         if spec.compute:
             self._outputs(checked)
 
-    def _unused_loader(self, checked: CheckedComponent) -> bool:
-        """A loader whose outputs no component reads (SOFA loads such scenes, logging an error)."""
+    def _loader_readers(self, checked: CheckedComponent) -> list[CheckedComponent] | None:
+        """The components that read a loader's outputs (by link, src or data link); None if
+        ``checked`` is not a loader."""
         if checked.category is not Category.LOADER:
-            return False
-        if self._referenced is None:
-            self._referenced = set()
+            return None
+        if self._readers is None:
+            self._readers = {}
             for other in self.checked:
-                self._referenced.update(id(t) for t in other.links.values())
-                self._referenced.update(id(t) for ts in other.link_lists.values() for t in ts)
+                targets = [*other.links.values(), *(t for ts in other.link_lists.values() for t in ts)]
                 if other.src is not None:
-                    self._referenced.add(id(other.src))
+                    targets.append(other.src)
                 for path, _ in other.data_links.values():
                     target = links.resolve(path, other.component)
                     if target is not None:
-                        self._referenced.add(id(target))
-        return id(checked.component) not in self._referenced
+                        targets.append(target)
+                for target in targets:
+                    readers = self._readers.setdefault(id(target), [])
+                    if other not in readers:
+                        readers.append(other)
+        return self._readers.get(id(checked.component), [])
 
-    def file_of(
-        self, checked: CheckedComponent, name: str, *, report: bool = False, unused: bool = False
-    ) -> Path | None:
+    def _missing_file_code(self, checked: CheckedComponent) -> tuple[str, str]:
+        """The code and explanation of a loader's missing file: SOFA logs an error and goes on
+        when nobody reads the loader (W229) or only visual models do (W231); anything feeding
+        mechanics needs the data (E219)."""
+        readers = self._loader_readers(checked)
+        if readers is None:
+            return "E219", ""
+        if not readers:
+            return "W229", "; nothing reads this loader's outputs"
+        if all(reader.category is Category.VISUAL for reader in readers):
+            names = ", ".join(sorted({r.spec.name if r.spec else r.component.type_name for r in readers}))
+            return "W231", f"; only visual models ({names}) read it: they are left empty"
+        return "E219", ""
+
+    def file_of(self, checked: CheckedComponent, name: str, *, report: bool = False) -> Path | None:
         from sofac.front import parse
 
         value = checked.fields.get(name)
@@ -1275,12 +1309,12 @@ class _Checker:
         if path is None and report:
             attribute = self._attribute_name(checked, name)
             roots = ", ".join(str(r) for r in self.scene.data_roots) or str(base)
+            code, why = self._missing_file_code(checked)
             self.diags.add(
-                "W229" if unused else "E219",
+                code,
                 component.attribute_loc(attribute),
                 f"{checked.spec.name if checked.spec else component.type_name} {component.label!r}: "
-                f"file {value!r} not found (searched {base} and the data roots: {roots})"
-                + ("; nothing reads this loader's outputs" if unused else ""),
+                f"file {value!r} not found (searched {base} and the data roots: {roots})" + why,
                 "a file or folder name has at most 255 bytes: shorten it"
                 if any(len(part.encode()) > 255 for part in Path(str(value)).parts)
                 else "fix the path, or add the folder holding it with --data-path",

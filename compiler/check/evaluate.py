@@ -170,7 +170,11 @@ def grid(ctx: Context) -> Outputs:
         raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
-    lattice = RegularGrid(tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)))
+    # p0, when the scene sets it, replaces the origin setPos derives from min (SOFA's d_p0.isSet())
+    p0 = tuple(map(float, _numbers(ctx, "p0", 3))) if ctx.is_set("p0") else None
+    lattice = RegularGrid(
+        tuple(int(c) for c in counts), tuple(map(float, low)), tuple(map(float, high)), p0=p0
+    )
     with np.errstate(all="ignore"):  # bounds near the float range: said below, not warned about
         points = lattice.points()
     if not np.isfinite(points).all():
@@ -234,19 +238,8 @@ def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
     return {}
 
 
-def sparse_grid(ctx: Context) -> Outputs:
-    """SparseGridTopology voxelising a surface mesh file (see voxelize.py): its points and hexahedra,
-    plus what its barycentric mapper needs (the regular grid, each regular cube's sparse index or -1,
-    which sparse cubes are BOUNDARY). Like SOFA's, it derives no edges, triangles or quads."""
-    from sofac.geometry import voxelize
-
-    levels = int(ctx.value("nbVirtualFinerLevels") or 0)
-    if levels:
-        raise EvaluationError(
-            f"nbVirtualFinerLevels={levels} (virtual finer grids) is not supported yet; remove it",
-            "nbVirtualFinerLevels",
-            code="E222",
-        )
+def _voxel_surface(ctx: Context) -> meshes.Mesh:
+    """The surface a sparse grid voxelises: its fileTopology, an .obj mesh."""
     path = ctx.file("filename")
     if path is None:
         if ctx.is_set("filename"):
@@ -276,15 +269,42 @@ def sparse_grid(ctx: Context) -> Outputs:
             given[0],
             code="E222",
         )
+    return mesh
 
-    def triple(name: str) -> tuple[float, float, float]:
-        x, y, z = (float(v) for v in np.asarray(ctx.value(name), dtype=float).ravel()[:3])
-        return x, y, z
 
+def _triple(ctx: Context, name: str) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in np.asarray(ctx.value(name), dtype=float).ravel()[:3])
+    return x, y, z
+
+
+_EMPTY_GRID = (
+    "the surface encloses no cell of the grid (SOFA leaves the topology invalid); "
+    "check the mesh and n/min/max"
+)
+
+
+def sparse_grid(ctx: Context) -> Outputs:
+    """SparseGridTopology voxelising a surface mesh file (see voxelize.py): its points and hexahedra,
+    plus what its barycentric mapper needs (the regular grid, each regular cube's sparse index or -1,
+    which sparse cubes are BOUNDARY). Like SOFA's, it derives no edges, triangles or quads."""
+    from sofac.geometry import voxelize
+
+    levels = int(ctx.value("nbVirtualFinerLevels") or 0)
+    if levels:
+        raise EvaluationError(
+            f"nbVirtualFinerLevels={levels} (virtual finer grids) is not supported yet; remove it",
+            "nbVirtualFinerLevels",
+            code="E222",
+        )
+    mesh = _voxel_surface(ctx)
     try:
-        nx, ny, nz = (int(c) for c in triple("n"))
+        nx, ny, nz = (int(c) for c in _triple(ctx, "n"))
         grid = voxelize.regular_grid(
-            mesh.positions, (nx, ny, nz), triple("min"), triple("max"), float(ctx.value("cellWidth") or 0.0)
+            mesh.positions,
+            (nx, ny, nz),
+            _triple(ctx, "min"),
+            _triple(ctx, "max"),
+            float(ctx.value("cellWidth") or 0.0),
         )
         triangles = voxelize.triangulate(mesh.triangles, mesh.quads)
         voxels = voxelize.classify(grid, mesh.positions, triangles)
@@ -292,12 +312,7 @@ def sparse_grid(ctx: Context) -> Outputs:
         raise EvaluationError(str(error), error.attribute, code="E207") from None
     sparse = voxelize.sparse_grid(voxels, only_inside=bool(ctx.value("onlyInsideCells")))
     if not len(sparse.hexahedra):
-        raise EvaluationError(
-            "the surface encloses no cell of the grid (SOFA leaves the topology invalid); check the "
-            "mesh and n/min/max",
-            "filename",
-            code="E207",
-        )
+        raise EvaluationError(_EMPTY_GRID, "filename", code="E207")
     return {
         "position": sparse.points.ravel(),
         "hexahedra": sparse.hexahedra.ravel(),
@@ -305,6 +320,45 @@ def sparse_grid(ctx: Context) -> Outputs:
         "grid_bounds": np.concatenate([grid.min, grid.max]).astype(float),
         "regular_to_sparse": sparse.regular_to_sparse,
         "boundary_cells": sparse.boundary.astype(np.int64),
+    }
+
+
+def sparse_grid_ramification(ctx: Context) -> Outputs:
+    """SparseGridRamificationTopology (see ramification.py): the sparse grid's outputs, with the
+    hexahedra duplicated where the surface inside a cell is in disconnected pieces, the per-cell
+    coefficients SOFA derives through its virtual finer levels, and what its findCube reads (the
+    finest grid and each of its cubes' hexahedron)."""
+    from sofac.geometry import ramification, voxelize
+
+    mesh = _voxel_surface(ctx)
+    try:
+        nx, ny, nz = (int(c) for c in _triple(ctx, "n"))
+        grid = ramification.ramified_grid(
+            mesh.positions,
+            mesh.triangles,
+            (nx, ny, nz),
+            _triple(ctx, "min"),
+            _triple(ctx, "max"),
+            virtual_levels=int(ctx.value("nbVirtualFinerLevels") or 0),
+            finest_connectivity=ctx.value("finestConnectivity") is not False,
+            fill_weighted=ctx.value("fillWeighted") is not False,
+            only_inside=bool(ctx.value("onlyInsideCells")),
+            cell_width=float(ctx.value("cellWidth") or 0.0),
+            quads=mesh.quads,
+        )
+    except voxelize.VoxelError as error:
+        raise EvaluationError(str(error), error.attribute, code="E207") from None
+    coarse, finest = grid.coarse, grid.finest
+    return {
+        "position": grid.points.ravel(),
+        "hexahedra": grid.hexahedra.ravel(),
+        "grid_resolution": np.asarray(coarse.resolution(), dtype=np.int64),
+        "grid_bounds": np.concatenate([coarse.min, coarse.max]).astype(float),
+        "boundary_cells": grid.boundary.astype(np.int64),
+        "cell_coefficients": grid.coefficients.astype(np.float64),
+        "finest_grid_resolution": np.asarray(finest.resolution(), dtype=np.int64),
+        "finest_grid_bounds": np.concatenate([finest.min, finest.max]).astype(float),
+        "finest_to_hexa": grid.finest_to_hexa,
     }
 
 
@@ -535,5 +589,6 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "sphere_loader": sphere_loader,
     "grid": grid,
     "sparse_grid": sparse_grid,
+    "sparse_grid_ramification": sparse_grid_ramification,
     "box_roi": box_roi,
 }

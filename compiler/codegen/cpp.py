@@ -27,6 +27,8 @@ from sofac.plan.ir import (
     Arg,
     Buffer,
     Call,
+    Collision,
+    CollisionModel,
     Constant,
     ConstraintPhase,
     Count,
@@ -76,6 +78,7 @@ _ENV = {
     Env.KINETIC_OUT: "&kinetic",
     Env.POTENTIAL_OUT: "&potential",
     Env.NONE: "nullptr",
+    Env.CONTACTS: "S.contacts",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
 
@@ -339,6 +342,105 @@ class _GroupView:
         return getattr(self._group, name)
 
 
+_SIDE = {"triangle": "kTriangle", "line": "kLine", "point": "kPoint", "sphere": "kSphere"}
+
+
+_VIEW = {"triangle": "TriangleModel", "line": "LineModel", "point": "PointModel", "sphere": "SphereModel"}
+
+
+def _model_view(index: int, model: CollisionModel) -> str:
+    """The runtime's view of a collision model on the instance's buffers (proximity.h)."""
+    x, cd = _ptr(model.state.x), repr(model.contact_distance)
+    if model.kind == "triangle":
+        here = f"C.models[{index}]"
+        flags, normals = f"{here}.flags.data()", f"{here}.normals.data()"
+        return f"{{{x}, {_ptr(model.cells)}, {flags}, {normals}, {model.elements}, {cd}}}"
+    if model.kind == "line":
+        return f"{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}}"
+    if model.kind == "sphere":
+        return f"{{{x}, 3, {_sphere_radii(model)}, {model.radius!r}, {model.elements}, {cd}}}"
+    return f"{{{x}, {model.elements}, {cd}}}"
+
+
+def _sphere_radii(model: CollisionModel) -> str:
+    """A sphere model's listRadius and its length (SphereModel's radii, n_radii)."""
+    return f"{_ptr(model.radii)}, {_size(model.radii)}" if model.radii is not None else "nullptr, 0"
+
+
+class _CollisionView:
+    """The compiled contacts as the template arranges them: the setup at init (the pair table is
+    a buffer), the model views of a step (one array per kind), their trees' updates, and one
+    narrow-phase case per element test the scene has (the pairs sharing a test share its code)."""
+
+    def __init__(self, collision: Collision, index: int) -> None:
+        models = collision.models
+        self.index = index
+        self.origin = collision.origin
+        alarm, contact = repr(collision.alarm_distance), repr(collision.contact_distance)
+        self.method = f"const sofac::collide::Proximity method{{{alarm}, {contact}}};"
+        used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
+        self.views: list[str] = []
+        for kind, view in _VIEW.items():
+            members = sorted((i for i in used if models[i].kind == kind), key=lambda i: models[i].view)
+            if members:
+                items = ",\n        ".join(_model_view(i, models[i]) for i in members)
+                self.views.append(f"const sofac::collide::{view} {kind}s[] = {{\n        {items}}};")
+        self.updates = []
+        for i in used:
+            model = models[i]
+            normals = ""
+            if model.kind == "triangle":
+                normals = f", C.models[{i}].normals.data()" if model.compute_normals else ", nullptr"
+            tree, view = f"C.models[{i}].tree", f"{model.kind}s[{model.view}]"
+            self.updates.append(
+                f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, {view}{normals});"
+            )
+        self.cases = []
+        for number, test in enumerate(collision.tests):
+            first, second = test.kinds
+            flags = "".join(f", {'true' if o else 'false'}" for o in test.options)
+            views = f"{first}s[p.view[0]], e1, {second}s[p.view[1]], e2"
+            call = f"sofac::collide::{test.name}(method, {views}{flags}, out);"
+            lambda_ = f"[&](Index e1, Index e2, sofac::collide::OutputList& out) {{ {call} }}"
+            self.cases.append((number, test.name, f"C.narrow_phase(p, {lambda_});"))
+        self.setup = [f"C.resize({len(models)}, {alarm}, {contact}, {collision.depth});"]
+        for index, model in enumerate(models):
+            here = f"C.models[{index}]"
+            self.setup.append(f"// {_comment(model.origin)}")
+            self.setup.append(f"{here}.kind = sofac::collide::ContactSide::{_SIDE[model.kind]};")
+            self.setup.append(f"{here}.points = {model.state.size}; {here}.elements = {model.elements};")
+            self.setup.append(
+                f"{here}.contact_distance = {model.contact_distance!r}; "
+                f"{here}.contact_stiffness = {model.contact_stiffness!r}; "
+                f"{here}.moving = {'true' if model.moving else 'false'};"
+            )
+            if model.cells is not None:
+                self.setup.append(f"{here}.cells = {_ptr(model.cells)};")
+            if model.kind == "sphere":  # its radii, for the contacts' distances (x set by the response)
+                radii = _sphere_radii(model)
+                self.setup.append(
+                    f"{here}.sphere = {{nullptr, 3, {radii}, {model.radius!r}, {model.elements}, "
+                    f"{model.contact_distance!r}}};"
+                )
+            if model.kind == "triangle":
+                self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
+                self.setup.append(
+                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, "
+                    f"{model.state.size}, {here}.flags.data());"
+                )
+        assert collision.table is not None
+        table, rows = _ptr(collision.table), len(collision.pairs)
+        self.setup.append(f"for (Index k = 0; k < {rows}; ++k) {{  // the pair table: {_VIEW_COLUMNS}")
+        self.setup.append(f"    const Index* row = {table} + 7 * k;")
+        self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
+        self.setup.append("}")
+        self.setup.append("C.finish_setup();")
+        self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
+
+
+_VIEW_COLUMNS = "first, second, root, id bound, test, views"
+
+
 def generate_source(plan: Plan) -> str:
     """The C++ source of a plan's step (deterministic: same plan, same text). Compiled for
     threads, groups that share no buffer step in parallel (Plan.parallel_groups)."""
@@ -365,6 +467,7 @@ def generate_source(plan: Plan) -> str:
         dt=plan.dt,
         threads=plan.threads,
         guard=plan.contact_guard,
+        collisions=[_CollisionView(c, k) for k, c in enumerate(plan.collisions) if c.pairs],
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,

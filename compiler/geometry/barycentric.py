@@ -578,6 +578,29 @@ def _map_sparse_grid(grid: SparseGrid, pts: np.ndarray) -> Embedding:
     return Embedding("hexahedra", element, f, indices, weights, notes)
 
 
+def ramified_grid_map(
+    coarse: RegularGrid, finest: RegularGrid, finest_to_hexa: np.ndarray, hexahedra: np.ndarray, pts: Any
+) -> tuple[np.ndarray, np.ndarray]:
+    """BarycentricMapperSparseGridTopology on a SparseGridRamificationTopology: findCube finds the
+    point's cube in the finest grid, takes the hexahedron its piece belongs to, and the fractions
+    in the coarse grid's cube. Points outside every finest cube (SOFA then searches the nearest
+    finest BOUNDARY cube) are refused."""
+    pts = np.asarray(pts, dtype=np.float64).reshape(-1, 3)
+    fine_cube, _, fine_found = _grid_cubes(finest, pts)
+    table = np.asarray(finest_to_hexa, dtype=np.int64).reshape(-1)
+    element = np.where(fine_found, table[np.where(fine_found, fine_cube, 0)], -1)
+    if (element < 0).any():
+        first = int(np.flatnonzero(element < 0)[0])
+        raise ValueError(
+            f"point {first} ({', '.join(f'{v:g}' for v in pts[first])}) is in no cell of the ramified "
+            "grid: its nearest-cell search is not compiled yet"
+        )
+    _, f, _ = _grid_cubes(coarse, pts)
+    return _linear_map(
+        np.asarray(hexahedra, dtype=np.int64).reshape(-1, 8), element, _hexa_weights(f), _HEXA_ORDER_MESH, 8
+    )
+
+
 def _map_mesh(points: np.ndarray, pts: np.ndarray, cells: dict[str, np.ndarray]) -> Embedding:
     """BarycentricMapperMeshTopology::init."""
     if len(cells["tetrahedra"]) or len(cells["hexahedra"]):

@@ -55,6 +55,7 @@ class Env(enum.Enum):
     KINETIC_OUT = "kinetic_out"  # ... and their addresses, for kernels that add to both
     POTENTIAL_OUT = "potential_out"
     NONE = "none"  # an absent pointer
+    CONTACTS = "contacts"  # the scene's penalty contacts, one per pipeline (runtime/sofac/penalty.h)
 
 
 class FemMethod(enum.IntEnum):
@@ -502,6 +503,68 @@ class ConstraintPhase:
 
 
 @dataclass
+class CollisionModel:
+    """A collision model of the pipeline, in SOFA's order (depth first below the pipeline's node)."""
+
+    origin: str
+    kind: str  # "triangle", "line", "point" or "sphere" (runtime ContactSide)
+    state: StatePlan  # its points (Vec3d)
+    elements: int  # triangles, edges, points or spheres
+    cells: Buffer | None  # i64 triangles (3 per) or edges (2 per)
+    contact_distance: float
+    contact_stiffness: float
+    moving: bool  # boxes follow the points (False: computed at the first step only)
+    simulated: bool
+    compute_normals: bool = True  # triangle models' computeNormals
+    view: int = -1  # its place among the paired models of its kind (-1: in no pair)
+    radii: Buffer | None = None  # sphere models: listRadius (spheres past it take `radius`)
+    radius: float = 0.0
+
+
+@dataclass(frozen=True)
+class ElementTest:
+    """An element test of runtime/sofac/proximity.h, ``<method>::<kind>_<kind>``, with its flags
+    after the two models (same_model, useLineLine, useSurfaceNormals)."""
+
+    name: str
+    options: tuple[bool, ...] = ()
+
+    @property
+    def kinds(self) -> tuple[str, str]:
+        first, second = self.name.split("::")[1].split("_")
+        return first, second
+
+
+@dataclass
+class ContactPair:
+    """A model pair the broad phase can produce, models in the intersector's order."""
+
+    first: int
+    second: int
+    test: int  # index in Collision.tests
+    root: bool  # both simulated: one explicit force per step (SOFA places it at the pipeline's node)
+    id_bound: int  # the outputs' ids are below it (the de-duplication's table)
+
+
+@dataclass
+class Collision:
+    """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
+
+    origin: str  # the pipeline
+    method: str  # "new_proximity" or "min_proximity"
+    alarm_distance: float
+    contact_distance: float
+    depth: int  # the bounding trees' depth (BVHNarrowPhase needs deep trees)
+    models: list[CollisionModel]
+    tests: list[ElementTest]  # those the pairs use, each compiled once
+    pairs: list[ContactPair]
+    # i64 rows (first, second, root, id_bound, test, first's view, second's view), one per pair
+    table: Buffer | None = None
+    # Why each other pair of models gets no code: ((first origin, second origin), reason).
+    left_out: list[tuple[str, str, str]] = field(default_factory=list)
+
+
+@dataclass
 class Plan:
     scene_file: str
     dt: Buffer
@@ -521,6 +584,7 @@ class Plan:
     threads: int = 1
     rigid_model: str = "sofa"  # how rigid bodies were compiled (plan_scene's rigid_model)
     contact_guard: ContactGuard | None = None
+    collisions: list[Collision] = field(default_factory=list)  # compiled contacts, one per pipeline
     # Compiled for threads, with groups that share no buffer: they step side by side.
     parallel_groups: bool = False
     interactive: bool = False  # with a point force on each state, set from Python (plan_scene)

@@ -101,6 +101,25 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
                     "before each step, which stops before a contact (response not compiled)",
                 )
             )
+    for collision in planner.collisions:
+        models = collision.models
+        for pair in collision.pairs:
+            first, second = models[pair.first], models[pair.second]
+            where = (
+                "explicit: once per step at its start (two simulated models)"
+                if pair.root
+                else "in the group of the simulated model (a static partner): forces and K dx"
+            )
+            test = collision.tests[pair.test].name
+            effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, penalty {where}"))
+        reasons: dict[str, list[str]] = {}
+        for first, second, why in collision.left_out:
+            reasons.setdefault(why, []).append(f"{first} / {second}")
+        for why, pairs in reasons.items():
+            if len(pairs) <= 6:
+                effects.extend(("no contact pair", pair, why) for pair in pairs)
+            else:
+                effects.append(("no contact pair", f"{len(pairs)} model pairs", why))
     for key, why in planner.pruned.items():
         effects.append(("pruned", key, why))
     effects.extend(on_read)

@@ -21,9 +21,11 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
+from sofac.plan.contacts import contact_setup_refusal, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
+    Collision,
     ConstraintPhase,
     ContactGuard,
     Group,
@@ -83,6 +85,8 @@ class Planner:
         self.threads = threads
         self.guarded: list[CheckedComponent] = []  # collision models that could touch (ContactGuard)
         self.guard: ContactGuard | None = None
+        self.colliding = False  # contacts compiled (plan/contacts.py) rather than guarded
+        self.collisions: list[Collision] = []
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.refused: set[int] = set()  # components whose one refusal says all (no follow-up E222)
         self.lowered: list[Component] = []  # components whose kernels are in the step
@@ -169,6 +173,7 @@ class Planner:
             rigid_model=self.rigid_model,
             interactive=self.interactive,
             contact_guard=self.guard,
+            collisions=self.collisions,
             constraints=self.constraints,
             parallel_groups=self.threads > 1
             and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
@@ -191,11 +196,15 @@ class Planner:
         # Models of different nodes could touch: guarded (the step stops before a contact), unless
         # a model may touch itself, which a box cannot rule out.
         guard = contacts and not any(self.value(c.component, "selfCollision") for c in models)
+        self.colliding = contacts and not contact_setup_refusal(self)
         for checked in self.checked:
             spec = checked.spec
             if spec is None:
                 continue
-            if checked.category is Category.COLLISION_MODEL and contacts and guard:
+            if checked.category is Category.COLLISION_MODEL and self.colliding:
+                if self.value(checked.component, "active") is False:
+                    self.ignored.append((checked.component, "inactive collision model"))
+            elif checked.category is Category.COLLISION_MODEL and contacts and guard:
                 if self.value(checked.component, "active") is not False:
                     self.guarded.append(checked)  # an effect of the step (see _contact_guard)
                 else:
@@ -285,10 +294,15 @@ class Planner:
 
     def _mapped_size(self, state: Component) -> int:
         """The size a mapping gives its output state at init when the state has no positions of its
-        own (the distance mappings: one DOF per edge of their topology); else 0."""
+        own (the distance mappings: one DOF per edge of their topology; IdentityMapping: one per input
+        DOF); else 0."""
         mapping = self.checked.mapping_of(state)
         if mapping is None or mapping.spec is None:
             return 0
+        if mapping.spec.lowering == "identity_mapping":  # IdentityMapping::init: the input's size
+            source = mapping.links.get("input")
+            given = self.checked.positions(source) if isinstance(source, Component) else None
+            return len(given) if given is not None else 0
         if mapping.spec.lowering not in ("distance_mapping", "distance_multi_mapping"):
             return 0
         topology = _topology_of(self, mapping)
@@ -360,6 +374,8 @@ class Planner:
                 screen_variational(self, group, owner)
             if group.routed:
                 route_through_mappings(self, group)
+        if self.colliding:
+            self.collisions = plan_collisions(self, owner)
         self.guard = contact_guard(self)
         if self.prune:
             leave_unread_out(self, list(groups.values()))

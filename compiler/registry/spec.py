@@ -148,6 +148,10 @@ class ComponentSpec:
     # Described only by SOFA's source (registry/catalogue.py): its Data are those the constructors
     # declare, not the ones some components create at run time (MeshSplittingEngine's position1...).
     from_sofa_source: bool = False
+    # A rule across fields, run by the checker: given a reader of the component's field values (as
+    # CheckedScene.value gives them), (code, attribute, message, hint) for a combination sofac
+    # refuses, else None (e.g. a hyperelastic material and the length of its ParameterSet).
+    validate: Callable[[Callable[[str], Any]], tuple[str, str, str, str] | None] | None = None
 
     _by_name: dict[str, FieldSpec] = field(default_factory=dict, compare=False, repr=False)
 

@@ -27,8 +27,8 @@
 // default (5000 / 0.45). SOFA's init replaces a negative Young's modulus by 5000 and a Poisson ratio
 // outside [0, 0.5) by 0.45 (with a warning); these kernels do the same.
 //
-// Not reproduced: plasticity (plasticMaxThreshold > 0), updateStiffnessMatrix=true,
-// computeGlobalMatrix=true (assembled-in-addForce path), von Mises stress, topological changes.
+// Plasticity (plasticMaxThreshold > 0) and updateStiffnessMatrix: tetra_fem_add_force_options. Not
+// reproduced: computeGlobalMatrix=true (assembled-in-addForce path), von Mises stress, topological changes.
 #pragma once
 
 #include <algorithm>
@@ -422,19 +422,28 @@ inline void strain_displacement(double* j, const V3& a, const V3& b, const V3& c
 // off-diagonal normal terms = K01, shear terms = K33), already divided by 36 V.
 // T is double, or a vector of doubles holding that many elements (one per lane) for the
 // vectorised kernels: each lane then does exactly the scalar operations, in the same order.
+// In two halves, so that plasticity (tetra_plastic_strain) can act on the strain between them.
+// The strain J^T D (Voigt xx yy zz xy yz zx) of the 12 displacements D. jn: the cofactors in J's
+// normal-strain columns 0-2 (J(3n, 0), J(3n+1, 1), J(3n+2, 2)), js: those in its shear columns 3-5;
+// the same array except after SOFA's updateStiffnessMatrix with method large, which rewrites the
+// normal ones only.
 template <class T>
-inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, const T& fact, bool scale) {
-    const T a0 = j[0], b0 = j[1], g0 = j[2];
-    const T a1 = j[3], b1 = j[4], g1 = j[5];
-    const T a2 = j[6], b2 = j[7], g2 = j[8];
-    const T a3 = j[9], b3 = j[10], g3 = j[11];
-    T e[6];
-    e[0] = a0 * D[0] + a1 * D[3] + a2 * D[6] + a3 * D[9];
-    e[1] = b0 * D[1] + b1 * D[4] + b2 * D[7] + b3 * D[10];
-    e[2] = g0 * D[2] + g1 * D[5] + g2 * D[8] + g3 * D[11];
+inline void tetra_strain(T* e, const T* D, const T* jn, const T* js) {
+    e[0] = jn[0] * D[0] + jn[3] * D[3] + jn[6] * D[6] + jn[9] * D[9];
+    e[1] = jn[1] * D[1] + jn[4] * D[4] + jn[7] * D[7] + jn[10] * D[10];
+    e[2] = jn[2] * D[2] + jn[5] * D[5] + jn[8] * D[8] + jn[11] * D[11];
+    const T a0 = js[0], b0 = js[1], g0 = js[2];
+    const T a1 = js[3], b1 = js[4], g1 = js[5];
+    const T a2 = js[6], b2 = js[7], g2 = js[8];
+    const T a3 = js[9], b3 = js[10], g3 = js[11];
     e[3] = b0 * D[0] + a0 * D[1] + b1 * D[3] + a1 * D[4] + b2 * D[6] + a2 * D[7] + b3 * D[9] + a3 * D[10];
     e[4] = g0 * D[1] + b0 * D[2] + g1 * D[4] + b1 * D[5] + g2 * D[7] + b2 * D[8] + g3 * D[10] + b3 * D[11];
     e[5] = g0 * D[0] + a0 * D[2] + g1 * D[3] + a1 * D[5] + g2 * D[6] + a2 * D[8] + g3 * D[9] + a3 * D[11];
+}
+// F = J (fact K e) of a strain e.
+template <class T>
+inline void tetra_strain_force(T* F, const T* e, const T* jn, const T* js, const T* mat, const T& fact,
+                               bool scale) {
     const T kd = mat[0], ko = mat[1], ks = mat[2];
     T s[6];
     s[0] = kd * e[0] + ko * e[1] + ko * e[2];
@@ -446,11 +455,46 @@ inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, cons
     if (scale)
         for (T& v : s) v *= fact;
     for (int n = 0; n < 4; ++n) {
-        const T a = j[3 * n], b = j[3 * n + 1], g = j[3 * n + 2];
-        F[3 * n + 0] = a * s[0] + b * s[3] + g * s[5];
-        F[3 * n + 1] = b * s[1] + a * s[3] + g * s[4];
-        F[3 * n + 2] = g * s[2] + b * s[4] + a * s[5];
+        const T a = js[3 * n], b = js[3 * n + 1], g = js[3 * n + 2];
+        F[3 * n + 0] = jn[3 * n] * s[0] + b * s[3] + g * s[5];
+        F[3 * n + 1] = jn[3 * n + 1] * s[1] + a * s[3] + g * s[4];
+        F[3 * n + 2] = jn[3 * n + 2] * s[2] + b * s[4] + a * s[5];
     }
+}
+template <class T>
+inline void tetra_compute_force(T* F, const T* D, const T* jn, const T* js, const T* mat, const T& fact,
+                                bool scale) {
+    T e[6];
+    tetra_strain(e, D, jn, js);
+    tetra_strain_force(F, e, jn, js, mat, fact, scale);
+}
+template <class T>
+inline void tetra_compute_force(T* F, const T* D, const T* j, const T* mat, const T& fact, bool scale) {
+    tetra_compute_force(F, D, j, j, mat, fact, scale);
+}
+
+// SOFA's squared norm of a Voigt vector (r = v0^2, then += vi^2 in order).
+inline double voigt_norm2(const double* v) {
+    double r = v[0] * v[0];
+    for (int i = 1; i < 6; ++i) r += v[i] * v[i];
+    return r;
+}
+
+// SOFA's plasticity of computeForce (plasticMaxThreshold > 0), applied to the total strain e of an
+// element with plastic strain p (6 numbers, carried from step to step): the elastic strain e - p,
+// when its 2-norm exceeds the yield threshold, moves the fraction `creep` of itself into p; p is
+// then scaled back onto the sphere of radius max_threshold if it left it; e becomes e - p.
+inline void tetra_plastic_strain(double* e, double* p, double max_threshold, double yield_threshold, double creep) {
+    double elastic[6];
+    for (int i = 0; i < 6; ++i) elastic[i] = e[i] - p[i];
+    if (voigt_norm2(elastic) > yield_threshold * yield_threshold)
+        for (int i = 0; i < 6; ++i) p[i] += creep * elastic[i];
+    const double p_norm2 = voigt_norm2(p);
+    if (p_norm2 > max_threshold * max_threshold) {
+        const double ratio = max_threshold / std::sqrt(p_norm2);
+        for (int i = 0; i < 6; ++i) p[i] *= ratio;
+    }
+    for (int i = 0; i < 6; ++i) e[i] -= p[i];
 }
 
 // R^T v and R v for a row-major 3x3 R (9 numbers), as mul_t and mul (SOFA's order), on T.
@@ -467,7 +511,8 @@ inline void rotate(const T* R, const T* v, T* r) {
 // element's rotation, local -> world; none for small) that SOFA subtracts from df. X: the 12
 // numbers of dx at the element's nodes.
 template <class T, bool Rotated>
-inline void tetra_dforce_element(const T* R, const T* j, const T* mat, const T& kfactor, const T* X, T* out) {
+inline void tetra_dforce_element(const T* R, const T* jn, const T* js, const T* mat, const T& kfactor, const T* X,
+                                 T* out) {
     T L[12];
     if (Rotated) {
         for (int k = 0; k < 4; ++k) rotate_t(R, X + 3 * k, L + 3 * k);
@@ -475,7 +520,7 @@ inline void tetra_dforce_element(const T* R, const T* j, const T* mat, const T& 
         for (int k = 0; k < 12; ++k) L[k] = X[k];
     }
     T F[12];
-    tetra_compute_force(F, L, j, mat, kfactor, true);
+    tetra_compute_force(F, L, jn, js, mat, kfactor, true);
     if (Rotated) {
         for (int k = 0; k < 4; ++k) rotate(R, F + 3 * k, out + 3 * k);
     } else {
@@ -639,10 +684,55 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
     }
 }
 
+// TetrahedronFEMForceField's plasticity (plasticMaxThreshold > 0): `strain` holds 6 numbers per
+// element (SOFA's _plasticStrains, Voigt order, zero at creation), updated by every add_force;
+// a null `strain`: no plasticity.
+struct TetraPlasticity {
+    double* strain;
+    double max_threshold;
+    double yield_threshold;
+    double creep;
+};
+
+// SOFA's updateStiffnessMatrix: every add_force rewrites the strain-displacement cofactors from the
+// element's current local coordinates (then add_dforce and the element matrices use them).
+// polar/svd: SOFA's computeStrainDisplacement of the rotated current points, into the element
+// data. large: SOFA rewrites 9 entries of J's normal-strain columns only (the shear columns keep
+// their rest values), so those live apart: `normals`, 12 per element (see tetra_strain), which
+// tetra_fem_copy_normals fills with the rest values at init.
+struct TetraStiffnessUpdate {
+    bool enabled;
+    double* normals;
+};
+
+// The rest normal-column cofactors of each element (large with updateStiffnessMatrix).
+inline void tetra_fem_copy_normals(Index n, const double* element_data, int method, double* normals) {
+    static_assert(fem_detail::TJ == 0, "the cofactors open an element's record");
+    for (Index i = 0; i < n; ++i)
+        fem_detail::tetra_unpack(element_data, i, tetra_fem_data_size(method), fem_detail::TJ, 12, normals + 12 * i);
+}
+
+namespace fem_detail {
+// computeForce of element i with its displacements D and cofactors jn (normal columns) and js
+// (shear columns), with plasticity when given.
+inline void tetra_element_force(double* F, const double* D, const double* jn, const double* js, const double* mat,
+                                Index i, const TetraPlasticity* plasticity) {
+    if (plasticity == nullptr || plasticity->strain == nullptr)
+        return tetra_compute_force(F, D, jn, js, mat, 1.0, false);
+    double strain[6];
+    tetra_strain(strain, D, jn, js);
+    tetra_plastic_strain(strain, plasticity->strain + 6 * i, plasticity->max_threshold,
+                         plasticity->yield_threshold, plasticity->creep);
+    tetra_strain_force(F, strain, jn, js, mat, 1.0, false);
+}
+}  // namespace fem_detail
+
 // The internal force of element i at positions x, F (12 numbers) to add to its nodes; stores the
-// element's current rotation (large/polar/svd).
+// element's current rotation (large/polar/svd); updates its plastic strain and its cofactors when
+// asked (SOFA's order: displacements, then the cofactors, then the force).
 inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, double* element_data, int method,
-                               double* out) {
+                               double* out, const TetraPlasticity* plasticity = nullptr,
+                               const TetraStiffnessUpdate* update = nullptr) {
     using namespace fem_detail;
     const int stride = tetra_fem_data_size(method);
     double e[54];
@@ -650,14 +740,14 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
     const Index* t = tetra + 4 * i;
     double D[12];
     double F[12];
-    if (method == 0) {
+    if (method == 0) {  // SOFA's small method never updates its cofactors
         const double* p0 = x + 3 * t[0];
         D[0] = D[1] = D[2] = 0.0;
         for (int k = 1; k < 4; ++k) {
             const double* pk = x + 3 * t[k];
             for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TSMALL_REST + 3 * (k - 1) + m] - pk[m] + p0[m];
         }
-        tetra_compute_force(out, D, e + TJ, e + TMAT, 1.0, false);
+        tetra_element_force(out, D, e + TJ, e + TJ, e + TMAT, i, plasticity);
         return;
     }
     const V3 p[4] = {load(x + 3 * t[0]), load(x + 3 * t[1]), load(x + 3 * t[2]), load(x + 3 * t[3])};
@@ -679,6 +769,8 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
     tetra_pack(element_data, i, stride, TROT, 9, e);
     V3 q[4];
     for (int k = 0; k < 4; ++k) q[k] = mul(r02, p[k]);
+    const bool updating = update != nullptr && update->enabled;
+    const double* jn = e + TJ;
     if (method == 1) {
         // SOFA subtracts node 0 only where the local coordinates are not zero by construction
         // and sets the displacement of those to exactly 0.
@@ -697,11 +789,30 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
         D[9] = r[3] - q[3][0];
         D[10] = r[4] - q[3][1];
         D[11] = r[5] - q[3][2];
+        if (updating) {  // SOFA's 9 entries, from the current local coordinates
+            double* n = update->normals + 12 * i;
+            const double d10 = q[1][0], d20 = q[2][0], d21 = q[2][1];
+            const double d30 = q[3][0], d31 = q[3][1], d32 = q[3][2];
+            n[0] = -d21 * d32;                                      // J(0,0)
+            n[1] = d20 * d32 - d10 * d32;                           // J(1,1)
+            n[2] = d21 * d30 - d20 * d31 + d10 * d31 - d10 * d21;   // J(2,2)
+            n[3] = d21 * d32;                                       // J(3,0)
+            n[4] = -d20 * d32;                                      // J(4,1)
+            n[5] = -d21 * d30 + d20 * d31;                          // J(5,2)
+            n[7] = d10 * d32;                                       // J(7,1)
+            n[8] = -d10 * d31;                                      // J(8,2)
+            n[11] = d10 * d21;                                      // J(11,2)
+            jn = n;
+        }
     } else {
         for (int k = 0; k < 4; ++k)
             for (int m = 0; m < 3; ++m) D[3 * k + m] = e[TREST + 3 * k + m] - q[k][m];
+        if (updating) {
+            strain_displacement(e + TJ, q[0], q[1], q[2], q[3]);
+            tetra_pack(element_data, i, stride, TJ, 12, e);
+        }
     }
-    tetra_compute_force(F, D, e + TJ, e + TMAT, 1.0, false);
+    tetra_element_force(F, D, jn, e + TJ, e + TMAT, i, plasticity);
     for (int k = 0; k < 4; ++k) {
         const V3 fk = mul(rot, V3{{F[3 * k], F[3 * k + 1], F[3 * k + 2]}});
         for (int m = 0; m < 3; ++m) out[3 * k + m] = fk[m];
@@ -712,8 +823,10 @@ inline void tetra_fem_force_of(const Index* tetra, Index i, const double* x, dou
 // the rotation of the last add_force (the initial rotation before any add_force); small:
 // -J K J^T. The derivative of the rotation is neglected, as in SOFA (exact at zero strain, an
 // approximation elsewhere). SOFA subtracts R F from df; adding -(R F) rounds the same.
+// normals: the updated normal-column cofactors of large with updateStiffnessMatrix, or null.
 inline void tetra_fem_dforce_of(const Index* tetra, Index i, const double* dx, double kfactor,
-                                const double* element_data, int method, double* out) {
+                                const double* element_data, int method, double* out,
+                                const double* normals = nullptr) {
     using namespace fem_detail;
     double e[TROT + 9];
     tetra_unpack(element_data, i, tetra_fem_data_size(method), 0, method == 0 ? TROT : TROT + 9, e);
@@ -723,9 +836,9 @@ inline void tetra_fem_dforce_of(const Index* tetra, Index i, const double* dx, d
         for (int m = 0; m < 3; ++m) X[3 * k + m] = dx[3 * t[k] + m];
     double F[12];
     if (method == 0)
-        tetra_dforce_element<double, false>(nullptr, e + TJ, e + TMAT, kfactor, X, F);
+        tetra_dforce_element<double, false>(nullptr, e + TJ, e + TJ, e + TMAT, kfactor, X, F);
     else
-        tetra_dforce_element<double, true>(e + TROT, e + TJ, e + TMAT, kfactor, X, F);
+        tetra_dforce_element<double, true>(e + TROT, normals ? normals + 12 * i : e + TJ, e + TJ, e + TMAT, kfactor, X, F);
     for (int j = 0; j < 12; ++j) out[j] = -F[j];
 }
 
@@ -809,7 +922,7 @@ __attribute__((always_inline)) inline void tetra_dforce_blocks(const Index* tetr
         Lanes X[12] = {};
         gather_nodes(tetra, n, first, dx, node, X);
         Lanes F[12];
-        tetra_dforce_element<Lanes, Rotated>(f + TROT, f + TJ, f + TMAT, factor, X, F);
+        tetra_dforce_element<Lanes, Rotated>(f + TROT, f + TJ, f + TJ, f + TMAT, factor, X, F);
         scatter_nodes<true>(n, first, node, F, df, slots, deferred);
     }
 }
@@ -1018,6 +1131,34 @@ inline void tetra_fem_add_force(const Index* tetra, Index n, const double* x, do
         else
             serial_elements<4>(n, tetra, f, element);
     }
+}
+
+// tetra_fem_add_force with SOFA's plasticity and/or updateStiffnessMatrix (any method; the scalar
+// path, one element after the other as SOFA: each element's updates depend on its own nodes only).
+inline void tetra_fem_add_force_options(const Index* tetra, Index n, const double* x, double* f,
+                                        double* element_data, int method, const TetraPlasticity& plasticity,
+                                        const TetraStiffnessUpdate& update, const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) {
+        tetra_fem_force_of(tetra, i, x, element_data, method, out, &plasticity, &update);
+    };
+    if (split.chunks > 1)
+        split_elements<4>(split, tetra, f, element);
+    else
+        serial_elements<4>(n, tetra, f, element);
+}
+
+// tetra_fem_add_dforce with the updated normal-column cofactors of large with updateStiffnessMatrix
+// (the scalar path).
+inline void tetra_fem_add_dforce_normals(const Index* tetra, Index n, const double* dx, double* df, double kfactor,
+                                         const double* element_data, int method, const double* normals,
+                                         const ElementSplit& split = {}) {
+    const auto element = [&](Index i, double* out) {
+        tetra_fem_dforce_of(tetra, i, dx, kfactor, element_data, method, out, normals);
+    };
+    if (split.chunks > 1)
+        split_elements<4>(split, tetra, df, element);
+    else
+        serial_elements<4>(n, tetra, df, element);
 }
 
 // df += kfactor * (df/dx) dx (see tetra_fem_dforce_of), TETRA_LANES elements at once.

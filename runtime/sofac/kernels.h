@@ -484,6 +484,19 @@ inline void subset_apply_jt(double* in_f, const double* out_f, const Index* indi
         for (int d = 0; d < DT::deriv; ++d) in_f[DT::deriv * indices[k] + d] += out_f[DT::deriv * k + d];
 }
 
+// IdentityMapping between types of different sizes (Rigid3d -> Vec3d, Rigid2d -> Vec2d, Vec6d -> Vec3d):
+// the child takes the first `out_width` numbers of each parent value (a rigid body's centre, its
+// linear velocity); J^T adds a child force to the parent's first numbers only (no torque).
+inline void leading_apply(const double* in, double* out, Index n, int in_width, int out_width) {
+    for (Index k = 0; k < n; ++k)
+        for (int d = 0; d < out_width; ++d) out[out_width * k + d] = in[in_width * k + d];
+}
+
+inline void leading_apply_jt(double* in_f, const double* out_f, Index n, int in_width, int out_width) {
+    for (Index k = 0; k < n; ++k)
+        for (int d = 0; d < out_width; ++d) in_f[in_width * k + d] += out_f[out_width * k + d];
+}
+
 // ---- linear algebra on flat vectors (conjugate gradient) ---------------------------------------
 
 // a.b over n derivatives of `width` numbers, summed per derivative first, as SOFA's vector dot.

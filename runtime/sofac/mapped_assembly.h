@@ -55,4 +55,15 @@ inline void subset_jacobian(Assembler& A, Index child, Index parent, const Index
         }
 }
 
+// IdentityMapping between types of different sizes: child number d of DOF k is the parent's number
+// d of DOF k (recorded once).
+inline void leading_jacobian(Assembler& A, Index child, Index parent, Index n, int in_width, int out_width) {
+    const double one = 1.0;
+    for (Index k = 0; k < n; ++k)
+        for (int d = 0; d < out_width; ++d) {
+            const Index column = parent + in_width * k + d;
+            A.jacobian_row(child + out_width * k + d, 1, &column, &one);
+        }
+}
+
 }  // namespace sofac

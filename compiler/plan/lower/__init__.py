@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from sofac.plan.lower.common import Lowering
 from sofac.plan.lower.constraints import lower_bilateral, lower_constraint_correction, lower_constraint_solver
-from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_trifem_optim
+from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
+from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
     lower_constant_force,
     lower_interaction_ellipsoid,
@@ -54,6 +55,8 @@ LOWERINGS: dict[str, Lowering] = {
     "hexa_fem": lower_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
+    "quad_bending": lower_quad_bending,
+    "hyperelastic": lower_hyperelastic,
     "quad_bending_springs": lower_quad_bending_springs,
     "triangular_bending_springs": lower_triangular_bending_springs,
     "interaction_ellipsoid": lower_interaction_ellipsoid,

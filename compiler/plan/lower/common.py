@@ -122,6 +122,9 @@ def _sparse_grid_coefficients(planner: Planner, checked: CheckedComponent) -> np
     spec = planner.checked.of(topology).spec if topology is not None else None
     if topology is None or spec is None or spec.role != "sparse_grid":
         return None
+    computed = planner.value(topology, "cell_coefficients")  # SparseGridRamificationTopology's own
+    if computed is not None:
+        return np.asarray(computed, dtype=float)
     boundary = planner.value(topology, "boundary_cells")
     if boundary is None:
         return None

@@ -50,6 +50,8 @@ FEM_KINDS = {
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
     "trifem": ("trifem", "triangles", 3, {1: 35}),
 }
+# runtime quad_bending.h QUAD_BENDING_DATA: doubles per quad (rest offsets 12, material 4)
+QUAD_BENDING_DATA = 16
 # The runtime's data sizes of those kinds, which tests/test_layout.py checks against this table.
 DATA_SIZE_FUNCTIONS = {
     "tetra_fem": "tetra_fem_data_size",
@@ -67,6 +69,24 @@ def _material(planner: Planner, checked: CheckedComponent) -> tuple[Buffer, Buff
         value = value if value is not None else _default(checked, name)
         buffers.append(planner.buffer(checked.component, name, np.atleast_1d(value), role="param"))
     return buffers[0], buffers[1]
+
+
+def _plasticity(planner: Planner, checked: CheckedComponent, count: int) -> Aggregate | None:
+    """TetrahedronFEMForceField's plasticity when plasticMaxThreshold > 0 (SOFA's test): each
+    element's plastic strain (6 numbers, a state: reset restores zeros) and the three thresholds."""
+    values = {
+        name: float(planner.value(checked.component, name) or 0.0)
+        for name in ("plasticMaxThreshold", "plasticYieldThreshold", "plasticCreep")
+    }
+    if values["plasticMaxThreshold"] <= 0.0:
+        return None
+    strains = planner.buffer(
+        checked.component, "plasticStrains", np.zeros(count * 6), columns=6, role="state"
+    )
+    return Aggregate(
+        "TetraPlasticity",
+        (strains, values["plasticMaxThreshold"], values["plasticYieldThreshold"], values["plasticCreep"]),
+    )
 
 
 def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -88,11 +108,23 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         return
     if prefix != "tetra_fem" and method == FemMethod.SVD:
         method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
-    if prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0:
-        planner.unsupported(checked, "plasticity (plasticMaxThreshold > 0) is not compiled yet")
+    updating = (
+        prefix == "tetra_fem"
+        and method != FemMethod.SMALL
+        and bool(planner.value(component, "updateStiffnessMatrix"))
+    )
+    plastic = prefix == "tetra_fem" and float(planner.value(component, "plasticMaxThreshold") or 0.0) > 0.0
+    if plastic and planner.value(component, "computeGlobalMatrix"):
+        # SOFA's small and large methods then log "Support for assembling system matrix when using
+        # plasticity" and add no force at all
+        planner.unsupported(
+            checked, "plasticity with computeGlobalMatrix=true is not compiled (SOFA refuses it)"
+        )
         return
-    if prefix == "tetra_fem" and planner.value(component, "updateStiffnessMatrix"):
-        planner.unsupported(checked, "updateStiffnessMatrix=true is not compiled yet")
+    if updating and method == FemMethod.LARGE and group.assembled:
+        planner.unsupported(
+            checked, "updateStiffnessMatrix=true with method large in an assembled system is not compiled yet"
+        )
         return
     # HexahedronFEMForceField(AndMass) applies a SparseGridTopology's cell coefficients (below)
     topology = _topology_cells(planner, checked, sparse_grid_ok=prefix == "hexa_fem") or {}
@@ -136,9 +168,23 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         )
     )
     split = _split_argument(planner, component, cells, corners) if prefix != "trifem" else []
-    group.forces.append(
-        Op(origin, [_call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)])
-    )
+    plasticity = _plasticity(planner, checked, count) if prefix == "tetra_fem" else None
+    # large + updateStiffnessMatrix: the rewritten normal-column cofactors (fem.h TetraStiffnessUpdate)
+    normals = None
+    if updating and method == FemMethod.LARGE:
+        normals = planner.buffer(component, "updatedStrainDisplacement", np.zeros(count * 12), role="scratch")
+        group.init.append(Op(origin, [_call("tetra_fem_copy_normals", count, data, method, normals)]))
+    if plasticity is not None or updating:
+        options = (
+            plasticity if plasticity is not None else Aggregate("TetraPlasticity", (Env.NONE, 0.0, 0.0, 0.0)),
+            Aggregate("TetraStiffnessUpdate", (updating, normals if normals is not None else Env.NONE)),
+        )
+        force = _call(
+            "tetra_fem_add_force_options", elements, count, state.x, state.f, data, method, *options, *split
+        )
+    else:
+        force = _call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)
+    group.forces.append(Op(origin, [force]))
     and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
     if and_mass and not lower_hexa_mass(
         planner, checked, state, group, elements, count, data, method, coefficient_buffer
@@ -152,24 +198,25 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             )
         )
     if group.scheme == "implicit":
-        group.stiffness_dx.append(
-            Op(
-                origin,
-                [
-                    _call(
-                        f"{prefix}_add_dforce",
-                        elements,
-                        count,
-                        state.dx,
-                        state.df,
-                        Env.KFACT,
-                        data,
-                        method,
-                        *split,
-                    )
-                ],
+        dforce = (
+            _call(
+                "tetra_fem_add_dforce_normals",
+                elements,
+                count,
+                state.dx,
+                state.df,
+                Env.KFACT,
+                data,
+                method,
+                normals,
+                *split,
+            )
+            if normals is not None
+            else _call(
+                f"{prefix}_add_dforce", elements, count, state.dx, state.df, Env.KFACT, data, method, *split
             )
         )
+        group.stiffness_dx.append(Op(origin, [dforce]))
         # Tetrahedra: element matrices a block of TETRA_LANES at once, one per vector lane (fem.h).
         if prefix in ("tetra_fem", "tetracorot_fem"):
             assembler = kernel("assemble_elements", 4, Constant.TETRA_LANES)
@@ -182,6 +229,58 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             group,
             state,
             _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
+        )
+
+
+def lower_quad_bending(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """QuadBendingFEMForceField: SOFA's small method on the topology's quads, its stiffness
+    recomputed from the positions at every force and derivative pass (as SOFA)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"QuadBendingFEMForceField on {state.datatype.name} is not compiled yet")
+        return
+    if group.assembled:
+        # SOFA's buildStiffnessMatrix reads 3x3 blocks at 3-strides of its 5-unknown-per-node matrix
+        planner.unsupported(checked, "QuadBendingFEMForceField in an assembled system is not compiled yet")
+        return
+    quads = (_topology_cells(planner, checked) or {}).get("quads")
+    if quads is None or not quads.size:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    component = checked.component
+    count = quads.size // 4
+    elements = planner.buffer(component, "quads", quads, "i64", columns=4)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    thickness = float(planner.value(component, "thickness") or _default(checked, "thickness"))
+    data = planner.buffer(component, "quadInfo", np.zeros(count * QUAD_BENDING_DATA), role="scratch")
+    origin = origin_of(component)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    group.init.append(
+        Op(origin, [_call("quad_bending_init", elements, count, state.rest, *material, thickness, data)])
+    )
+    group.forces.append(
+        Op(origin, [_call("quad_bending_add_force", elements, count, state.x, state.f, data)])
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [
+                    _call(
+                        "quad_bending_add_dforce",
+                        elements,
+                        count,
+                        state.x,
+                        state.dx,
+                        state.df,
+                        Env.KFACT,
+                        data,
+                    )
+                ],
+            )
         )
 
 

@@ -5,6 +5,7 @@ multi-mappings (x, v down; J, J^T and the geometric stiffness).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -22,6 +23,7 @@ from sofac.plan.ir import (
     MappingOp,
     Op,
     Slot,
+    StatePlan,
     kernel,
     origin_of,
     recorded_once,
@@ -37,6 +39,7 @@ from sofac.plan.lower.common import (
 )
 
 if TYPE_CHECKING:
+    from sofac.geometry.barycentric import RegularGrid
     from sofac.plan.planner import Planner
 
 
@@ -335,10 +338,16 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
         return
     parent, child, group = ends
     component = checked.component
+    identity = bool(checked.spec and checked.spec.lowering == "identity_mapping")
     if parent.datatype is not child.datatype:
-        planner.unsupported(checked, f"{component.type_name} between different templates is not compiled yet")
+        if identity:
+            _lower_leading_identity(planner, checked, parent, child, group)
+        else:
+            planner.unsupported(
+                checked, f"{component.type_name} between different templates is not compiled yet"
+            )
         return
-    if checked.spec and checked.spec.lowering == "identity_mapping":
+    if identity:
         indices = np.arange(parent.size, dtype=np.int64)
     else:
         indices = _indices(planner, checked, "indices", 0, all_if_empty=False)
@@ -375,8 +384,71 @@ def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dic
     )
 
 
+def _lower_leading_identity(
+    planner: Planner, checked: CheckedComponent, parent: StatePlan, child: StatePlan, group: Group
+) -> None:
+    """IdentityMapping from a larger type (Rigid3d -> Vec3d, Rigid2d -> Vec2d, Vec6d -> Vec3d): SOFA's
+    core::eq / peq keep the leading numbers (a rigid body's centre and linear velocity; J^T adds the
+    force, no torque)."""
+    component = checked.component
+    n = parent.size
+    if child.size != n:
+        planner.unsupported(checked, f"it maps {n} DOFs onto a state of {child.size}")
+        return
+    p, c = parent.datatype, child.datatype
+    if c.coord_size > p.coord_size or c.deriv_size > p.deriv_size:
+        planner.unsupported(checked, f"IdentityMapping {p.name} -> {c.name} is not compiled yet")
+        return
+    maps_forces = planner.value(component, "mapForces") is not False
+    group.mappings.append(
+        MappingOp(
+            origin_of(component),
+            parent,
+            child,
+            [
+                _call("leading_apply", parent.x, child.x, n, p.coord_size, c.coord_size),
+                _call("leading_apply", parent.v, child.v, n, p.deriv_size, c.deriv_size),
+            ],
+            _call("leading_apply", PARENT, CHILD, n, p.deriv_size, c.deriv_size),
+            _call("leading_apply_jt", PARENT, CHILD, n, p.deriv_size, c.deriv_size) if maps_forces else None,
+            assembly=[
+                recorded_once(
+                    _call(
+                        "leading_jacobian", Env.ASSEMBLER, OFFSET, INPUT_OFFSET, n, p.deriv_size, c.deriv_size
+                    )
+                )
+            ],
+        )
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class _Ramified:
+    """What a SparseGridRamificationTopology's findCube reads: its grid, the finest (virtual) grid
+    and each finest cube's hexahedron."""
+
+    coarse: RegularGrid
+    finest: RegularGrid
+    table: np.ndarray
+
+
+def _ramified_grid(planner: Planner, topology: Component) -> _Ramified:
+    from sofac.geometry.barycentric import RegularGrid
+
+    def grid(prefix: str) -> RegularGrid:
+        resolution = np.asarray(planner.value(topology, f"{prefix}grid_resolution"), dtype=np.int64)
+        bounds = np.asarray(planner.value(topology, f"{prefix}grid_bounds"), dtype=float)
+        nx, ny, nz = (int(c) for c in resolution)
+        low = (float(bounds[0]), float(bounds[1]), float(bounds[2]))
+        high = (float(bounds[3]), float(bounds[4]), float(bounds[5]))
+        return RegularGrid((nx, ny, nz), low, high)
+
+    table = np.asarray(planner.value(topology, "finest_to_hexa"), dtype=np.int64)
+    return _Ramified(grid(""), grid("finest_"), table)
+
+
 def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    from sofac.geometry.barycentric import RegularGrid, SparseGrid, map_cells, mapper_for
+    from sofac.geometry.barycentric import RegularGrid, SparseGrid, map_cells, mapper_for, ramified_grid_map
 
     ends = _mapping_ends(planner, checked, owner)
     if ends is None:
@@ -399,7 +471,19 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
     grid = None
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)
-        grid = RegularGrid(tuple(int(c) for c in cells["resolution"]), tuple(bounds[:3]), tuple(bounds[3:]))
+        p0 = planner.value(topology, "p0") if topology.get("p0") is not None else None
+        grid = RegularGrid(
+            tuple(int(c) for c in cells["resolution"]),
+            tuple(bounds[:3]),
+            tuple(bounds[3:]),
+            p0=tuple(float(c) for c in np.ravel(p0)) if p0 is not None else None,
+        )
+    elif (
+        mode == "sparse_grid"
+        and topology is not None
+        and planner.value(topology, "finest_to_hexa") is not None
+    ):
+        grid = _ramified_grid(planner, topology)
     elif mode == "sparse_grid" and topology is not None:
         table = planner.value(topology, "regular_to_sparse")
         if table is None or "hexahedra" not in cells:
@@ -420,7 +504,12 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
         planner.unsupported(checked, "its input or output positions are not known at compile time")
         return
     try:
-        indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
+        if isinstance(grid, _Ramified):
+            indices, weights = ramified_grid_map(
+                grid.coarse, grid.finest, grid.table, cells["hexahedra"], points
+            )
+        else:
+            indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
     except ValueError as error:
         planner.unsupported(checked, f"it cannot embed its points: {error}")
         return

@@ -30,6 +30,7 @@ _COMPOSITE_FIELDS = (
 
 COLLISION_PIPELINE = ComponentSpec(
     name="CollisionPipeline",
+    role="pipeline",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="The collision pipeline: reset, broad phase, narrow phase, contact responses, using the "
@@ -47,20 +48,23 @@ COLLISION_PIPELINE = ComponentSpec(
 
 COMPOSITE_COLLISION_PIPELINE = ComponentSpec(
     name="CompositeCollisionPipeline",
+    role="composite_pipeline",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
-    doc="Runs several SubCollisionPipelines.",
-    unsupported_reason="explicit composite collision pipelines are not supported yet (use CollisionPipeline)",
+    doc="Runs several SubCollisionPipelines, phase by phase, in link order.",
+    supported=True,
     effects=_COLLISION,
     fields=_COMPOSITE_FIELDS,
 )
 
 SUB_COLLISION_PIPELINE = ComponentSpec(
     name="SubCollisionPipeline",
+    role="sub_pipeline",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
-    doc="One collision pipeline over an explicit list of collision models.",
-    unsupported_reason="explicit composite collision pipelines are not supported yet (use CollisionPipeline)",
+    doc="One collision pipeline over an explicit list of collision models (run by a "
+    "CompositeCollisionPipeline).",
+    supported=True,
     effects=_COLLISION,
     fields=(
         _DEPTH,
@@ -74,6 +78,7 @@ SUB_COLLISION_PIPELINE = ComponentSpec(
 
 BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
     name="BruteForceBroadPhase",
+    role="broad_phase",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Broad phase testing the bounding boxes of every pair of collision models.",
@@ -84,6 +89,7 @@ BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
 
 BVH_NARROW_PHASE = ComponentSpec(
     name="BVHNarrowPhase",
+    role="narrow_phase",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Narrow phase traversing the bounding-volume hierarchies of candidate pairs.",
@@ -95,6 +101,7 @@ _MULTITHREADING = "components of the MultiThreading plugin are not supported (us
 
 PARALLEL_BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
     name="ParallelBruteForceBroadPhase",
+    role="broad_phase",
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
     doc="MultiThreading plugin: parallel BruteForceBroadPhase.",
@@ -108,6 +115,7 @@ PARALLEL_BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
 
 PARALLEL_BVH_NARROW_PHASE = ComponentSpec(
     name="ParallelBVHNarrowPhase",
+    role="narrow_phase",
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
     doc="MultiThreading plugin: parallel BVHNarrowPhase.",
@@ -118,6 +126,7 @@ PARALLEL_BVH_NARROW_PHASE = ComponentSpec(
 
 BRUTE_FORCE_DETECTION = ComponentSpec(
     name="BruteForceDetection",
+    role="broad_phase",
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Deprecated: adds a BruteForceBroadPhase and a BVHNarrowPhase to its node.",
@@ -138,6 +147,7 @@ _PROXIMITY = (
 
 MIN_PROXIMITY_INTERSECTION = ComponentSpec(
     name="MinProximityIntersection",
+    role="min_proximity",
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests between element pairs closer than alarmDistance.",
@@ -155,6 +165,7 @@ MIN_PROXIMITY_INTERSECTION = ComponentSpec(
 
 NEW_PROXIMITY_INTERSECTION = ComponentSpec(
     name="NewProximityIntersection",
+    role="new_proximity",
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests based on triangle-triangle distances.",
@@ -216,6 +227,7 @@ _RESPONSE_FIELDS = (
 
 COLLISION_RESPONSE = ComponentSpec(
     name="CollisionResponse",
+    role="contact_manager",
     category=Category.COLLISION_PIPELINE,
     module=_RESPONSE,
     doc="Contact manager: creates a response (e.g. penalty springs) per colliding pair of models.",
@@ -245,6 +257,7 @@ _FREE_POSITION = FieldSpec("displayFreePosition", Bool(), False)
 
 SPHERE_COLLISION_MODEL = ComponentSpec(
     name="SphereCollisionModel",
+    role="sphere",
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="One sphere per DOF of the node's state (centres), radius from listRadius or radius.",
@@ -263,6 +276,7 @@ SPHERE_COLLISION_MODEL = ComponentSpec(
 
 TRIANGLE_COLLISION_MODEL = ComponentSpec(
     name="TriangleCollisionModel",
+    role="triangle",
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The triangles of the node's topology.",
@@ -290,6 +304,7 @@ TRIANGLE_COLLISION_MODEL = ComponentSpec(
 
 LINE_COLLISION_MODEL = ComponentSpec(
     name="LineCollisionModel",
+    role="line",
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The edges of the node's topology.",
@@ -303,6 +318,7 @@ LINE_COLLISION_MODEL = ComponentSpec(
 
 POINT_COLLISION_MODEL = ComponentSpec(
     name="PointCollisionModel",
+    role="point",
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The points of the node's state.",

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
 from ..fields import Bool, Color, Coords, Enum, Int, Ints, Options, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import (
@@ -24,6 +29,9 @@ _BEAMS = "beam elements are not supported yet"
 _VON_MISES = FieldSpec(
     "computeVonMisesStress", Int(), 0, "von Mises stress: 0 none, 1 from the corotational strain, 2 full"
 )
+# float(numpy.float32(0.0001)) and float(numpy.float32(0.9)): SOFA's float literals as doubles
+_FLOAT_0_0001 = 9.999999747378752e-05
+_FLOAT_0_9 = 0.8999999761581421
 _GATHER = (
     FieldSpec("gatherPt", Text(), doc="GPU version only: DOFs gathered per thread"),
     FieldSpec("gatherBsize", Text(), doc="GPU version only: gather block size"),
@@ -61,10 +69,15 @@ TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
             "assemble a global stiffness matrix",
             aliases=("assembling",),
         ),
+        # SOFA's defaults are float literals ((Real)0.0001f, (Real)0.9f): their double values here
         FieldSpec("plasticMaxThreshold", Real(), 0.0, "plasticity: maximum plastic strain (2-norm)"),
-        FieldSpec("plasticYieldThreshold", Real(), 0.0001, "plasticity: yield strain (2-norm)"),
+        FieldSpec("plasticYieldThreshold", Real(), _FLOAT_0_0001, "plasticity: yield strain (2-norm)"),
         FieldSpec(
-            "plasticCreep", Real(), 0.9, "plasticity: creep factor times dt", valid=MUST_BE_IN_UNIT_INTERVAL
+            "plasticCreep",
+            Real(),
+            _FLOAT_0_9,
+            "plasticity: creep factor times dt",
+            valid=MUST_BE_IN_UNIT_INTERVAL,
         ),
         FieldSpec("initialPoints", Coords(), doc="rest positions (default: the state's)"),
         FieldSpec("updateStiffness", Bool(), False, "recompute precomputed data from changed parameters"),
@@ -316,17 +329,19 @@ QUAD_BENDING_FEM_FORCE_FIELD = ComponentSpec(
     name="QuadBendingFEMForceField",
     category=Category.FORCEFIELD,
     module=_MODULE,
-    doc="Quad plate elements with membrane and bending stiffness.",
+    lowering="quad_bending",
+    doc="Quad plate elements in world coordinates: a bilinear membrane on x, y and the transverse "
+    "shear of w with the rotations held at zero (SOFA's small method, runtime/sofac/quad_bending.h).",
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="QuadBendingFEMForceField (plate bending) is not implemented yet",
+    supported=True,
     effects=_FEM_EFFECTS,
     fields=(
         FieldSpec(
             "method",
             Enum(values=("small", "large"), case_sensitive=True),
             "small",
-            "small or large displacements",
+            "SOFA reads it nowhere: every quad uses the small-displacement method",
         ),
         FieldSpec(
             "youngModulus",
@@ -344,30 +359,81 @@ QUAD_BENDING_FEM_FORCE_FIELD = ComponentSpec(
     ),
 )
 
+# SOFA's materialName options, in SOFA's order (the runtime's material codes, hyperelastic.h), and
+# the ParameterSet each compiled material reads (SOFA reads parameterArray[i] unchecked).
+HYPERELASTIC_MATERIALS = (
+    "ArrudaBoyce",
+    "StVenantKirchhoff",
+    "NeoHookean",
+    "MooneyRivlin",
+    "VerondaWestman",
+    "Costa",
+    "Ogden",
+    "StableNeoHookean",
+)
+HYPERELASTIC_PARAMETERS: dict[str, tuple[str, ...]] = {
+    "ArrudaBoyce": ("mu", "k0"),
+    "StVenantKirchhoff": ("mu", "lambda"),
+    "NeoHookean": ("mu", "lambda"),
+    "MooneyRivlin": ("c1", "c2", "k0"),
+    "VerondaWestman": ("c1", "c2", "k0"),
+    "Costa": ("a", "k0", "bff", "bfs", "bss", "bfn", "bsn", "bnn"),
+    "Ogden": ("mu1", "alpha1", "k0"),
+    "StableNeoHookean": ("mu", "lambda"),
+}
+
+
+def hyperelastic_problem(material: str, parameters: Sequence[float]) -> tuple[str, str, str, str] | None:
+    """Why a material and ParameterSet cannot be compiled, as (code, attribute, message, hint);
+    None when they can."""
+    names = HYPERELASTIC_PARAMETERS.get(material)
+    compiled = ", ".join(HYPERELASTIC_PARAMETERS)
+    if names is None:
+        return (
+            "E222",
+            "materialName",
+            f"unsupported material {material!r}: it is not compiled yet",
+            f"use one of {compiled}",
+        )
+    wanted = " ".join(names)
+    if len(parameters) < len(names):
+        given = "no ParameterSet" if not len(parameters) else f"ParameterSet has {len(parameters)} numbers"
+        return (
+            "E205",
+            "ParameterSet",
+            f"material {material} reads {len(names)} parameters ({wanted}), {given}",
+            f'write ParameterSet="{wanted}" with numbers (SOFA reads them unchecked)',
+        )
+    if material == "Ogden" and parameters[1] == 0:
+        return ("E207", "ParameterSet", "Ogden's alpha1 (the second number) is 0", "give alpha1 != 0")
+    return None
+
+
+def _hyperelastic_rule(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    written = value("ParameterSet")
+    parameters = [] if written is None else [float(x) for x in np.ravel(written)]
+    return hyperelastic_problem(str(value("materialName") or "ArrudaBoyce"), parameters)
+
+
 TETRAHEDRON_HYPERELASTICITY_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedronHyperelasticityFEMForceField",
     category=Category.FORCEFIELD,
     module="Sofa.Component.SolidMechanics.FEM.HyperElastic",
-    doc="Hyperelastic tetrahedra (Neo-Hookean, Mooney-Rivlin, St Venant-Kirchhoff, Ogden, ...).",
+    doc="Hyperelastic tetrahedra (Neo-Hookean, Mooney-Rivlin, St Venant-Kirchhoff, Ogden, ...): "
+    "ParameterSet holds the material's parameters in SOFA's order (ArrudaBoyce, StVenantKirchhoff, "
+    "NeoHookean, StableNeoHookean: mu and k0 or lambda; MooneyRivlin, VerondaWestman: c1 c2 k0; "
+    "Ogden: mu1 alpha1 k0; Costa: a k0 bff bfs bss bfn bsn bnn). AnisotropyDirections, which no "
+    "material of SOFA reads, and matrixRegularization, which SOFA does not use, change nothing.",
+    lowering="hyperelastic",
+    validate=_hyperelastic_rule,
     templates=("Vec3d",),
     default_template="Vec3d",
-    unsupported_reason="hyperelastic materials are not supported yet",
+    supported=True,
     effects=_FEM_EFFECTS,
     fields=(
         FieldSpec(
             "materialName",
-            Options(
-                values=(
-                    "ArrudaBoyce",
-                    "StVenantKirchhoff",
-                    "NeoHookean",
-                    "MooneyRivlin",
-                    "VerondaWestman",
-                    "Costa",
-                    "Ogden",
-                    "StableNeoHookean",
-                )
-            ),
+            Options(values=HYPERELASTIC_MATERIALS),
             "ArrudaBoyce",
             "material law",
         ),

@@ -145,8 +145,9 @@ SPARSE_GRID_RAMIFICATION_TOPOLOGY = ComponentSpec(
     module=_GRID,
     doc="Sparse grid that duplicates cells crossed by several disconnected parts of the surface.",
     former_names=("SparseGridRamification",),
-    unsupported_reason="SparseGridRamificationTopology is not supported yet",
+    supported=True,
     effects=_GENERATED,
+    compute="sparse_grid_ramification",
     fields=(
         FieldSpec("finestConnectivity", Bool(), True, "test connectivity at the finest level"),
         *_SPARSE_GRID_FIELDS,

@@ -1,0 +1,387 @@
+"""Penalty contact as SOFA's DefaultAnimationLoop runs it, compiled for the model pairs that can meet.
+
+At compile time: the pipeline's collision models in SOFA's order, the pairs its broad phase can
+ever produce (different nodes or selfCollision, not both static, disjoint groups, an intersector
+for the two types), each with its element test and model order fixed, and where each pair's
+response goes (a static partner: inside the other model's group, in its force evaluations and K dx
+products; two simulated models: one explicit force per step). At run time (runtime/sofac/penalty.h):
+trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component, Node
+from sofac.registry import Category
+
+from .ir import Collision, CollisionModel, ContactPair, ElementTest, Env, Group, Op, call, origin_of
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+# The intersector's type order: a pair's first model is the one of higher rank (SOFA registers
+# Triangle-Line, Line-Point, Sphere-Point, Line-Sphere, Triangle-Sphere, never the other way).
+_RANK = {"triangle": 3, "line": 2, "sphere": 1, "point": 0}
+# The element tests each method registers (runtime/sofac/proximity.h), by (first, second) kind.
+_TESTS = {
+    "new_proximity": {
+        ("point", "point"),
+        ("line", "point"),
+        ("line", "line"),
+        ("triangle", "point"),
+        ("triangle", "line"),
+        ("triangle", "triangle"),
+        ("sphere", "sphere"),
+        ("sphere", "point"),
+        ("line", "sphere"),
+        ("triangle", "sphere"),
+    },
+    # MinProximity ignores Triangle-Line and Triangle-Triangle (MinProximityIntersection::init).
+    "min_proximity": {
+        ("point", "point"),
+        ("line", "point"),
+        ("line", "line"),
+        ("triangle", "point"),
+        ("sphere", "sphere"),
+        ("sphere", "point"),
+        ("triangle", "sphere"),
+        ("line", "sphere"),
+    },
+}
+# MinProximityIntersection's switches: the pairs each one removes.
+_MIN_PROXIMITY_SWITCHES = {
+    "usePointPoint": {("point", "point")},
+    "useLinePoint": {("line", "point")},
+    "useLineLine": {("line", "line")},
+    "useSphereTriangle": {("triangle", "sphere")},
+}
+
+
+@dataclass
+class _Setup:
+    """One detection-and-response pipeline: a CollisionPipeline (its models are those below its
+    node; its phases and response the first found there) or a SubCollisionPipeline (all linked)."""
+
+    pipeline: CheckedComponent
+    parts: dict[str, CheckedComponent]  # broad_phase, narrow_phase, intersection, contact_manager
+    models: list[CheckedComponent]
+
+
+_PARTS = {
+    "broad_phase": "broadPhaseDetection",
+    "narrow_phase": "narrowPhaseDetection",
+    "intersection": "intersectionMethod",
+    "contact_manager": "contactManager",
+}
+
+
+def _role(checked: CheckedComponent) -> str:
+    role = checked.spec.role if checked.spec else ""
+    return "intersection" if role in ("min_proximity", "new_proximity") else role
+
+
+def _setups(planner: Planner) -> list[_Setup] | str:
+    """The scene's pipelines in the order SOFA runs them, or why they are not compiled."""
+    pipelines = [
+        c for c in planner.checked if c.category is Category.COLLISION_PIPELINE and _role(c) in _PIPELINES
+    ]
+    if not pipelines:
+        return "a collision pipeline"
+    composite = next((c for c in pipelines if _role(c) == "composite_pipeline"), None)
+    setups: list[_Setup] = []
+    if composite is not None:
+        subs = composite.link_lists.get("subCollisionPipelines", [])
+        if not subs:
+            return "a CompositeCollisionPipeline with its subCollisionPipelines linked"
+        for sub in subs:
+            checked = planner.checked.of(sub)
+            parts = {role: checked.links.get(name) for role, name in _PARTS.items()}
+            if any(not isinstance(p, Component) for p in parts.values()):
+                return f"SubCollisionPipeline {sub.label!r} with its four phases linked (else SOFA skips it)"
+            models = [planner.checked.of(m) for m in checked.link_lists.get("collisionModels", [])]
+            setups.append(_Setup(checked, {r: planner.checked.of(p) for r, p in parts.items()}, models))
+        return setups
+    pipeline = pipelines[0]
+    found: dict[str, CheckedComponent] = {}
+    models = []
+    for checked in _below(planner, pipeline.component.node):
+        role = _role(checked)
+        if role in _PARTS:
+            found.setdefault(role, checked)
+        elif checked.category is Category.COLLISION_MODEL:
+            models.append(checked)
+    missing = [role for role in _PARTS if role not in found]
+    if missing:
+        return f"a CollisionPipeline with its {', '.join(missing)} below its node"
+    return [_Setup(pipeline, found, models)]
+
+
+_PIPELINES = ("pipeline", "composite_pipeline")
+
+
+def _below(planner: Planner, node: Node) -> list[CheckedComponent]:
+    """The components of a node and below, as SOFA's get(SearchDown) lists them: a node's objects,
+    then its children, depth first."""
+    found: list[CheckedComponent] = [planner.checked.of(c) for c in node.objects]
+    for child in node.children:
+        found += _below(planner, child)
+    return found
+
+
+def contact_setup_refusal(planner: Planner) -> str:
+    """Why the scene's contacts cannot be compiled ("" when they can)."""
+    setups = _setups(planner)
+    if isinstance(setups, str):
+        return (
+            f"penalty contact is compiled for {setups}: BruteForceBroadPhase, BVHNarrowPhase, "
+            "MinProximityIntersection or NewProximityIntersection and a CollisionResponse"
+        )
+    for checked in planner.checked:
+        if (
+            checked.category is Category.ANIMATION_LOOP
+            and checked.spec
+            and checked.spec.name != "DefaultAnimationLoop"
+        ):
+            return f"contact response under {checked.spec.name} is not compiled yet (DefaultAnimationLoop is)"
+    for setup in setups:
+        for role, checked in setup.parts.items():
+            spec = checked.spec
+            if spec is None or not spec.supported or (role == "intersection" and spec.role not in _TESTS):
+                return f"{checked.component.type_name} is not compiled yet"
+        response = str(planner.value(setup.parts["contact_manager"].component, "response") or "")
+        if response != "PenalityContactForceField":
+            return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
+        for checked in setup.models:
+            spec = checked.spec
+            assert spec is not None
+            if spec.role not in _RANK:
+                return f"{spec.name} takes no part in compiled contacts"
+            if checked.datatype is not None and checked.datatype.name != "Vec3d":
+                return (
+                    f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
+                )
+            if planner.value(checked.component, "selfCollision"):
+                return "self-collision is not compiled yet"
+            if planner.value(checked.component, "contactResponse"):
+                return "a model's own contactResponse is not compiled yet"
+    return ""
+
+
+def plan_collisions(planner: Planner, owner: dict[int, Group]) -> list[Collision]:
+    """The scene's compiled contacts, one per pipeline in SOFA's order, and their calls in the
+    groups of the models they act on."""
+    setups = _setups(planner)
+    assert not isinstance(setups, str)
+    collisions = []
+    for index, setup in enumerate(setups):
+        collision = _plan_collision(planner, setup, index, owner)
+        if collision is not None:
+            collisions.append(collision)
+    return collisions
+
+
+def _plan_collision(
+    planner: Planner, setup: _Setup, number: int, owner: dict[int, Group]
+) -> Collision | None:
+    pipeline, intersection = setup.pipeline, setup.parts["intersection"]
+    method = intersection.spec.role if intersection.spec else ""
+    value = planner.value
+    tests = set(_TESTS[method])
+    if method == "min_proximity":
+        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
+            if value(intersection.component, switch) is False:
+                tests -= removed
+    models: list[CollisionModel] = []
+    checked_models = [c for c in setup.models if value(c.component, "active") is not False]
+    for checked in checked_models:
+        model = _model(planner, checked)
+        if model is None:
+            return None
+        models.append(model)
+    collision = Collision(
+        origin=origin_of(pipeline.component),
+        method=method,
+        alarm_distance=float(value(intersection.component, "alarmDistance")),
+        contact_distance=float(value(intersection.component, "contactDistance")),
+        depth=int(value(pipeline.component, "depth")),
+        models=models,
+        tests=[],
+        pairs=[],
+    )
+    if collision.alarm_distance < collision.contact_distance:
+        component = intersection.component
+        attribute = component.attributes.get("alarmDistance") or component.attributes.get("contactDistance")
+        planner.diags.add(
+            "E207",
+            attribute.loc if attribute is not None else component.loc,
+            f"{component.type_name}: alarmDistance={collision.alarm_distance!r} must be >= "
+            f"contactDistance={collision.contact_distance!r} (pairs are detected within the alarm "
+            "distance and pushed apart up to the contact distance)",
+            "raise alarmDistance or lower contactDistance",
+        )
+        return None
+    use_line_line = bool(value(intersection.component, "useLineLine")) if method == "new_proximity" else False
+    for later in range(len(models)):
+        for earlier in range(later):
+            a, b = models[later], models[earlier]
+            why = _never(planner, checked_models[later], checked_models[earlier], a, b)
+            first, second = (later, earlier) if _RANK[a.kind] >= _RANK[b.kind] else (earlier, later)
+            kinds = (models[first].kind, models[second].kind)
+            if not why and kinds not in tests:
+                why = f"{method} has no {kinds[0]}-{kinds[1]} test"
+            if why:
+                collision.left_out.append((a.origin, b.origin, why))
+                continue
+            options: tuple[bool, ...] = ()
+            if kinds == ("triangle", "triangle"):
+                options = (False, use_line_line)
+            elif kinds == ("triangle", "line") and method == "new_proximity":
+                options = (use_line_line,)
+            elif kinds == ("triangle", "point") and method == "min_proximity":
+                options = (bool(value(intersection.component, "useSurfaceNormals")),)
+            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options)
+            if test not in collision.tests:
+                collision.tests.append(test)
+            m1, m2 = models[first], models[second]
+            if kinds == ("triangle", "triangle"):
+                id_bound = 3 * m1.elements + 12 * m2.elements
+            else:
+                id_bound = max(m1.elements, m2.elements) + 1
+            collision.pairs.append(
+                ContactPair(
+                    first, second, collision.tests.index(test), m1.simulated and m2.simulated, id_bound
+                )
+            )
+    if not collision.pairs:
+        return collision
+    used = sorted({i for p in collision.pairs for i in (p.first, p.second)})
+    for kind in _RANK:
+        for view, index in enumerate(i for i in used if models[i].kind == kind):
+            models[index].view = view
+    rows = [
+        (p.first, p.second, int(p.root), p.id_bound, p.test, models[p.first].view, models[p.second].view)
+        for p in collision.pairs
+    ]
+    collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
+    _place(planner, collision, number, owner)
+    return collision
+
+
+def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None:
+    from .lower.common import _topology_cells
+
+    state = planner.state_of(checked)
+    spec = checked.spec
+    assert spec is not None
+    if state is None or state.datatype.name != "Vec3d":
+        planner.unsupported(checked, "a collision model needs a Vec3d MechanicalObject in its node")
+        return None
+    kind = spec.role
+    value = planner.value
+    cells_buffer = radii = None
+    elements = state.size
+    if kind == "sphere":
+        listed = value(checked.component, "listRadius")
+        if listed is not None and np.size(listed):
+            radii = planner.buffer(checked.component, "listRadius", listed)
+    if kind in ("triangle", "line"):
+        cells = _topology_cells(planner, checked) or {}
+        if kind == "triangle":
+            if cells.get("quads") is not None and np.size(cells["quads"]):
+                planner.unsupported(checked, "quads in a TriangleCollisionModel are not compiled yet")
+                return None
+            array = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
+        else:
+            from sofac.geometry import masses
+
+            array = cells.get("edges")
+            if array is None or not np.size(array):
+                array = masses.topology_edges(
+                    state.size, triangles=cells.get("triangles"), quads=cells.get("quads")
+                )
+            array = np.asarray(array, dtype=np.int64).reshape(-1, 2)
+        if array.size and (array.min() < 0 or array.max() >= state.size):
+            planner.unsupported(checked, f"its topology names points beyond the {state.size} of its state")
+            return None
+        elements = len(array)
+        cells_buffer = planner.buffer(checked.component, kind + "s", array, "i64", columns=array.shape[1])
+    return CollisionModel(
+        origin=origin_of(checked.component),
+        kind=kind,
+        state=state,
+        elements=elements,
+        cells=cells_buffer,
+        contact_distance=float(value(checked.component, "contactDistance")),
+        contact_stiffness=float(value(checked.component, "contactStiffness")),
+        moving=bool(value(checked.component, "moving")),
+        simulated=bool(value(checked.component, "simulated")),
+        compute_normals=bool(value(checked.component, "computeNormals")) if kind == "triangle" else False,
+        radii=radii,
+        radius=float(value(checked.component, "radius")) if kind == "sphere" else 0.0,
+    )
+
+
+def _never(
+    planner: Planner,
+    a_checked: CheckedComponent,
+    b_checked: CheckedComponent,
+    a: CollisionModel,
+    b: CollisionModel,
+) -> str:
+    """Why the broad phase never pairs two models ("" if it may): CollisionModel::canCollideWith
+    and BruteForceBroadPhase's static test."""
+    if a_checked.component.node is b_checked.component.node:
+        return "models of one node collide only with selfCollision"
+    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
+    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
+    if groups_a & groups_b:
+        return "they share a collision group"
+    if not a.simulated and not b.simulated:
+        return "both are static (simulated=0)"
+    if not a.elements or not b.elements:
+        return "one of them has no element"
+    return ""
+
+
+def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[int, Group]) -> None:
+    """Each simulated model's contact forces in the group integrating its state: in every force
+    evaluation and, for its contacts with static models, in every K dx product."""
+    in_pairs = {i for p in collision.pairs for i in (p.first, p.second)}
+    for index, model in enumerate(collision.models):
+        if index not in in_pairs or not model.simulated:
+            continue
+        group = owner.get(id(model.state.component))
+        if group is None:
+            continue  # nothing integrates it: the forces on it go nowhere, as in SOFA
+        if group.assembled or group.direct:
+            planner.unsupported(
+                planner.checked.of(model.state.component),
+                "penalty contact in an assembled system (a direct solver) is not compiled yet; "
+                "use CGLinearSolver",
+            )
+            continue
+        where = f"contact forces on {model.origin}"
+        state = model.state
+        group.forces.append(
+            Op(where, [call("contact_add_force", Env.CONTACTS, pipeline, index, state.f, state.x)])
+        )
+        static_partner = any(
+            not collision.models[p.second if p.first == index else p.first].simulated
+            for p in collision.pairs
+            if index in (p.first, p.second)
+        )
+        if group.scheme == "implicit" and static_partner and state.dx is not None:
+            group.stiffness_dx.append(
+                Op(
+                    where,
+                    [
+                        call(
+                            "contact_add_dforce", Env.CONTACTS, pipeline, index, state.df, state.dx, Env.KFACT
+                        )
+                    ],
+                )
+            )

@@ -1,0 +1,358 @@
+// Penalty contact between the collision models of a DefaultAnimationLoop scene, as SOFA's pipeline
+// runs it each step (SubCollisionPipeline: bounding trees, BruteForceBroadPhase, BVHNarrowPhase;
+// CollisionResponse with BarycentricPenalityContact + PenalityContactForceField):
+//
+//   detect():  the trees of the models (static ones once), the broad phase over the compile-time
+//              pair table, the narrow phase of each pair it finds (the element test is the caller's:
+//              code generation instantiates only the (method, type pair) tests the scene has);
+//   respond(): SOFA's two stable-id maps decide the order of the contacts; each pair's outputs are
+//              de-duplicated and become penalty contacts on contact points (barycentric points
+//              on triangles and lines, the model's own points on point and sphere models); pairs of
+//              two simulated models get their force now, once, at the start of the step (SOFA
+//              evaluates them at the pipeline's node, before any solver: explicit coupling);
+//   add_force() / add_dforce(): in each force evaluation and each K dx product of the group that
+//              integrates a model, the contacts with a static model (placed in that group) are
+//              evaluated, and every contact point's force is mapped onto the model's points in the
+//              order SOFA creates the contact-point nodes under the model's node.
+//
+// Memory: every buffer is reserved at init for the pair's element counts; a step that needs more
+// grows them (counted in growths(), never an overrun) and keeps the larger capacity.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "contact.h"
+#include "contact_order.h"
+
+namespace sofac::collide {
+
+// One collision model of the pipeline, in SOFA's order (depth-first below the pipeline's node).
+struct PenaltyModel {
+    ContactSide kind = ContactSide::kPoint;
+    Index points = 0;             // points of its state
+    Index elements = 0;           // triangles, edges, points or spheres
+    const Index* cells = nullptr; // triangles (3 per) or edges (2 per)
+    double contact_distance = 0.0;
+    double contact_stiffness = 0.0;
+    bool moving = true;  // its boxes follow its points (moving="0": computed once, at the first step)
+    CubeTree tree;
+    std::vector<int> flags;       // triangle models: SOFA's vertex / edge ownership flags
+    std::vector<double> normals;  // triangle models: the normals of the last tree update
+    std::vector<double> external; // point / sphere models: the explicit contact forces of this step
+    SphereModel sphere{};         // sphere models: the radii (the response reads them)
+    // Contact-point states under this model's node, in creation order: 2 * pair + side.
+    std::vector<Index> children;
+};
+
+// One model pair the broad phase can produce (the compile-time table), with its response.
+struct PenaltyPair {
+    Index model[2] = {0, 0};  // in the intersector's order
+    // The compiled element test (code generation numbers the (method, kinds) tests the scene
+    // has) and the two models' places among the models of their kind.
+    Index test = 0;
+    Index view[2] = {0, 0};
+    bool root = false;         // both models simulated: evaluated once, at the start of the step
+    OutputList outputs;
+    NarrowPhaseStack stack;
+    ContactDeduplication dedup;
+    BarycentricContactPoints points[2];
+    std::vector<double> x[2], f[2], dx[2], df[2];  // the contact-point states (barycentric sides)
+    PenaltyContactForceField ff;
+    bool live = false;  // SOFA's contact object exists (from its first outputs to its last)
+};
+
+class PenaltyContacts {
+public:
+    // `n` models, `rule` the broad phase's n x n table (PairRule), `pair_of` the index of each
+    // (first, second) ordered pair in `pairs` (n x n, -1: none).
+    void resize(Index n, double alarm_distance, double contact_distance, int depth) {
+        models.resize(static_cast<std::size_t>(n));
+        rule.assign(static_cast<std::size_t>(n * n), static_cast<std::int8_t>(kNever));
+        pair_of.assign(static_cast<std::size_t>(n * n), -1);
+        alarm_distance_ = alarm_distance;
+        contact_distance_ = contact_distance;
+        depth_ = depth;
+    }
+
+    // A possible pair; `id_bound` bounds its outputs' ids (the dedup's table).
+    Index add_pair(Index first, Index second, bool root, Index id_bound, Index test, Index view1, Index view2) {
+        PenaltyPair& p = pairs.emplace_back();
+        p.model[0] = first;
+        p.model[1] = second;
+        p.root = root;
+        p.test = test;
+        p.view[0] = view1;
+        p.view[1] = view2;
+        const Index n = static_cast<Index>(models.size());
+        const Index index = static_cast<Index>(pairs.size()) - 1;
+        pair_of[first * n + second] = index;
+        if (first > second)
+            rule[first * n + second] = kKeep;
+        else if (first < second)
+            rule[second * n + first] = kSwap;
+        else
+            rule[first * n + first] = kKeep;
+        const std::size_t capacity = static_cast<std::size_t>(std::max(models[first].elements, models[second].elements));
+        p.outputs.reserve(4 * capacity);
+        p.dedup.resize(id_bound, 4 * capacity);
+        p.ff.reserve(4 * capacity);
+        for (int s = 0; s < 2; ++s) {
+            p.points[s].reserve(4 * capacity);
+            for (auto* v : {&p.x[s], &p.f[s], &p.dx[s], &p.df[s]}) v->reserve(12 * capacity);
+        }
+        return index;
+    }
+
+    // After the models and pairs: trees sized, maps' pools filled.
+    void finish_setup() {
+        const Index n = static_cast<Index>(models.size());
+        broad_.resize(models.size());
+        static_x_.assign(models.size(), nullptr);
+        broad_pairs_.assign(static_cast<std::size_t>(n * (n + 1)), 0);
+        for (std::size_t i = 0; i < models.size(); ++i) {
+            PenaltyModel& m = models[i];
+            m.tree.resize(m.elements, depth_);
+            if (m.kind == ContactSide::kTriangle) m.normals.assign(static_cast<std::size_t>(3 * m.elements), 0.0);
+            if (m.kind == ContactSide::kPoint || m.kind == ContactSide::kSphere)
+                m.external.assign(static_cast<std::size_t>(3 * m.points), 0.0);
+            m.children.reserve(2 * pairs.size());
+            broad_[i] = BroadPhaseModel{&m.tree, m.contact_distance};
+        }
+        outputs_map_.reserve(n, pairs.size());
+        contacts_map_.reserve(n, pairs.size());
+    }
+
+    // A model's tree on its current points (`update` builds it from the view the caller made).
+    bool needs_update(Index model) const { return models[model].moving || !models[model].tree.built(); }
+
+    // BVHNarrowPhase on one pair: `test(e1, e2, outputs)` is its element test.
+    template <class Test>
+    void narrow_phase(PenaltyPair& p, Test&& test) {
+        const PenaltyModel& a = models[p.model[0]];
+        const PenaltyModel& b = models[p.model[1]];
+        bvh_narrow_phase(a.tree, a.contact_distance, b.tree, b.contact_distance, alarm_distance_, p.stack,
+                         [&](Index e1, Index e2) { test(e1, e2, p.outputs); });
+    }
+
+    // Broad phase, then the narrow phase of every pair found, in SOFA's order. `narrow(pair)` runs
+    // the pair's BVH traversal with its element test into pairs[pair].outputs.
+    template <class Narrow>
+    void detect(Narrow&& narrow) {
+        const Index n = static_cast<Index>(models.size());
+        const Index found = brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
+        auto& outputs = outputs_map_.map();
+        for (auto& entry : outputs) pairs[entry.second].outputs.clear();  // beginNarrowPhase
+        for (Index k = 0; k < found; ++k) {
+            const Index first = broad_pairs_[2 * k], second = broad_pairs_[2 * k + 1];
+            const Index index = pair_of[first * n + second];
+            auto slot = output_slot(outputs, first, second);
+            slot->second = index;
+            PenaltyPair& p = pairs[index];
+            p.outputs.clear();
+            p.stack.reserve_for(models[p.model[0]].tree, models[p.model[1]].tree);  // once the trees exist
+            narrow(index);
+        }
+        erase_empty(outputs, [&](Index index) { return pairs[index].outputs.size() == 0; });
+    }
+
+    // The contacts of this step from the outputs, in SOFA's contact order, and the explicit forces
+    // of the pairs of two simulated models. `x[m]`: model m's points.
+    void respond(const double* const* x) {
+        auto& contacts = contacts_map_.map();
+        for (const auto& entry : outputs_map_.map()) {
+            auto [it, fresh] = contact_slot(contacts, entry.first);
+            if (fresh) {
+                it->second = entry.second;
+                create(entry.second);
+            }
+            set_outputs(pairs[entry.second], x);
+        }
+        remove_inactive(contacts, outputs_map_.map(), [&](Index index) { destroy(index); });
+        for (PenaltyModel& m : models) std::fill(m.external.begin(), m.external.end(), 0.0);
+        for (const auto& entry : contacts) {  // SolveVisitor at the pipeline's node, `contacts` order
+            PenaltyPair& p = pairs[entry.second];
+            if (!p.root) continue;
+            for (int s = 0; s < 2; ++s) std::fill(p.f[s].begin(), p.f[s].end(), 0.0);
+            p.ff.add_force(force(p, 0), force(p, 1), position(p, 0, x), position(p, 1, x));
+        }
+    }
+
+    // f(model) += its contact forces (a force evaluation of the group integrating `model`).
+    void add_force(Index model, double* f, const double* x) {
+        PenaltyModel& m = models[model];
+        if (!m.external.empty())
+            for (std::size_t i = 0; i < m.external.size(); ++i) f[i] += m.external[i];
+        for (const auto& entry : contacts_map_.map()) {  // the contacts with a static model, in this group
+            PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            if (s < 0) continue;
+            if (has_points(p, s)) {
+                p.points[s].apply(x, p.x[s].data());
+                std::fill(p.f[s].begin(), p.f[s].end(), 0.0);
+            }
+            if (has_points(p, 1 - s)) std::fill(p.f[1 - s].begin(), p.f[1 - s].end(), 0.0);
+            double* fs = has_points(p, s) ? p.f[s].data() : f;
+            double* fo = has_points(p, 1 - s) ? p.f[1 - s].data() : scratch(p, 1 - s);
+            const double* xs = has_points(p, s) ? p.x[s].data() : x;
+            const double* xo = other_position(p, 1 - s);
+            if (s == 0)
+                p.ff.add_force(fs, fo, xs, xo);
+            else
+                p.ff.add_force(fo, fs, xo, xs);
+        }
+        for (const Index child : m.children) {  // contact points up to the model, creation order
+            const PenaltyPair& p = pairs[child / 2];
+            p.points[child % 2].apply_jt(p.f[child % 2].data(), f);
+        }
+    }
+
+    // df(model) += kfact K dx (a product of the group integrating `model`): the contacts with a
+    // static model (the static side does not move: its dx is zero).
+    void add_dforce(Index model, double* df, const double* dx, double kfact) {
+        PenaltyModel& m = models[model];
+        for (const auto& entry : contacts_map_.map()) {
+            PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            if (s < 0) continue;
+            const int o = 1 - s;
+            if (has_points(p, s)) {
+                p.points[s].apply(dx, p.dx[s].data());
+                std::fill(p.df[s].begin(), p.df[s].end(), 0.0);
+            }
+            zero_other(p, o);
+            double* dfs = has_points(p, s) ? p.df[s].data() : df;
+            const double* dxs = has_points(p, s) ? p.dx[s].data() : dx;
+            if (s == 0)
+                p.ff.add_dforce(dfs, p.df[o].data(), dxs, p.dx[o].data(), kfact);
+            else
+                p.ff.add_dforce(p.df[o].data(), dfs, p.dx[o].data(), dxs, kfact);
+        }
+        for (const Index child : m.children) {
+            const PenaltyPair& p = pairs[child / 2];
+            if (!p.root) p.points[child % 2].apply_jt(p.df[child % 2].data(), df);
+        }
+    }
+
+    // Potential energy of the active contacts (sum of ks pen^2 / 2).
+    double energy() const {
+        double e = 0.0;
+        for (const auto& entry : contacts_map_.map()) e += pairs[entry.second].ff.energy();
+        return e;
+    }
+
+    // Contacts of the last step, and how often a buffer outgrew its reserved capacity.
+    Index contact_count() const {
+        Index n = 0;
+        for (const auto& entry : contacts_map_.map()) n += static_cast<Index>(pairs[entry.second].ff.contacts.size());
+        return n;
+    }
+    Index growths() const {
+        Index n = outputs_map_.growths() + contacts_map_.growths();
+        for (const PenaltyPair& p : pairs)
+            n += p.outputs.growths + p.dedup.growths + p.ff.growths + p.points[0].growths + p.points[1].growths;
+        return n;
+    }
+    // Outputs SOFA would have made of NaN (dropped) or of a zero distance (normal (1, 0, 0)).
+    Index degenerate_outputs() const {
+        Index n = 0;
+        for (const PenaltyPair& p : pairs) n += p.outputs.dropped + p.outputs.zero_distances;
+        return n;
+    }
+
+    std::vector<PenaltyModel> models;
+    std::vector<PenaltyPair> pairs;
+    std::vector<std::int8_t> rule;  // n x n PairRule
+    std::vector<Index> pair_of;  // n x n index into pairs, -1: none
+
+private:
+    bool has_points(const PenaltyPair& p, int side) const {
+        const ContactSide kind = models[p.model[side]].kind;
+        return kind == ContactSide::kTriangle || kind == ContactSide::kLine;
+    }
+    double* force(PenaltyPair& p, int side) {
+        return has_points(p, side) ? p.f[side].data() : models[p.model[side]].external.data();
+    }
+    const double* position(const PenaltyPair& p, int side, const double* const* x) const {
+        return has_points(p, side) ? p.x[side].data() : x[p.model[side]];
+    }
+    // The static side of a contact in a group: its contact points as the response placed them.
+    const double* other_position(const PenaltyPair& p, int side) const {
+        return has_points(p, side) ? p.x[side].data() : static_x_[p.model[side]];
+    }
+    double* scratch(PenaltyPair& p, int side) {
+        p.f[side].assign(static_cast<std::size_t>(3 * models[p.model[side]].points), 0.0);
+        return p.f[side].data();
+    }
+    void zero_other(PenaltyPair& p, int side) {
+        const std::size_t n = has_points(p, side) ? p.x[side].size() : static_cast<std::size_t>(3 * models[p.model[side]].points);
+        p.dx[side].assign(n, 0.0);
+        p.df[side].assign(n, 0.0);
+    }
+
+    void create(Index index) {  // createMapping on side 1, then side 2: the contact-point nodes
+        PenaltyPair& p = pairs[index];
+        p.live = true;
+        for (int s = 0; s < 2; ++s)
+            if (has_points(p, s)) models[p.model[s]].children.push_back(2 * index + s);
+    }
+    void destroy(Index index) {
+        PenaltyPair& p = pairs[index];
+        p.live = false;
+        p.ff.clear();
+        for (int s = 0; s < 2; ++s) {
+            auto& children = models[p.model[s]].children;
+            children.erase(std::remove(children.begin(), children.end(), 2 * index + s), children.end());
+        }
+    }
+
+    ContactSideModel side_model(PenaltyPair& p, int s, const double* x) {
+        PenaltyModel& m = models[p.model[s]];
+        m.sphere.x = x;
+        return ContactSideModel{m.kind, x, m.cells, m.kind == ContactSide::kSphere ? &m.sphere : nullptr,
+                                m.contact_distance, m.contact_stiffness, has_points(p, s) ? &p.points[s] : nullptr};
+    }
+
+    // BarycentricPenalityContact::setDetectionOutputs, then the mappers' update() on positions.
+    void set_outputs(PenaltyPair& p, const double* const* x) {
+        p.dedup.run(p.outputs);
+        set_penalty_contacts(p.outputs, p.dedup, contact_distance_, side_model(p, 0, x[p.model[0]]),
+                             side_model(p, 1, x[p.model[1]]), p.ff);
+        for (int s = 0; s < 2; ++s) {
+            static_x_[p.model[s]] = x[p.model[s]];
+            if (!has_points(p, s)) continue;
+            const std::size_t n = 3 * p.points[s].size();
+            for (auto* v : {&p.x[s], &p.f[s], &p.dx[s], &p.df[s]}) v->resize(n);
+            p.points[s].apply(x[p.model[s]], p.x[s].data());
+        }
+    }
+
+    double alarm_distance_ = 0.0, contact_distance_ = 0.0;
+    int depth_ = 0;
+    std::vector<BroadPhaseModel> broad_;
+    std::vector<Index> broad_pairs_;
+    std::vector<const double*> static_x_;
+    StablePairMap<Index> outputs_map_, contacts_map_;
+};
+
+}  // namespace sofac::collide
+
+namespace sofac {
+
+// The scene's pipelines, in SOFA's order (a CompositeCollisionPipeline's sub-pipelines).
+using ContactPipelines = std::vector<std::unique_ptr<collide::PenaltyContacts>>;
+
+inline void contact_add_force(ContactPipelines& pipelines, Index pipeline, Index model, double* f, const double* x) {
+    pipelines[pipeline]->add_force(model, f, x);
+}
+
+inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
+                               const double* dx, double kfact) {
+    pipelines[pipeline]->add_dforce(model, df, dx, kfact);
+}
+
+}  // namespace sofac

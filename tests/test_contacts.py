@@ -1,0 +1,113 @@
+"""Penalty contact compiled into the step (issue #16): the pair table, where each pair's response
+goes, the numbers against closed forms, and SOFA's regression scenes it unlocks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sofac
+from sofac.diagnostics import SceneError
+from sofac.pipeline import generate, plan_file
+from sofac.regress.suite import Status, run_regression
+
+DATA = Path(__file__).parent / "data"
+FLOOR = DATA / "contact_particle_floor.scn"
+PARTICLES = DATA / "contact_two_particles.scn"
+
+
+@pytest.mark.parametrize(
+    ("scene", "radius"),
+    [(FLOOR, 0.0), (DATA / "contact_sphere_floor.scn", 0.1)],  # MinProximity point, NewProximity sphere
+)
+def test_body_rests_where_the_contact_force_balances_its_weight(scene: Path, radius: float) -> None:
+    """ks = k1 k2 / d, d = the intersection's contactDistance + the sphere's radius (the models add
+    no contactDistance), and the body settles at the height h where ks (d - h) = m g."""
+    sim = sofac.load(scene)
+    sim.step(800)
+    distance = 0.2 + radius
+    ks = 10.0 * 10.0 / distance
+    expected = distance - 1.0 * 9.81 / ks
+    (x, y, z) = sim["/Particle/dofs"].position[0]
+    assert (x, z) == pytest.approx((0.1, -0.2), abs=1e-12)  # the floor pushes along its normal only
+    assert y == pytest.approx(expected, abs=1e-9)
+    assert np.all(sim["/Particle/dofs"].velocity == pytest.approx(0.0, abs=1e-9))
+
+
+def test_two_simulated_particles_bounce_with_momentum_and_energy_kept() -> None:
+    """Two simulated models: one explicit force per step, equal and opposite on both."""
+    sim = sofac.load(PARTICLES)
+    left, right = sim["/Left/dofs"], sim["/Right/dofs"]
+    masses = (1.0, 3.0)
+
+    def momentum() -> np.ndarray:
+        return masses[0] * left.velocity[0] + masses[1] * right.velocity[0]
+
+    def kinetic() -> float:
+        return 0.5 * (
+            masses[0] * left.velocity[0] @ left.velocity[0]
+            + masses[1] * right.velocity[0] @ right.velocity[0]
+        )
+
+    start, energy = momentum(), kinetic()
+    sim.step(1500)
+    assert left.velocity[0][0] < 0 < right.velocity[0][0]  # they met and came apart
+    np.testing.assert_allclose(momentum(), start, atol=1e-14)
+    assert kinetic() == pytest.approx(energy, rel=1e-2)  # elastic, up to the explicit coupling's O(dt)
+
+
+def test_pair_table_and_placement_in_the_effects() -> None:
+    plan = plan_file(FLOOR)
+    assert plan.collisions and plan.contact_guard is None
+    (pair,) = plan.collisions[0].pairs
+    assert plan.collisions[0].tests[pair.test].name == "min_proximity::triangle_point"
+    assert not pair.root  # a static partner: inside the particle's group
+    rows = [e for e in plan.effects if e[0] == "contact pair"]
+    assert len(rows) == 1 and "in the group of the simulated model" in rows[0][2]
+    plan = plan_file(PARTICLES)
+    (pair,) = plan.collisions[0].pairs
+    assert pair.root
+    source = generate(plan)
+    assert source.count("case 0:  // min_proximity::point_point") == 1
+    assert "min_proximity::triangle" not in source  # only the tests the scene has
+
+
+def test_models_that_cannot_meet_get_no_collision_code(tmp_path: Path) -> None:
+    scene = tmp_path / "static.scn"
+    text = FLOOR.read_text().replace("<PointCollisionModel", '<PointCollisionModel group="1"')
+    scene.write_text(text.replace('simulated="0"', 'simulated="0" group="1"'))
+    plan = plan_file(scene)
+    assert plan.collisions and not plan.collisions[0].pairs
+    (left_out,) = plan.collisions[0].left_out
+    assert left_out[2] == "they share a collision group"
+    assert "collide(" not in generate(plan) and "penalty.h" not in generate(plan)
+
+
+def test_alarm_distance_below_contact_distance_is_refused(tmp_path: Path) -> None:
+    scene = tmp_path / "alarm.scn"
+    scene.write_text(FLOOR.read_text().replace('alarmDistance="0.5"', 'alarmDistance="0.1"'))
+    with pytest.raises(SceneError) as error:
+        plan_file(scene)
+    (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E207"]
+    assert (
+        diagnostic.loc.line == 9 and "alarmDistance=0.1 must be >= contactDistance=0.2" in diagnostic.message
+    )
+
+
+# SOFA's regression scenes held together by contacts: they pass only with SOFA's contact order,
+# penalty placement (static partners in the group, simulated pairs explicit) and arithmetic.
+SCENES = [
+    "Component/SolidMechanics/Spring/MeshSpringForceField.scn",  # NewProximity triangle-triangle
+    "Demos/chainHybrid.scn",  # + rigid tori (barycentric contact points on a RigidMapped surface)
+]
+
+
+@pytest.mark.parametrize("scene", SCENES)
+def test_contact_regression_scene_passes(shared_dir: Path, scene: str) -> None:
+    root = shared_dir / "reference" / "sofa-regression"
+    (result,) = run_regression(
+        root / "scenes.regression-tests", shared_dir / "corpus" / "sofa", root, only=[scene]
+    )
+    assert result.status is Status.PASS, (result.status, result.message, result.error)
+    assert result.error is not None and result.error <= result.epsilon
