@@ -130,3 +130,39 @@ def test_a_chain_of_rigid_cubes_holds_its_rigidly_mapped_attachments(corpus_dir:
     assert fastest > 5.0  # rad/s: the cubes turn about their attachments
     # free fall for 40 ms would take a cube 0.78 down; the first one turns about its anchor instead
     assert sim["/CUBE_1/MechanicalObject3"].position[0, 1] > -0.78 / 2
+
+
+@pytest.mark.parametrize(
+    ("solver", "correction", "refused"),
+    [
+        (
+            "UnbuiltGaussSeidelConstraintSolver",
+            "UncoupledConstraintCorrection",
+            "UnbuiltGaussSeidelConstraintSolver",
+        ),
+        ("LCPConstraintSolver", "UncoupledConstraintCorrection", "LCPConstraintSolver"),
+        (
+            "BlockGaussSeidelConstraintSolver",
+            "LinearSolverConstraintCorrection",
+            "LinearSolverConstraintCorrection",
+        ),
+    ],
+)
+def test_what_rows_are_not_compiled_for_is_refused_at_its_line(
+    tmp_path: Path, solver: str, correction: str, refused: str
+) -> None:
+    from sofac.check.checker import check_file
+    from sofac.plan.planner import plan_scene
+
+    text = HANGING.format(solver=solver, iterations=100, tolerance=1e-6, mass=1.0, compliance=1.0)
+    text = text.replace(
+        '<UncoupledConstraintCorrection template="Vec3d" defaultCompliance="1.0"/>', f"<{correction}/>"
+    )
+    path = tmp_path / "refused.scn"
+    path.write_text(text.replace("maxIterations", "maxIt") if solver == "LCPConstraintSolver" else text)
+    checked, _ = check_file(path)
+    assert checked is not None
+    with pytest.raises(sofac.SceneError) as caught:
+        plan_scene(checked)
+    line = next(n for n, row in enumerate(text.splitlines(), start=1) if f"<{refused}" in row)
+    assert f"unsupported component {refused} at line {line}" in str(caught.value)
