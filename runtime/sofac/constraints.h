@@ -675,4 +675,150 @@ inline void uncoupled_correct(double* x, double* v, double* lambda, double* dx, 
     apply_motion_correction<DT>(x, x, v, v, dx, dofs, position_factor, velocity_factor);
 }
 
+// ---- UnbuiltGaussSeidel with uncoupled corrections ---------------------------------------------
+
+// SOFA's Deriv products: Vec: one dot; RigidDeriv: linear dot + angular dot.
+template <class DT>
+inline double deriv_dot(const double* a, const double* b) {
+    if constexpr (DT::rigid && DT::deriv == 6) {
+        return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) + (a[3] * b[3] + a[4] * b[4] + a[5] * b[5]);
+    } else {
+        double sum = 0.0;
+        for (int c = 0; c < DT::deriv; ++c) sum += a[c] * b[c];
+        return sum;
+    }
+}
+
+// UncoupledConstraintCorrection's unbuilt interface: constraint_force and constraint_disp per DOF
+// (resetForUnbuiltResolution, addConstraintDisplacement, setConstraintDForce,
+// getBlockDiagonalCompliance: the raw compliance, without the ODE factor, as SOFA).
+template <class DT>
+struct UnbuiltUncoupled {
+    JacobianRows J;
+    Index dofs;
+    double comp0;
+    const double* comp;
+    Index comp_size;
+    double* force;  // dofs x deriv
+    double* disp;   // dofs x deriv
+
+    Index row_of(Index id) const {  // the position of constraint `id` among the rows, or -1
+        Index low = 0, high = J.rows;
+        while (low < high) {
+            const Index middle = (low + high) / 2;
+            if (J.row_index[middle] < id)
+                low = middle + 1;
+            else
+                high = middle;
+        }
+        return low < J.rows && J.row_index[low] == id && J.start[low] != J.start[low + 1] ? low : -1;
+    }
+    void reset() const {
+        for (Index i = 0; i < DT::deriv * dofs; ++i) force[i] = disp[i] = 0.0;
+    }
+    void add_displacement(double* d, Index first, Index last) const {
+        for (Index id = first; id <= last; ++id) {
+            const Index r = row_of(id);
+            if (r < 0) continue;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+                d[id] += deriv_dot<DT>(J.values + DT::deriv * e, disp + DT::deriv * J.dof[e]);
+        }
+    }
+    void set_force_change(const double* df, Index first, Index last) const {
+        for (Index id = first; id <= last; ++id) {
+            const Index r = row_of(id);
+            if (r < 0) continue;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e) {
+                const Index dof = J.dof[e];
+                for (int c = 0; c < DT::deriv; ++c) force[DT::deriv * dof + c] += J.values[DT::deriv * e + c] * df[id];
+                uncoupled_dx<DT>(disp + DT::deriv * dof, force + DT::deriv * dof, 1, dof < comp_size ? comp[dof] : comp0,
+                                 comp, DT::rigid ? comp_size : 0);
+            }
+        }
+    }
+    void block_compliance(double* W, Index n, Index first, Index last) const {
+        for (Index id1 = first; id1 <= last; ++id1) {
+            const Index r = row_of(id1);
+            if (r < 0) continue;
+            double w = 0.0;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+                w += uncoupled_pair<DT>(J.dof[e], J.values + DT::deriv * e, J.values + DT::deriv * e, comp0, comp,
+                                        comp_size);
+            W[n * id1 + id1] += w;
+            for (Index id2 = id1 + 1; id2 <= last; ++id2) {
+                const Index s = row_of(id2);
+                if (s < 0) continue;
+                double v = 0.0;
+                Index a = J.start[r], b = J.start[s];
+                while (a < J.start[r + 1] && b < J.start[s + 1]) {
+                    if (J.dof[a] < J.dof[b]) {
+                        ++a;
+                    } else if (J.dof[b] < J.dof[a]) {
+                        ++b;
+                    } else {
+                        v += uncoupled_pair<DT>(J.dof[a], J.values + DT::deriv * a, J.values + DT::deriv * b, comp0,
+                                                comp, comp_size);
+                        ++a, ++b;
+                    }
+                }
+                if (v != 0.0) {
+                    W[n * id1 + id2] += v;
+                    W[n * id2 + id1] += v;
+                }
+            }
+        }
+    }
+};
+
+// The corrections of a UGS solve, in the solver's list order: each block's displacements and force
+// changes go to the corrections holding its first row (SOFA's cclist).
+template <class DT, int C>
+struct UnbuiltSet {
+    UnbuiltUncoupled<DT> items[C];
+    void add_displacement(double* d, Index first, Index last) const {
+        for (const auto& item : items)
+            if (item.row_of(first) >= 0) item.add_displacement(d, first, last);
+    }
+    void set_force_change(const double* df, Index first, Index last) const {
+        for (const auto& item : items)
+            if (item.row_of(first) >= 0) item.set_force_change(df, first, last);
+    }
+};
+
+// UnbuiltGaussSeidelConstraintSolver on K blocks with C uncoupled corrections of one DataType:
+// W holds only the blocks' diagonal blocks (raw compliance), forces start from zero.
+template <class DT, int K, class... Items>
+inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double* scratch, Index n, const Index* first,
+                          const Index* kind, const double* parameter, const Index* kept, double* previous,
+                          double max_iterations, double tolerance, double sor, double scale_tolerance,
+                          double all_verified, double* report, double time, const Items&... items) {
+    UnbuiltSet<DT, int(sizeof...(Items))> set{{items...}};
+    RowBlock blocks[K];
+    for (int k = 0; k < K; ++k) {
+        blocks[k].first = first[k];
+        blocks[k].kind = Resolution(kind[k]);
+        blocks[k].parameter = parameter[k];
+        blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
+    }
+    for (const auto& item : set.items) item.reset();
+    for (int k = 0; k < K; ++k) {
+        const Index last = first[k] + resolution_lines(blocks[k].kind) - 1;
+        for (const auto& item : set.items)
+            if (item.row_of(first[k]) >= 0) item.block_compliance(W, n, first[k], last);
+    }
+    ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
+    const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
+                                      all_verified != 0.0};
+    const ConstraintResult result = unbuilt_gauss_seidel(p, settings, set);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (!result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
 }  // namespace sofac

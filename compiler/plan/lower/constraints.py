@@ -173,7 +173,7 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
 BILATERAL_3 = 0
 
 # The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
-_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1}
+_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
 
 
 def _values(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
@@ -315,6 +315,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
         )
     _carry_through_rigid_mappings(planner, phase)
+    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]] = []
     for correction in phase.corrections:
         entries = phase.entries.get(correction.state.ident)
         if entries is None:
@@ -358,6 +359,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
         velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
         t = state.datatype.name
+        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp)))
         phase.compliance.append(
             Op(
                 correction.origin,
@@ -430,6 +432,11 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     )
     if not settings:  # SOFA's default BlockGaussSeidelConstraintSolver
         settings = [1000.0, 0.001, 1.0, 1.0, 0.0, 0.0]
+    if phase.method == "unbuilt_gauss_seidel":
+        _unbuilt_solve(
+            planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
+        )
+        return
     phase.solve.append(
         Op(
             phase.solver or phase.loop,
@@ -451,6 +458,64 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                     *settings,
                     phase.report,
                     Env.TIME,
+                )
+            ],
+        )
+    )
+
+
+def _unbuilt_solve(
+    planner: Planner,
+    phase: ConstraintPhase,
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]],
+    problem: tuple,
+    blocks: tuple,
+) -> None:
+    """UnbuiltGaussSeidelConstraintSolver: W's diagonal blocks from the raw compliances, the
+    displacements through the corrections (no built W: the compliance calls are dropped)."""
+    phase.compliance.clear()
+    types = {t for t, *_ in items}
+    solver = getattr(planner, "constraint_solver", None)
+    if len(types) != 1 or (
+        solver is not None and float(planner.value(solver.component, "regularizationTerm")) > 0
+    ):
+        if solver is not None:
+            planner.unsupported(
+                solver,
+                "on constraint rows it is compiled for corrections of one DataType, without regularization",
+            )
+        return
+    (t,) = types
+    aggregates = []
+    for _, J, state, comp0, comp, size in items:
+        zeros = np.zeros_like(state.v.initial)
+        force = planner.buffer(
+            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
+        )
+        disp = planner.buffer(
+            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
+        )
+        aggregates.append(
+            Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        )
+    settings = [
+        Element(phase.settings[name])
+        for name in ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified")
+    ]
+    assert phase.kept is not None
+    phase.solve.append(
+        Op(
+            phase.solver,
+            [
+                call(
+                    kernel("solve_unbuilt", t, len(phase.blocks)),
+                    *problem,
+                    *blocks,
+                    phase.kept,
+                    *settings,
+                    phase.report,
+                    Env.TIME,
+                    *aggregates,
                 )
             ],
         )
