@@ -20,6 +20,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "ContactNotCompiled",
+    "ContactWarning",
     "InvalidParameter",
     "SceneError",
     "SceneWarning",
@@ -38,6 +39,7 @@ _LAZY = {
     "SceneError": "diagnostics",
     "SofacError": "diagnostics",
     "ContactNotCompiled": "simulation.loader",
+    "ContactWarning": "simulation.loader",
     "Simulation": "simulation.loader",
     "SimulationDiverged": "simulation.loader",
     "load": "pipeline",

@@ -9,7 +9,6 @@ A miss names the closest paths (did you mean ...?) and lists them all.
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Iterable
 
 
@@ -51,6 +50,8 @@ def resolve(text: object, keys: Iterable[str], what: str) -> str:
         raise UnknownPath(
             f"{text!r} is ambiguous: it names the {what}s {', '.join(found)}; give a longer path", text
         )
+    import difflib  # only a miss needs it
+
     close = difflib.get_close_matches("/" + text.strip().lstrip("/"), keys, n=3, cutoff=0.6)
     if not close:  # a short form: compare the last segments
         ends = {k.rsplit("/", 1)[-1]: k for k in keys}

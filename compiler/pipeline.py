@@ -16,8 +16,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from sofac import param_rules, scene_warnings
-from sofac.diagnostics import Diagnostics, SceneError, SofacError
+from sofac.diagnostics import Diagnostic, Diagnostics, SceneError, SofacError
 
 if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (not for warm loads)
     from sofac.check.checker import CheckedScene
@@ -79,6 +78,8 @@ def add_compile_refusals(checked: CheckedScene | None, diagnostics: Diagnostics)
 
 def plan_file(path: str | Path, *, data_roots: Sequence[Path] = (), threads: int = 1) -> Plan:
     """Check and plan a scene file, issuing its warnings (SceneWarning)."""
+    from sofac import scene_warnings
+
     checked, diagnostics = check_file(path, data_roots=data_roots)
     scene_warnings.issue(diagnostics.sorted())
     return plan_checked(checked, diagnostics, threads=threads)
@@ -101,6 +102,7 @@ def compile_checked(
     interactive: bool = False,
 ) -> Compiled:
     """Plan, generate and build a checked scene (the build may come from the cache)."""
+    from sofac import param_rules, scene_warnings
     from sofac.build import compiler as build
     from sofac.simulation.loader import Compiled
     from sofac.simulation.runspec import run_spec
@@ -144,7 +146,7 @@ def compile_scene(
         interactive=interactive,
         strict=strict,
     )
-    scene_warnings.issue(compiled.warnings, strict=strict)
+    _issue(compiled.warnings, strict)
     return compiled
 
 
@@ -156,8 +158,19 @@ def _compile_scene(
     _check_data_roots(data_roots)
     checked, diagnostics = check_file(path, data_roots=data_roots)
     if strict:
+        from sofac import scene_warnings
+
         scene_warnings.issue(diagnostics, strict=True)
     return compile_checked(checked, diagnostics, **options)
+
+
+def _issue(warnings: Sequence[Diagnostic], strict: bool) -> None:
+    """Issue a scene's warnings as SceneWarning, attributed to the caller of load() or
+    compile_scene(); the module is imported only when there are some (a warm load stays light)."""
+    if warnings:
+        from sofac import scene_warnings
+
+        scene_warnings.issue(warnings, strict=strict, stacklevel=3)
 
 
 def _check_data_roots(data_roots: Sequence[Path]) -> None:
@@ -214,7 +227,7 @@ def load(
         sim = _load_python_scene(path, options)
     else:
         compiled = _warm_or_built(path, options, lambda: _compile_scene(path, strict=strict, **options))
-        scene_warnings.issue(compiled.warnings, strict=strict)
+        _issue(compiled.warnings, strict)
         sim = compiled.instantiate()
     sim.load_seconds = time.perf_counter() - started  # type: ignore[attr-defined]
     if dt is not None:
@@ -248,11 +261,18 @@ def _warm_or_built(path: str | Path, options: dict[str, Any], build: Callable[[]
     if record is not None:
 
         def recompute() -> Compiled:
+            from sofac import scene_warnings
+
             with scene_warnings.quiet():  # issued by load(), from the record
                 return build()
 
         return Compiled(
-            record.spec, record.built, recompute=recompute, rebuild=_rebuild, warnings=record.warnings
+            record.spec,
+            record.built,
+            recompute=recompute,
+            rebuild=_rebuild,
+            warnings=record.warnings,
+            known_host=record.host,
         )
     compiled = build()
     warm.store(path, compiled.spec, compiled.built, compiled.checked, warnings=compiled.warnings, **options)

@@ -1,7 +1,12 @@
-"""Print the README's "Corpus status" section: how the SOFA corpus fares under ``sofac check``.
+"""Print the "Corpus status" section of docs/components.md: how the SOFA corpus fares under ``sofac check``.
 
     python scripts/corpus_status.py                  # print the section (Markdown)
-    python scripts/corpus_status.py --update-readme  # rewrite it in README.md, between the markers
+    python scripts/corpus_status.py --update-readme  # rewrite it in docs/components.md, between the markers
+    python scripts/corpus_status.py --all [--run N] [--tree DIR]
+        # every scene of the corpus (or of DIR, e.g. SOFA's whole examples/ tree): how many check
+        # clean, fail only on unsupported components (which, by frequency) or with other errors;
+        # with --run, the clean ones are also compiled and run N steps (compiled and finite,
+        # refused at compile time, diverged, internal error)
 
 Reads ``shared/corpus/sofa`` (``../shared`` beside the checkout, else ``$SOFAC_SHARED``): the 126
 scenes of its ``manifest.json`` are classified as clean (no errors), failing only with unsupported
@@ -24,12 +29,14 @@ from pathlib import Path
 import sofac
 from sofac import registry
 from sofac.check.checker import check_file
-from sofac.diagnostics import Diagnostic, Diagnostics
+from sofac.cli.main import find_scenes
+from sofac.diagnostics import Diagnostic, Diagnostics, SceneError
 from sofac.front.parse import parse_scene
-from sofac.pipeline import add_compile_refusals
+from sofac.pipeline import add_compile_refusals, compile_scene
+from sofac.simulation.loader import SimulationDiverged
 
 REPO = Path(__file__).resolve().parents[1]
-README = REPO / "README.md"
+README = REPO / "docs" / "components.md"  # the page that holds the section
 BEGIN, END = "<!-- corpus-status -->", "<!-- /corpus-status -->"
 _FILE_IN_MESSAGE = re.compile(r"file '([^']*)' not found")
 # What the diagnostics alone do not say about some scenes (printed only while they still fail).
@@ -201,6 +208,94 @@ def render(shared: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
+def run_outcome(path: Path, steps: int) -> str:
+    """Compile a scene that checks clean and run it: "runs" (finite after ``steps`` steps),
+    "refused EXXX" (the compile stopped with a diagnostic), "diverged", or "internal: ..."."""
+    try:
+        sim = compile_scene(path).instantiate()
+        sim.step(steps)
+    except SceneError as error:
+        codes = sorted({d.code for d in error.diagnostics if d.severity.name == "ERROR"})
+        return "refused " + ",".join(codes or ["?"])
+    except SimulationDiverged:
+        return "diverged"
+    except Exception as error:  # an internal error is what this report looks for
+        return f"internal: {type(error).__name__}: {error}".splitlines()[0][:160]
+    return "runs"
+
+
+def render_tree(tree: Path, steps: int | None) -> str:
+    """The whole-tree report: every scene ``find_scenes`` finds under ``tree``."""
+    scenes = sorted(find_scenes([str(tree)]))
+    kinds: Counter[str] = Counter()
+    blockers: Counter[str] = Counter()
+    other: list[str] = []
+    clean: list[Path] = []
+    for path in scenes:
+        name = path.relative_to(tree).as_posix()
+        try:
+            checked, diags = check_file(path)
+            add_compile_refusals(checked, diags)
+        except Exception as error:  # reported, not raised: the report goes on
+            kinds["internal error in check"] += 1
+            other.append(f"- `{name}`: internal error in check: {type(error).__name__}: {error}")
+            continue
+        errors = diags.errors
+        if not errors:
+            kinds["clean"] += 1
+            clean.append(path)
+            continue
+        codes = {d.code for d in errors}
+        blockers.update(
+            {m.group(1) for d in errors if d.code == "E222" if (m := _UNSUPPORTED.search(d.message))}
+        )
+        if codes == {"E222"}:
+            kinds["unsupported"] += 1
+        else:
+            kinds["other"] += 1
+            first = next(d for d in errors if d.code != "E222")
+            other.append(f"- `{name}`: {first.code} line {first.loc.line}: {first.message}")
+    lines = [
+        f"`python scripts/corpus_status.py --all{f' --run {steps}' if steps else ''}` on the "
+        f"{len(scenes)} scenes of `{tree}` (sofac {sofac.__version__}):",
+        "",
+        "| `sofac check` result | scenes |",
+        "| --- | ---: |",
+        f"| clean: no errors (warnings allowed) | {kinds['clean']} |",
+        f"| errors, all of them unsupported components (E222) | {kinds['unsupported']} |",
+        f"| other errors | {kinds['other']} |",
+    ]
+    if kinds["internal error in check"]:
+        lines.append(f"| internal error in check | {kinds['internal error in check']} |")
+    if steps:
+        outcomes: Counter[str] = Counter()
+        not_running: list[str] = []
+        for path in clean:
+            outcome = run_outcome(path, steps)
+            print(f"{outcome}\t{path.relative_to(tree).as_posix()}", file=sys.stderr, flush=True)  # progress
+            outcomes[outcome.split(":")[0] if outcome.startswith("internal") else outcome] += 1
+            if outcome != "runs":
+                not_running.append(f"- `{path.relative_to(tree).as_posix()}`: {outcome}")
+        lines += ["", f"Of the {len(clean)} clean scenes, run {steps} steps each:", ""]
+        lines += ["| outcome | scenes |", "| --- | ---: |"]
+        lines += [f"| {outcome} | {count} |" for outcome, count in sorted(outcomes.items())]
+        if not_running:
+            lines += ["", "Clean scenes that do not run:", "", *not_running]
+    lines += [
+        "",
+        "Unsupported components (E222), by the number of scenes they block: "
+        + ", ".join(f"`{n}` ({c})" for n, c in sorted(blockers.items(), key=lambda x: (-x[1], x[0])))
+        + ".",
+    ]
+    if other:
+        lines += ["", "Scenes with other errors (the first one):", "", *other]
+    return "\n".join(lines) + "\n"
+
+
+# The component an E222 names: "unsupported component NAME at line N".
+_UNSUPPORTED = re.compile(r"unsupported component (\S+) at line")
+
+
 def update_readme(section: str, readme: Path = README) -> None:
     text = readme.read_text(encoding="utf-8")
     block = f"{BEGIN}\n{section}{END}\n\n"
@@ -213,10 +308,24 @@ def update_readme(section: str, readme: Path = README) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Print (or update) the README's corpus status section.")
+    parser = argparse.ArgumentParser(
+        description="Print (or update) the corpus status section of docs/components.md."
+    )
     parser.add_argument("--update-readme", action="store_true", help=f"rewrite the section in {README.name}")
+    parser.add_argument("--all", action="store_true", help="report on every scene of the corpus (or --tree)")
+    parser.add_argument("--tree", type=Path, help="with --all: the folder to search instead of the corpus")
+    parser.add_argument(
+        "--run", type=int, metavar="N", help="with --all: compile the clean scenes and run N steps"
+    )
     args = parser.parse_args(argv)
     shared = find_shared()
+    if args.all:
+        tree = args.tree or (shared / "corpus" / "sofa" if shared else None)
+        if tree is None or not tree.is_dir():
+            print("corpus_status: no folder to report on (set SOFAC_SHARED or pass --tree)", file=sys.stderr)
+            return 2
+        sys.stdout.write(render_tree(tree, args.run))
+        return 0
     if shared is None:
         print("corpus_status: shared/corpus/sofa not found (set SOFAC_SHARED)", file=sys.stderr)
         return 2

@@ -9,6 +9,11 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Demos/caduceus_penalty.scn": "SparseGridRamificationTopology",
     # rendering only: accepted and left out of the step (issue 19)
     "Component/Visual/RecordedCamera.scn": "RecordedCamera",
+    # compiled since issue 19 (comp19)
+    "Component/LinearSolver/Direct/FEMBAR_SVDLinearSolver.scn": "SVDLinearSolver",
+    "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
+        "LinearMovementProjectiveConstraint"
+    ),
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others

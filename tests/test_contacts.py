@@ -35,6 +35,25 @@ def test_body_rests_where_the_contact_force_balances_its_weight(scene: Path, rad
     assert np.all(sim["/Particle/dofs"].velocity == pytest.approx(0.0, abs=1e-9))
 
 
+def test_a_direct_solver_assembles_the_contact_stiffness(tmp_path: Path) -> None:
+    """The particle on the floor with SparseLDLSolver: the contact's -ks n n^T enters the assembled
+    matrix; the trajectory is CG's (converged to 1e-12) to round-off, and it settles at the same height."""
+    cg = sofac.load(FLOOR)
+    scene = tmp_path / "ldl.scn"
+    scene.write_text(
+        FLOOR.read_text().replace(
+            '<CGLinearSolver iterations="50" tolerance="1e-12" threshold="1e-20"/>', "<SparseLDLSolver/>"
+        )
+    )
+    ldl = sofac.load(scene)
+    for _ in range(8):
+        cg.step(50)
+        ldl.step(50)
+        np.testing.assert_allclose(
+            ldl["/Particle/dofs"].position, cg["/Particle/dofs"].position, rtol=0, atol=1e-9
+        )
+
+
 def test_two_simulated_particles_bounce_with_momentum_and_energy_kept() -> None:
     """Two simulated models: one explicit force per step, equal and opposite on both."""
     sim = sofac.load(PARTICLES)
@@ -100,6 +119,10 @@ def test_alarm_distance_below_contact_distance_is_refused(tmp_path: Path) -> Non
 SCENES = [
     "Component/SolidMechanics/Spring/MeshSpringForceField.scn",  # NewProximity triangle-triangle
     "Demos/chainHybrid.scn",  # + rigid tori (barycentric contact points on a RigidMapped surface)
+    # two SubCollisionPipelines; NewProximity sphere (IdentityMapping Rigid3d -> Vec3d) vs triangles,
+    # lines and points of static tori
+    "Component/Collision/Detection/CompositeCollisionPipeline.scn",
+    "Demos/collisionMultiple.scn",  # MinProximity; spring grids onto a static floor after ~65 steps
 ]
 
 

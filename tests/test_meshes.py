@@ -884,8 +884,8 @@ def test_rigid_errors(tmp_path: Path, text: str, line: int, match: str) -> None:
 
 
 def test_unknown_extension_names_supported(tmp_path: Path) -> None:
-    path = write(tmp_path, "a.stl", "solid x\n")
-    with pytest.raises(MeshError, match=r"\.stl.*supported: \.obj, \.msh, \.vtu, \.vtk, \.sph"):
+    path = write(tmp_path, "a.ply", "ply\n")
+    with pytest.raises(MeshError, match=r"\.ply.*supported: \.obj, \.msh, \.vtu, \.vtk, \.sph, \.stl"):
         read_mesh(path)
     with pytest.raises(MeshError, match="supported"):
         count_points(path)

@@ -25,6 +25,8 @@ from sofac.plan.ir import (
     Count,
     Env,
     Offset,
+    SpringDamping,
+    SpringFlags,
     as_json,
     bind,
     buffers_of,
@@ -139,10 +141,12 @@ def _buffer(ident: str) -> Buffer:
 def test_calls_are_spelled_out_only_by_codegen() -> None:
     x, y, table = _buffer("b1_x"), _buffer("b2_y"), _buffer("b3_t")
     springs = Aggregate("Springs", (table, Count(table, 2), 4))
-    item = call(kernel("spring_forces", "Vec3d", "Rigid3d", True, False), springs, x, y, Env.NONE)
+    variant = (SpringDamping.DAMPED, SpringFlags.NONE)
+    item = call(kernel("spring_forces", "Vec3d", "Rigid3d", *variant), springs, x, y, Env.NONE)
     assert buffers_of([item]) == {"b1_x", "b2_y", "b3_t"}
     assert statement(item) == (
-        "sofac::spring_forces<sofac::Vec3d, sofac::Rigid3d, true, false>("
+        "sofac::spring_forces<sofac::Vec3d, sofac::Rigid3d, sofac::SpringDamping::Damped, "
+        "sofac::SpringFlags::None>("
         "sofac::Springs{S.b3_t.data(), Index(S.b3_t.size() / 2), 4}, S.b1_x.data(), S.b2_y.data(), nullptr);"
     )
     energy = call("spring_energy", x, np.float64(0.5), np.int64(3), into=Env.POTENTIAL)
@@ -163,3 +167,13 @@ def test_calls_are_spelled_out_only_by_codegen() -> None:
 def test_cpp_text_is_refused_as_an_argument() -> None:
     with pytest.raises(TypeError, match="not a plan argument"):
         call("mass_gravity", "S.b1_x.data()")
+
+
+def test_a_rest_position_no_call_reads_is_not_allocated() -> None:
+    from sofac.pipeline import plan_file
+
+    oscillator = {b.key for b in plan_file(REPO / "scenes" / "oscillator.scn").buffers}
+    assert "/oscillator/dofs.position" in oscillator
+    assert "/oscillator/dofs.rest_position" not in oscillator  # springs and a mass: nobody reads it
+    liver = {b.key for b in plan_file(REPO / "scenes" / "liver.scn").buffers}
+    assert "/Liver/dofs.rest_position" in liver  # TetrahedronFEMForceField's init reads it

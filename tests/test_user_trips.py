@@ -845,20 +845,6 @@ def test_accuracy_prints_the_warnings(tmp_path: Path, capsys: pytest.CaptureFixt
     assert W203.search(capsys.readouterr().err)
 
 
-# --- docs/running.md: its examples run -----------------------------------------------------------
-
-
-def test_the_running_page_examples_run(monkeypatch: pytest.MonkeyPatch) -> None:
-    root = Path(__file__).resolve().parents[1]
-    page = (root / "docs" / "running.md").read_text()
-    blocks = re.findall(r"```python\n(.*?)```", page, re.S)
-    assert len(blocks) >= 4
-    monkeypatch.chdir(root)
-    namespace: dict[str, object] = {}
-    for block in blocks:
-        exec(compile(block, "docs/running.md", "exec"), namespace)  # the page's own examples
-
-
 def test_a_huge_string_of_points_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "s.scn"
     path.write_text(

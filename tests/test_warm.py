@@ -69,15 +69,32 @@ def test_a_second_load_is_warm_and_steps_the_same(tmp_path: Path) -> None:
 def test_the_warm_path_imports_no_front_end(tmp_path: Path) -> None:
     path = liver(tmp_path)
     sofac.load(path)  # writes the record
+    # Nor what only a compile, a build, a warning or a mistyped path needs: each module costs a warm
+    # load its import (and, without bytecode files, its compilation). No subprocess: the host
+    # module's entry comes from the record, so the compiler is not run for its version line.
     probe = (
         "import sys, sofac\n"
         f"sim = sofac.load({str(path)!r})\n"
         "front = sorted(m for m in ('lxml', 'jinja2', 'sofac.front.parse', 'sofac.check.checker',"
-        " 'sofac.plan.planner', 'sofac.codegen.cpp') if m in sys.modules)\n"
+        " 'sofac.plan.planner', 'sofac.codegen.cpp', 'subprocess', 'sofac.build.guard', 'pybind11',"
+        " 'sofac.scene_warnings', 'difflib') if m in sys.modules)\n"
         "print(sim.compiled.warm, front)\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "True []"
+
+
+def test_a_record_names_the_host_module_and_a_stale_host_entry_is_ignored(tmp_path: Path) -> None:
+    from sofac.simulation import loader
+
+    path = liver(tmp_path)
+    sofac.load(path)
+    record = warm.lookup(path, data_roots=(), prune=True, rigid_model="sofa", threads=1)
+    loaded = loader.host_built()
+    assert record is not None and record.host is not None and loaded is not None
+    assert (record.host.library, record.host.key) == (loaded.library, loaded.key)
+    assert warm._host([str(tmp_path / "gone" / "_sofac_host.so"), "0" * 64]) is None
+    assert warm._host(None) is None
 
 
 def test_an_edited_attribute_is_a_miss(tmp_path: Path) -> None:

@@ -21,19 +21,14 @@ import json
 import os
 import platform
 import shutil
-import subprocess
 import sys
-import sysconfig
 import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import platformdirs
-
 from sofac import __version__
-from sofac.build import guard as build_guard
 from sofac.cache_errors import CacheNotWritable
 from sofac.diagnostics import SofacError
 from sofac.resources import cache_dir, resource_dir
@@ -120,6 +115,8 @@ def compiler() -> str:
 
 @functools.lru_cache(maxsize=4)
 def _compiler_identity(command: str) -> str:
+    import subprocess  # only a key computed afresh runs the compiler (a warm load does not)
+
     try:
         result = subprocess.run(
             [command, "--version"], capture_output=True, text=True, timeout=60, check=False
@@ -213,7 +210,10 @@ def _build(
     entry = root / key[:2] / key
     if valid_entry(entry, key, name):
         return Built(entry / name, key, True, 0.0)
+    import subprocess
+
     import filelock  # only a build takes the lock: a cached entry loads without importing it
+    from sofac.build import guard as build_guard
 
     (root / "locks").mkdir(parents=True, exist_ok=True)
     with filelock.FileLock(str(root / "locks" / f"{key}.lock"), timeout=600):
@@ -299,6 +299,8 @@ def build_scene(source: str, *, direct_solver: bool = False, numbers: int = 0, o
 def build_host(*, quiet: bool = False) -> Built:
     """The pybind11 host module, compiled once per installation (per compiler and Python; setup.sh
     builds it). Its compilation takes a while, so it is announced on stderr unless ``quiet``."""
+    import sysconfig
+
     import pybind11
 
     source = (resource_dir("runtime") / "host" / "host.cpp").read_text()

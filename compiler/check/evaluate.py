@@ -185,20 +185,105 @@ def grid(ctx: Context) -> Outputs:
             "xmin" if legacy else "min",
             code="E206",
         )
-    cells = _grid_cells(counts)
-    if "quads" in cells and ctx.value("computeTriangleList") is not False:
-        # A 2-D grid: SOFA's GridUpdate also splits each quad (q0 q1 q2) (q0 q2 q3) and, from those
-        # triangles, derives the edges.
-        quads = cells["quads"].reshape(-1, 4)
-        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
-        cells["triangles"] = triangles.ravel()
-        if ctx.value("computeEdgeList") is not False:
-            cells["edges"] = triangle_edges(triangles).ravel()
+    cells = _grid_update(counts, {flag: ctx.value(flag) is not False for flag in _GRID_FLAGS})
     return {
         "position": points.ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
         **cells,
+    }
+
+
+def cube_topology(ctx: Context) -> Outputs:
+    """CubeTopology (without splitNormals): the points of the box's surface (all grid points with
+    internalPoints, or when an axis has one point), p0 + i dx + j dy + k dz, numbered as
+    SOFA's getPoint; its edges along the surface and its quads, in SOFA's order (updateEdges/updateQuads)."""
+    n = [
+        int(_numbers(ctx, name, 1, integer=True)[0]) if ctx.is_set(name) else 0 for name in ("nx", "ny", "nz")
+    ]
+    if ctx.value("splitNormals"):
+        return {}
+    if any(c < 1 for c in n):
+        raise EvaluationError(f"CubeTopology resolution {n} must be >= 1 per axis", "nx", code="E207")
+    refused = limits.too_many_points(n)
+    if refused:
+        raise EvaluationError(f"cube resolution {refused}", "nx", code="E207")
+    nx, ny, nz = n
+    legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
+    if all(ctx.is_set(name) for name in legacy_bounds):
+        # SOFA's parse reads them (and scale) as single-precision floats, multiplied in float
+        scale = np.float32(_numbers(ctx, "scale", 1)[0]) if ctx.is_set("scale") else np.float32(1.0)
+        bounds = [float(np.float32(np.float32(_numbers(ctx, b, 1)[0]) * scale)) for b in legacy_bounds]
+        low, high = bounds[:3], bounds[3:]
+    else:
+        low = [float(v) for v in _numbers(ctx, "min", 3)]
+        high = [float(v) for v in _numbers(ctx, "max", 3)]
+    step = [(high[k] - low[k]) / (n[k] - 1) if n[k] > 1 else 0.0 for k in range(3)]
+    surface = not ctx.value("internalPoints") and nx > 1 and ny > 1 and nz > 1
+
+    def index(x: int, y: int, z: int) -> int:  # CubeTopology::point
+        if not surface:
+            return x + nx * (y + ny * z)
+        if z == 0:
+            return x + nx * y
+        if z == nz - 1:
+            return x + nx * (y + ny)
+        base = nx * ny * 2 + (2 * nx + 2 * ny - 4) * (z - 1)
+        if y == 0:
+            return base + x
+        if y == ny - 1:
+            return base + x + nx
+        if x == 0:
+            return base + 2 * nx + (y - 1)
+        return base + 2 * nx + (ny - 2) + (y - 1)
+
+    count = nx * ny * 2 + (nz - 2) * (2 * nx + 2 * ny - 4) if surface else nx * ny * nz
+    points = np.zeros((count, 3))
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if surface and 0 < z < nz - 1 and 0 < y < ny - 1 and 0 < x < nx - 1:
+                    continue
+                points[index(x, y, z)] = [low[k] + step[k] * (x, y, z)[k] for k in range(3)]
+    edges = []
+    for z in range(nz):
+        for y in range(ny):
+            for x in range(nx):
+                if x < nx - 1 and (y in (0, ny - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x + 1, y, z)))
+                if y < ny - 1 and (x in (0, nx - 1) or z in (0, nz - 1)):
+                    edges.append((index(x, y, z), index(x, y + 1, z)))
+                if z < nz - 1 and (x in (0, nx - 1) or y in (0, ny - 1)):
+                    edges.append((index(x, y, z), index(x, y, z + 1)))
+    quads = []
+    for y in range(ny - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, y, 0), index(x, y + 1, 0), index(x + 1, y + 1, 0), index(x + 1, y, 0)))
+    if nz > 1:
+        for y in range(ny - 1):
+            for x in range(nx - 1):
+                z = nz - 1
+                quads.append((index(x, y, z), index(x + 1, y, z), index(x + 1, y + 1, z), index(x, y + 1, z)))
+    for z in range(nz - 1):
+        for x in range(nx - 1):
+            quads.append((index(x, 0, z), index(x + 1, 0, z), index(x + 1, 0, z + 1), index(x, 0, z + 1)))
+    if ny > 1:
+        for z in range(nz - 1):
+            for x in range(nx - 1):
+                y = ny - 1
+                quads.append((index(x, y, z), index(x, y, z + 1), index(x + 1, y, z + 1), index(x + 1, y, z)))
+    for z in range(nz - 1):
+        for y in range(ny - 1):
+            quads.append((index(0, y, z), index(0, y, z + 1), index(0, y + 1, z + 1), index(0, y + 1, z)))
+    if nx > 1:
+        for z in range(nz - 1):
+            for y in range(ny - 1):
+                x = nx - 1
+                quads.append((index(x, y, z), index(x, y + 1, z), index(x, y + 1, z + 1), index(x, y, z + 1)))
+    return {
+        "position": points.ravel(),
+        "edges": np.asarray(edges, dtype=np.int64).reshape(-1),
+        "quads": np.asarray(quads, dtype=np.int64).reshape(-1),
     }
 
 
@@ -209,6 +294,71 @@ def triangle_edges(triangles: np.ndarray) -> np.ndarray:
     keys = np.sort(ends, axis=1)
     _, first = np.unique(keys, axis=0, return_index=True)
     return ends[np.sort(first)]
+
+
+_GRID_FLAGS = ("computeHexaList", "computeQuadList", "computeTriangleList", "computeEdgeList")
+
+
+def _grid_update(counts: np.ndarray, flags: dict[str, bool]) -> dict[str, np.ndarray]:
+    """The elements SOFA's GridTopology::GridUpdate makes, in its order, for a grid of any
+    dimension: hexahedra; quads in the XY, then XZ, then YZ planes; triangles (q0 q1 q2) (q0 q2 q3)
+    of each quad (made from the quads even without computeQuadList); edges from those triangles as
+    createEdgeSetArray does, or, without triangles, the grid lines along X, then Y, then Z."""
+    nx, ny, nz = (int(c) for c in counts)
+
+    def point(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+        return x + nx * (y + ny * z)
+
+    def lattice(sx: int, sy: int, sz: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x fastest, then y, then z: SOFA's loops over x < sx, y < sy, z < sz."""
+        z, y, x = np.meshgrid(
+            np.arange(max(sz, 0)), np.arange(max(sy, 0)), np.arange(max(sx, 0)), indexing="ij"
+        )
+        return x.ravel(), y.ravel(), z.ravel()
+
+    cells: dict[str, np.ndarray] = {}
+    if flags["computeHexaList"]:
+        x, y, z = lattice(nx - 1, ny - 1, nz - 1)
+        corners = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
+        if len(x):
+            cells["hexahedra"] = np.stack([point(x + a, y + b, z + c) for a, b, c in corners], axis=1).ravel()
+    quads = np.zeros((0, 4), dtype=np.int64)
+    if flags["computeQuadList"] or flags["computeTriangleList"]:
+        planes = []
+        x, y, z = lattice(nx - 1, ny - 1, nz)  # XY
+        planes.append(
+            np.stack([point(x, y, z), point(x + 1, y, z), point(x + 1, y + 1, z), point(x, y + 1, z)], 1)
+        )
+        x, y, z = lattice(nx - 1, ny, nz - 1)  # XZ
+        planes.append(
+            np.stack([point(x, y, z), point(x + 1, y, z), point(x + 1, y, z + 1), point(x, y, z + 1)], 1)
+        )
+        x, y, z = lattice(nx, ny - 1, nz - 1)  # YZ
+        planes.append(
+            np.stack([point(x, y, z), point(x, y + 1, z), point(x, y + 1, z + 1), point(x, y, z + 1)], 1)
+        )
+        quads = np.concatenate(planes).astype(np.int64).reshape(-1, 4)
+        if len(quads):
+            cells["quads"] = quads.ravel()
+    triangles = np.zeros((0, 3), dtype=np.int64)
+    if flags["computeTriangleList"] and len(quads):
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+        cells["triangles"] = triangles.ravel()
+    if flags["computeEdgeList"]:
+        if len(triangles):
+            edges = triangle_edges(triangles)
+        else:
+            lines = []
+            x, y, z = lattice(nx - 1, ny, nz)
+            lines.append(np.stack([point(x, y, z), point(x + 1, y, z)], 1))
+            x, y, z = lattice(nx, ny - 1, nz)
+            lines.append(np.stack([point(x, y, z), point(x, y + 1, z)], 1))
+            x, y, z = lattice(nx, ny, nz - 1)
+            lines.append(np.stack([point(x, y, z), point(x, y, z + 1)], 1))
+            edges = np.concatenate(lines).astype(np.int64).reshape(-1, 2)
+        if len(edges):
+            cells["edges"] = edges.ravel()
+    return {kind: np.asarray(value, dtype=np.int64) for kind, value in cells.items()}
 
 
 def _grid_cells(counts: np.ndarray) -> dict[str, np.ndarray]:
@@ -465,6 +615,31 @@ def tetra_to_triangle(ctx: Context) -> Outputs:
     return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
 
 
+def quad_to_triangle(ctx: Context) -> Outputs:
+    """Quad2TriangleTopologicalMapping: two triangles per input quad (p1 p2 p0) (p3 p0 p2), or with
+    ``swapping`` on the quads where (i mod s) xor (i div s) is odd, (p0 p1 p3) (p2 p3 p1); s is the
+    grid's nx - 1 (ny - 1 when nx is 1), 2 when the input is not a grid (SOFA's init)."""
+    quads = ctx.linked("input", "quads")
+    if quads is None or not np.size(quads):
+        raise UnknownInput("the input topology's quads are not known at compile time")
+    cells = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    resolution = ctx.linked("input", "resolution")
+    nx, ny = (int(resolution[0]) - 1, int(resolution[1]) - 1) if resolution is not None else (2, 1)
+    if nx == 0 and ny == 0:
+        raise EvaluationError(
+            "the input grid has one point along x and y: SOFA's Quad2TriangleTopologicalMapping is "
+            "invalid for it",
+            "input",
+            code="E207",
+        )
+    scale = nx if nx else ny
+    index = np.arange(len(cells))
+    swapped = (((index % scale) ^ (index // scale)) & 1).astype(bool) & bool(ctx.value("swapping"))
+    straight = np.stack([cells[:, [1, 2, 0]], cells[:, [3, 0, 2]]], axis=1)
+    turned = np.stack([cells[:, [0, 1, 3]], cells[:, [2, 3, 1]]], axis=1)
+    return {"triangles": np.where(swapped[:, None, None], turned, straight).reshape(-1)}
+
+
 def hexa_to_quad(ctx: Context) -> Outputs:
     """Hexa2QuadTopologicalMapping: the boundary quads of the input hexahedra, outward."""
     from sofac.geometry.fem_topology import HEXA_FACES
@@ -488,6 +663,27 @@ def _tetrahedral_container_edges(tetrahedra: np.ndarray) -> np.ndarray:
                 seen.add(key)
                 edges.append(key)
     return np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+
+
+# MergeVectors' input Data the registry declares (SOFA creates nbInputs of them).
+_MERGE_INPUTS = 8
+
+
+def merge_vectors(ctx: Context) -> Outputs:
+    """MergeVectors: input1, ..., input<nbInputs> one after the other (an unset input is empty)."""
+    count = int(ctx.value("nbInputs") or 0)
+    if count > _MERGE_INPUTS:
+        raise EvaluationError(
+            f"nbInputs={count}: sofac evaluates MergeVectors with at most {_MERGE_INPUTS} inputs",
+            "nbInputs",
+            code="E222",
+        )
+    parts = []
+    for i in range(1, count + 1):
+        value = ctx.value(f"input{i}")
+        if value is not None and np.size(value):
+            parts.append(np.asarray(value).ravel())
+    return {"output": np.concatenate(parts) if parts else np.zeros(0)}
 
 
 def transform_engine(ctx: Context) -> Outputs:
@@ -588,6 +784,9 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "quad_to_triangle": quad_to_triangle,
+    "merge_vectors": merge_vectors,
+    "cube_topology": cube_topology,
     "sparse_grid": sparse_grid,
     "sparse_grid_ramification": sparse_grid_ramification,
     "box_roi": box_roi,

@@ -44,6 +44,8 @@ from sofac.plan.ir import (
     Plan,
     Projection,
     Slot,
+    SpringDamping,
+    SpringFlags,
     Statement,
     StatePlan,
     TemplateArg,
@@ -93,6 +95,8 @@ def _template(arg: TemplateArg) -> str:
         return "true" if arg else "false"
     if isinstance(arg, Constant):
         return _CONSTANTS[arg]
+    if isinstance(arg, (SpringDamping, SpringFlags)):
+        return f"sofac::{type(arg).__name__}::{arg.value}"
     if isinstance(arg, int):
         return str(arg)
     return cpp_type(arg)
@@ -193,11 +197,15 @@ def _headers(plan: Plan) -> list[str]:
             statements += [c for c in (mapping.transpose, mapping.geometric) if c is not None]
         matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
         for projection in group.projections:
-            statements += [projection.project]
-            extra = (projection.mark if matrix else None, projection.position, projection.project_velocity)
+            extra = (
+                projection.project,
+                projection.mark if matrix else None,
+                projection.position,
+                projection.project_velocity,
+            )
             statements += [c for c in extra if c is not None]
     index = _header_of()
-    needed = set()
+    needed = {index["BlockTridiagonal"]} if any(group.btd for group in plan.groups) else set()
     for name in {n for item in statements for n in _names(item)}:
         if name not in index:
             raise KeyError(f"no runtime header defines sofac::{name}")
@@ -289,12 +297,16 @@ class _ProjectionView:
         self.origin = projection.origin
         self.velocity = projection.velocity
         project = projection.project
-        self.on_v = _bound(projection.project_velocity or project, {VECTOR: state.v})
-        self.on_x = _bound(projection.position, {VECTOR: state.x}) if projection.position else ""
-        self.on_acc = _bound(project, {VECTOR: state.acc}) if state.acc else ""
-        self.on_f = _bound(project, {VECTOR: state.f})
-        self.on_df = _bound(project, {VECTOR: state.df}) if state.df else ""
-        self.on_r = _bound(project, {VECTOR: state.stages["r"]}) if "r" in state.stages else ""
+
+        def on(call: Call | None, vector: Buffer | None) -> str:
+            return _bound(call, {VECTOR: vector}) if call is not None and vector is not None else ""
+
+        self.on_v = on(projection.project_velocity or project, state.v)
+        self.on_x = on(projection.position, state.x)
+        self.on_acc = on(project, state.acc)
+        self.on_f = on(project, state.f)
+        self.on_df = on(project, state.df)
+        self.on_r = on(project, state.stages.get("r"))
 
 
 class _GroupView:
@@ -425,7 +437,7 @@ class _CollisionView:
             if model.kind == "triangle":
                 self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
                 self.setup.append(
-                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.elements}, "
+                    f"sofac::collide::triangle_flags({_ptr(model.cells)}, {model.flagged}, "
                     f"{model.state.size}, {here}.flags.data());"
                 )
         assert collision.table is not None
@@ -436,6 +448,8 @@ class _CollisionView:
         self.setup.append("}")
         self.setup.append("C.finish_setup();")
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
+        assert collision.report is not None
+        self.report = _ptr(collision.report)
 
 
 _VIEW_COLUMNS = "first, second, root, id bound, test, views"

@@ -12,6 +12,7 @@ extension     format                                                         rea
 ``.vtk``      legacy VTK ASCII (UNSTRUCTURED_GRID, POLYDATA), version < 5    own
 ``.vtk``      legacy VTK binary or version 5.x                               meshio (lazy import)
 ``.sph``      SOFA sphere list (``sphe id x y z r``)                         own
+``.stl``      STL, ASCII (``solid``) or binary                               own (MeshSTLLoader)
 ``.rigid``    Xsp 3.0 rigid-body file (mass, volume, inertia, center)        own (read_rigid)
 ============  =============================================================  ===================
 
@@ -74,7 +75,7 @@ __all__ = [
 ]
 
 #: Extensions :func:`read_mesh` and :func:`count_points` understand.
-SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".msh", ".vtu", ".vtk", ".sph")
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".msh", ".vtu", ".vtk", ".sph", ".stl")
 
 #: Files larger than this are refused (a guard against reading a wrong path into memory).
 MAX_FILE_BYTES = 1 << 30
@@ -325,6 +326,8 @@ def _read_mesh_cached(path: str, mtime_ns: int, size: int, handle_seams: bool = 
             return _parse_vtu(_read_bytes(path))
         if suffix == ".vtk":
             return _read_vtk(path)
+        if suffix == ".stl":
+            return _parse_stl(_read_bytes(path))
         spheres = _parse_sph(_read_text(path))
         return Mesh(positions=spheres.centers, notes=spheres.notes)
     except MeshError as error:
@@ -345,6 +348,8 @@ def _count_points_cached(path: str, mtime_ns: int, size: int) -> int:
             return _count_vtu(_read_text(path))
         if suffix == ".vtk":
             return _count_vtk(path)
+        if suffix == ".stl":
+            return _parse_stl(_read_bytes(path)).n_points
         text = _read_text(path)
         return len(_SPH_LINE_RE.findall(text, text.find("\n") + 1 if "\n" in text else len(text)))
     except MeshError as error:
@@ -1863,3 +1868,75 @@ def apply_transform(
         full = full @ euler_to_matrix(rotation).T
     full += t
     return np.ascontiguousarray(full[:, :width])
+
+
+# --------------------------------------------------------------------------------------------
+# STL (MeshSTLLoader)
+# --------------------------------------------------------------------------------------------
+
+_STL_HEADER = 80  # MeshSTLLoader's headerSize default
+_STL_FACET = np.dtype([("normal", "<f4", 3), ("corners", "<f4", (3, 3)), ("attribute", "<u2")])
+
+
+def _parse_stl(data: bytes) -> Mesh:
+    """An STL file as SOFA's MeshSTLLoader reads it: ASCII when its first word is ``solid``, else
+    binary (80-byte header, a little-endian facet count, 50 bytes per facet: the file size must be
+    84 + 50 n). Vertices are merged by exact equality and numbered in order of first appearance;
+    the binary reader drops degenerate triangles (two equal corners), the ASCII one keeps them, as
+    SOFA's do. SOFA's per-facet normals are not kept (``normals`` is per vertex here)."""
+    head = data[:256].lstrip()
+    if head[:5] == b"solid" and (len(head) == 5 or head[5:6].isspace()):
+        return _parse_stl_ascii(data.decode("latin-1"))
+    if len(data) < _STL_HEADER + 4:
+        raise MeshError(f"binary STL file of {len(data)} bytes: shorter than its 84-byte header")
+    count = int(np.frombuffer(data, "<u4", 1, _STL_HEADER)[0])
+    if len(data) != _STL_HEADER + 4 + 50 * count:
+        raise MeshError(
+            f"binary STL file of {len(data)} bytes, but its header announces {count} triangles "
+            f"({_STL_HEADER + 4 + 50 * count} bytes); an ASCII STL file must start with 'solid'"
+        )
+    facets = np.frombuffer(data, _STL_FACET, count, _STL_HEADER + 4)
+    corners = facets["corners"].astype(np.float64).reshape(-1, 3)
+    positions, triangles = _merge_corners(corners)
+    keep = (
+        (triangles[:, 0] != triangles[:, 1])
+        & (triangles[:, 1] != triangles[:, 2])
+        & (triangles[:, 0] != triangles[:, 2])
+    )
+    notes = () if keep.all() else (f"{int((~keep).sum())} degenerate triangles dropped (as SOFA does)",)
+    return Mesh(positions=positions, triangles=triangles[keep], notes=notes)
+
+
+def _merge_corners(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct corner positions in order of first appearance, and each triangle's indices."""
+    if not len(corners):
+        return np.zeros((0, 3)), _empty_cells(3)
+    _, first, inverse = np.unique(corners, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")  # unique rows by first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return corners[first[order]], rank[inverse.ravel()].reshape(-1, 3)
+
+
+def _parse_stl_ascii(text: str) -> Mesh:
+    corners: list[tuple[float, float, float]] = []
+    in_facet = 0
+    for number, line in enumerate(text.splitlines(), 1):
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "vertex":
+            if len(words) < 4:
+                raise MeshError("'vertex' needs three coordinates", number)
+            in_facet += 1
+            if in_facet > 3:
+                raise MeshError("a facet with more than three vertices (SOFA reads triangles)", number)
+            corners.append(tuple(_to_float(w, number, "vertex coordinate") for w in words[1:4]))
+        elif words[0] == "endfacet":
+            if in_facet != 3:
+                raise MeshError(f"a facet with {in_facet} vertices (MeshSTLLoader reads triangles)", number)
+            in_facet = 0
+        elif words[0] in ("endsolid", "end"):
+            break
+    positions, triangles = _merge_corners(np.asarray(corners, dtype=np.float64).reshape(-1, 3))
+    return Mesh(positions=positions, triangles=triangles)

@@ -267,6 +267,7 @@ def _plan_collision(
         for p in collision.pairs
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
+    collision.report = planner.buffer(pipeline.component, "contactReport", np.zeros(6), role="state")
     _place(planner, collision, number, owner)
     return collision
 
@@ -283,7 +284,7 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
     kind = spec.role
     value = planner.value
     cells_buffer = radii = None
-    elements = state.size
+    elements = flagged = state.size
     if kind == "sphere":
         listed = value(checked.component, "listRadius")
         if listed is not None and np.size(listed):
@@ -291,10 +292,14 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
     if kind in ("triangle", "line"):
         cells = _topology_cells(planner, checked) or {}
         if kind == "triangle":
-            if cells.get("quads") is not None and np.size(cells["quads"]):
-                planner.unsupported(checked, "quads in a TriangleCollisionModel are not compiled yet")
-                return None
+            # The topology's triangles, then two per quad (TriangleCollisionModel::updateFromTopology:
+            # (q1, q2, q0) and (q3, q0, q2)); only the first ones get vertex and edge flags.
             array = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
+            flagged = len(array)
+            quads = np.asarray(cells.get("quads", np.zeros(0)), dtype=np.int64).reshape(-1, 4)
+            if len(quads):
+                halves = np.stack([quads[:, [1, 2, 0]], quads[:, [3, 0, 2]]], axis=1).reshape(-1, 3)
+                array = np.concatenate([array, halves])
         else:
             from sofac.geometry import masses
 
@@ -322,6 +327,7 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         compute_normals=bool(value(checked.component, "computeNormals")) if kind == "triangle" else False,
         radii=radii,
         radius=float(value(checked.component, "radius")) if kind == "sphere" else 0.0,
+        flagged=flagged if kind == "triangle" else 0,
     )
 
 
@@ -357,13 +363,6 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
         group = owner.get(id(model.state.component))
         if group is None:
             continue  # nothing integrates it: the forces on it go nowhere, as in SOFA
-        if group.assembled or group.direct:
-            planner.unsupported(
-                planner.checked.of(model.state.component),
-                "penalty contact in an assembled system (a direct solver) is not compiled yet; "
-                "use CGLinearSolver",
-            )
-            continue
         where = f"contact forces on {model.origin}"
         state = model.state
         group.forces.append(
@@ -374,6 +373,24 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
             for p in collision.pairs
             if index in (p.first, p.second)
         )
+        if group.assembled and static_partner:  # A += kfact K: blocks between each element's points
+            offset = group.assembly_offset(state, planner.checked.of(state.component))
+            group.assemble.append(
+                Op(
+                    where,
+                    [
+                        call(
+                            "contact_assemble",
+                            Env.CONTACTS,
+                            pipeline,
+                            index,
+                            Env.ASSEMBLER,
+                            offset,
+                            Env.KFACT,
+                        )
+                    ],
+                )
+            )
         if group.scheme == "implicit" and static_partner and state.dx is not None:
             group.stiffness_dx.append(
                 Op(

@@ -67,6 +67,21 @@ class FemMethod(enum.IntEnum):
     SVD = 3
 
 
+class SpringDamping(enum.Enum):
+    """spring_forces' damping variant (kernels.h): Undamped when the plan proves every damping is 0."""
+
+    UNDAMPED = "Undamped"
+    DAMPED = "Damped"
+
+
+class SpringFlags(enum.Enum):
+    """spring_forces' flags variant (kernels.h): None when every spring is enabled and none is
+    elongation-only, so the per-spring flags are not read."""
+
+    NONE = "None"
+    PER_SPRING = "PerSpring"
+
+
 class Constant(enum.Enum):
     """Layout constants of the runtime, named rather than copied (their values live in C++)."""
 
@@ -136,7 +151,8 @@ class Aggregate:
 
 
 Arg = Union[Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
-TemplateArg = Union[str, int, bool, Constant]  # noqa: UP007  (str: a DataType name, "Vec3d")
+# str: a DataType name ("Vec3d"); the enums: a kernel's variant, spelt as the runtime's enum class
+TemplateArg = Union[str, int, bool, Constant, SpringDamping, SpringFlags]  # noqa: UP007
 
 
 @dataclass(frozen=True)
@@ -292,7 +308,7 @@ class Projection:
 
     origin: str
     state: StatePlan
-    project: Call
+    project: Call | None  # None: responses are left alone (a constraint on positions only)
     velocity: bool = False  # also projects the velocity after the update
     # Direct solvers: marks the constrained scalar DOFs of the assembled matrix (at OFFSET).
     mark: Call | None = None
@@ -312,7 +328,7 @@ class StatePlan:
     x: Buffer
     v: Buffer
     f: Buffer
-    rest: Buffer
+    rest: Buffer | None  # None when no call reads it (passes.drop_unread_rest_positions)
     simulated: bool = False  # an ODE solver in its node or above
     acc: Buffer | None = None  # a = M⁻¹ f (explicit) or Δv (implicit), independent states only
     dx: Buffer | None = None  # implicit schemes: the vector a matrix-free product reads ...
@@ -361,8 +377,11 @@ class Group:
     trapezoidal: bool = False  # EulerImplicitSolver's trapezoidalScheme (factor 1/2 on some h)
     factor_once: bool = False  # PrecomputedLinearSolver: the first step's factorisation is kept
     llt: bool = False  # the direct solver factors L L^T (registry role "llt"), else L D L^T
+    # SVDLinearSolver (registry role "svd"): a dense SVD instead; its minSingularValue buffer.
+    svd_threshold: Buffer | None = None
     assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
+    btd: bool = False  # BTDLinearSolver: the direct solve is the block-tridiagonal Thomas algorithm (6x6)
     # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
     pcg: dict[str, Buffer] = field(default_factory=dict)
     minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance
@@ -519,6 +538,7 @@ class CollisionModel:
     view: int = -1  # its place among the paired models of its kind (-1: in no pair)
     radii: Buffer | None = None  # sphere models: listRadius (spheres past it take `radius`)
     radius: float = 0.0
+    flagged: int = 0  # triangle models: the leading triangles that get SOFA's flags (not quads')
 
 
 @dataclass(frozen=True)
@@ -546,6 +566,9 @@ class ContactPair:
     id_bound: int  # the outputs' ids are below it (the de-duplication's table)
 
 
+REPORT_FIELDS = ("contacts", "growths", "degenerate", "detection_seconds", "response_seconds", "fast_motions")
+
+
 @dataclass
 class Collision:
     """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
@@ -560,6 +583,11 @@ class Collision:
     pairs: list[ContactPair]
     # i64 rows (first, second, root, id_bound, test, first's view, second's view), one per pair
     table: Buffer | None = None
+    # What the steps found, as ``<pipeline>.contactReport`` (REPORT_FIELDS): the last step's
+    # contacts; since the instance was created or reset, buffers that outgrew their capacity,
+    # degenerate outputs (NaN dropped or zero distance), the seconds spent in detection and in
+    # response, and the pairs a model came near after moving farther than the detection's reach.
+    report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
 

@@ -4,7 +4,9 @@ systems, mapped states nobody reads left out, init-only parameters, and the effe
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+import dataclasses
+from collections.abc import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
@@ -12,6 +14,7 @@ from sofac.plan.ir import (
     INPUT_OFFSET,
     OFFSET,
     STEP_PHASES,
+    Buffer,
     Call,
     ContactGuard,
     Group,
@@ -287,3 +290,38 @@ def add_point_forces(planner: Planner, groups: list[Group]) -> None:
             )
             pull = call(kernel("point_force", state.datatype.name), state.f, point, force, state.size)
             group.forces.append(Op(f"point force on {state.path} (set from Python)", [pull]))
+
+
+def _buffers_held(value: Any) -> Iterator[str]:
+    """The idents of every buffer a call in ``value`` takes, or a plan object (a collision model, a
+    guard) holds, walking the plan's own types; a state's own vectors are not a use of them."""
+    if isinstance(value, Call):
+        yield from (b.ident for b in value.buffers())
+    elif isinstance(value, Buffer):
+        yield value.ident
+    elif isinstance(value, (list, tuple)):
+        for item in value:
+            yield from _buffers_held(item)
+    elif isinstance(value, dict):
+        for item in value.values():
+            yield from _buffers_held(item)
+    elif (
+        dataclasses.is_dataclass(value)
+        and type(value).__module__ == Call.__module__
+        and not isinstance(value, StatePlan)
+    ):
+        for field in dataclasses.fields(value):
+            yield from _buffers_held(getattr(value, field.name))
+
+
+def drop_unread_rest_positions(planner: Planner, groups: list[Group]) -> None:
+    """A MechanicalObject's rest_position is allocated only when a call takes it (a FEM's init, a
+    RestShapeSpringsForceField, a mapping's set-up): read from the plan itself, the calls of the
+    groups (step, init, mappings computed in the step or on read, projections) and what the
+    collision pipeline and the contact guard hold."""
+    used = set(_buffers_held([groups, planner.collisions, planner.guard]))
+    for state in planner.states.values():
+        if state.rest is not None and state.rest.ident not in used:
+            rest = state.rest
+            planner.buffers = [b for b in planner.buffers if b is not rest]
+            state.rest = None

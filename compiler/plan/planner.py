@@ -40,12 +40,13 @@ from sofac.plan.lower.constraints import finish_constraint_phase
 from sofac.plan.passes import (
     add_point_forces,
     contact_guard,
+    drop_unread_rest_positions,
     effects,
     init_only,
     leave_unread_out,
     route_through_mappings,
 )
-from sofac.plan.solvers import new_group, screen_variational
+from sofac.plan.solvers import new_group, screen_btd, screen_variational
 from sofac.registry import Category
 from sofac.registry.datatypes import DATATYPES
 
@@ -369,18 +370,21 @@ class Planner:
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
         self.constraints = finish_constraint_phase(self, list(groups.values()))
+        if self.colliding:  # before J is routed: contacts add blocks on mapped collision states
+            self.collisions = plan_collisions(self, owner)
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)
+            if group.btd:
+                screen_btd(self, group)
             if group.routed:
                 route_through_mappings(self, group)
-        if self.colliding:
-            self.collisions = plan_collisions(self, owner)
         self.guard = contact_guard(self)
         if self.prune:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:
             add_point_forces(self, list(groups.values()))
+        drop_unread_rest_positions(self, list(groups.values()))
         return list(groups.values())
 
     def _attach_mapped(self, owner: dict[int, Group]) -> None:

@@ -92,7 +92,7 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
         spec = planner.checked.of(linear).spec if linear is not None else None
         if spec is not None and spec.lowering == "direct":
             group.linear_solver, group.assembled = linear, True
-            group.llt = spec.role == "llt"
+            direct_kind(planner, planner.checked.of(linear), group)
     return group
 
 
@@ -348,6 +348,8 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
             ),
         }
         return True
+    if checked_linear.spec.lowering == "btd":
+        return plan_btd(planner, checked_linear, group)
     if checked_linear.spec.lowering not in ("cg", "direct", "precomputed"):
         planner.unsupported(checked_linear, f"sofac cannot compile {checked_linear.spec.name} yet")
         return False
@@ -357,7 +359,7 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
             return False
         group.assembled = group.direct = True
         group.factor_once = checked_linear.spec.lowering == "precomputed"
-        group.llt = checked_linear.spec.role == "llt"
+        direct_kind(planner, checked_linear, group)
         return True
     if (checked_linear.template or GRAPH_SCATTERED) != GRAPH_SCATTERED:
         # SOFA assembles the system matrix and runs CG on it (CRS, sparse or full: the same numbers)
@@ -375,6 +377,47 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
         "solves": planner.buffer(linear, "solves", [0], "i64", role="scratch"),
     }
     return True
+
+
+def direct_kind(planner: Planner, linear: CheckedComponent, group: Group) -> None:
+    """The factorisation of a direct solver: L L^T (role "llt"), a dense SVD (role "svd", with
+    SVDLinearSolver's minSingularValue) or L D L^T."""
+    role = linear.spec.role if linear.spec is not None else ""
+    group.llt = role == "llt"
+    if role == "svd":
+        threshold = planner.value(linear.component, "minSingularValue")
+        group.svd_threshold = planner.buffer(
+            linear.component,
+            "minSingularValue",
+            [1e-6 if threshold is None else float(threshold)],
+            role="param",
+        )
+
+
+def plan_btd(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
+    """BTDLinearSolver: the assembled, projected system read as a block-tridiagonal matrix of 6x6
+    blocks (SOFA's BTDMatrix6d keeps no entry outside the three block diagonals), inverted by
+    SOFA's Thomas algorithm every step. Its partial solves (subpartSolve) are not compiled."""
+    if planner.value(linear.component, "subpartSolve"):
+        planner.unsupported(linear, "subpartSolve=true is not compiled yet")
+        return False
+    if not assembles_everything(planner, linear):
+        return False
+    group.linear_solver = linear.component
+    group.assembled = group.direct = group.btd = True
+    return True
+
+
+def screen_btd(planner: Planner, group: Group) -> None:
+    """BTDLinearSolver's 6x6 blocks are the DOFs of Rigid3d (or Vec6d) states."""
+    for state in group.states:
+        if state.datatype.deriv_size != 6:
+            planner.unsupported(
+                planner.checked.of(group.linear_solver),
+                f"BTDLinearSolver on a {state.datatype.name} state is not compiled "
+                "(6x6 blocks: Rigid3d, Vec6d)",
+            )
+            return
 
 
 def assembles_everything(planner: Planner, linear: CheckedComponent) -> bool:

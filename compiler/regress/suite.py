@@ -708,7 +708,7 @@ def format_table(results: Sequence[SceneResult]) -> str:
 
 
 def format_markdown(results: Sequence[SceneResult]) -> str:
-    """A Markdown table (the README's per-scene table) and the totals line."""
+    """A Markdown table (docs/regression.md's per-scene table) and the totals line."""
     lines = ["| scene | status | SOFA's error | ε | max diff / bbox | detail |", "|---|---|---|---|---|---|"]
     for r in results:
         detail = _detail(r).replace("|", "/")

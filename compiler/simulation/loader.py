@@ -12,6 +12,7 @@ import contextlib
 import importlib.util
 import sys
 import threading
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ if TYPE_CHECKING:  # the front end is imported only when a scene is compiled (no
     from sofac.plan import ir as plan
 
 _host: ModuleType | None = None
+_host_built: build.Built | None = None  # the cache entry _host was loaded from
 
 
 class PrunedEffectError(SofacError):
@@ -36,6 +38,13 @@ class PrunedEffectError(SofacError):
 
 class ParameterNeedsReset(SofacError):
     """A parameter read only when the simulation is initialised was changed between steps."""
+
+
+class ContactWarning(UserWarning):
+    """A compiled contact pipeline saw something the run's user should know: a buffer that outgrew
+    the capacity reserved at init (the step then allocated), detection outputs SOFA would have made
+    of NaN or of a zero distance, or a model that moved farther in one step than the detection's
+    reach while near a partner (a contact may have been missed: tunnelling; reduce dt)."""
 
 
 class ContactNotCompiled(SofacError):
@@ -115,18 +124,25 @@ def _rebuild_diverged(cls: type[SimulationDiverged], message: str, attributes: d
     return error
 
 
-def host() -> ModuleType:
-    """The host extension module (built on first use, then taken from the cache)."""
-    global _host
+def host(known: build.Built | None = None) -> ModuleType:
+    """The host extension module (built on first use, then taken from the cache). ``known`` is a
+    valid cache entry of it, from a warm record: loading it skips computing the host's cache key,
+    which runs the C++ compiler for its version line."""
+    global _host, _host_built
     if _host is None:
-        built = build.build_host()
+        built = known if known is not None else build.build_host()
         spec = importlib.util.spec_from_file_location("_sofac_host", built.library)
         assert spec is not None and spec.loader is not None
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         sys.modules.setdefault("_sofac_host", module)
-        _host = module
+        _host, _host_built = module, built
     return _host
+
+
+def host_built() -> build.Built | None:
+    """The cache entry of the host module loaded in this process (None before the first load)."""
+    return _host_built
 
 
 class _EnergyGuard(NamedTuple):
@@ -242,6 +258,7 @@ class Compiled:
         recompute: Callable[[], Compiled] | None = None,
         rebuild: Callable[..., Compiled] | None = None,
         warnings: tuple[Diagnostic, ...] = (),
+        known_host: build.Built | None = None,
     ) -> None:
         self.spec = spec
         self.warnings = warnings  # the scene's warnings (sofac check's W codes), issued by load()
@@ -251,7 +268,7 @@ class Compiled:
         # (checked, prune=, rigid_model=, threads=) -> Compiled: the pipeline's compile, for recompile()
         self._rebuild = rebuild
         self.warm = recompute is not None  # taken from a warm record, not compiled in this process
-        self._library = host().Library(str(built.library))
+        self._library = host(known_host).Library(str(built.library))
 
     def _full(self) -> None:
         if self._plan is None:
@@ -324,6 +341,7 @@ class Simulation:
             None,
         )
         self._limited_seen = 0  # solves that hit the limit, already warned about
+        self._contact_seen = [np.zeros(3) for _ in spec.contact_reports]  # counters already reported
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
         # The buffers a step carries over ("state": positions, velocities, solver history): copied
@@ -420,6 +438,8 @@ class Simulation:
             remaining -= count
             if self._touching is not None and self._touching[0] >= 0:
                 raise self._contact_error(int(self._touching[0]))
+            if self.spec.contact_reports:
+                self._report_contacts()
             if done < count or not self._finite():
                 raise self._non_finite_error()
             self._warn_unconverged_constraints()
@@ -461,6 +481,22 @@ class Simulation:
                 if not self._finite():
                     break  # step() reports it
         return done
+
+    def _report_contacts(self) -> None:
+        """A ContactWarning for each contact counter that grew since it was last reported."""
+        what = (
+            "contact buffers outgrew their reserved capacity (the step allocated)",
+            "detection outputs were degenerate (NaN dropped, or a zero distance given the normal (1, 0, 0))",
+            "times a model moved farther in one step than the detection's reach while near a partner: "
+            "contacts may have been missed (tunnelling); reduce dt or raise alarmDistance",
+        )
+        for (origin, index), seen in zip(self.spec.contact_reports, self._contact_seen, strict=True):
+            counters = self._views[index][[1, 2, 5]]
+            for k in np.flatnonzero(counters > seen):
+                count = int(counters[k] - seen[k])
+                where = f"step {self._steps} (t={self.time:g}), {origin}"
+                warnings.warn(ContactWarning(f"{where}: {count} {what[k]}"), stacklevel=4)
+            seen[:] = np.maximum(seen, counters)
 
     def _contact_error(self, pair: int) -> ContactNotCompiled:
         contact = self.spec.contact
@@ -723,6 +759,8 @@ class Simulation:
         self._steps = 0
         self._limited_seen = 0
         self._kept = None
+        for seen in self._contact_seen:
+            seen[:] = 0.0
         self._native.init()
         self._init_values = [view.copy() for _, view in self._init_params]
 

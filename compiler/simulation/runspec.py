@@ -84,6 +84,8 @@ class RunSpec:
     rigid_model: str
     interactive: bool  # compiled with the point forces an interactive viewer pulls with
     rules: dict[str, ParamRule] = field(default_factory=dict)  # parameter key -> its field's rule
+    # Compiled contacts: (pipeline origin, buffer index of its contactReport), per pipeline.
+    contact_reports: tuple[tuple[str, int], ...] = ()
 
     def index(self, key: str) -> int:
         return next(i for i, b in enumerate(self.buffers) if b.key == key)
@@ -148,6 +150,9 @@ def run_spec(scene_plan: Plan) -> RunSpec:
         scene_plan.threads,
         scene_plan.rigid_model,
         scene_plan.interactive,
+        contact_reports=tuple(
+            (c.origin, index[id(c.report)]) for c in scene_plan.collisions if c.report is not None
+        ),
     )
 
 

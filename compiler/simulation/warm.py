@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from sofac import __version__, scene_warnings
+from sofac import __version__
 from sofac.build import compiler as build
 from sofac.diagnostics import Diagnostic
 from sofac.front.datafiles import default_data_roots, is_file
@@ -37,7 +37,9 @@ from sofac.param_rules import ParamRule
 from sofac.resources import cache_dir, resource_dir
 from sofac.simulation.runspec import BufferSpec, ContactSpec, EnergyFileSpec, RunSpec, SolverSpec, StateSpec
 
-FORMAT = 2  # 2: the scene's warnings are kept, so that a warm load issues them too
+# 2: the scene's warnings are kept, so that a warm load issues them too; 3: the host module's
+# cache entry is kept, so that a warm load does not compute its key (which runs the compiler)
+FORMAT = 3
 # Environment variables that change what a scene compiles to (see build.py and datafiles.py).
 ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 
@@ -47,6 +49,7 @@ class Record:
     spec: RunSpec
     built: build.Built
     warnings: tuple[Diagnostic, ...] = ()
+    host: build.Built | None = None  # the host module's cache entry, if still valid
 
 
 @functools.cache
@@ -56,15 +59,34 @@ def _installation() -> str:
     stamp = hashlib.sha256()
     package = Path(__file__).resolve().parents[1]
     for root in (package, resource_dir("templates"), resource_dir("runtime")):
-        for path in sorted(root.rglob("*")):
-            if path.suffix in (".py", ".json", ".j2", ".h", ".cpp") and "__pycache__" not in path.parts:
-                info = path.stat()
-                stamp.update(f"{path}\0{info.st_size}\0{info.st_mtime_ns}\n".encode())
+        for path in _stamped_files(str(root)):
+            info = os.stat(path)
+            stamp.update(f"{path}\0{info.st_size}\0{info.st_mtime_ns}\n".encode())
     compiler = shutil.which(build.compiler())
     if compiler is not None:
         info = Path(compiler).resolve().stat()
         stamp.update(f"{compiler}\0{info.st_size}\0{info.st_mtime_ns}\n".encode())
     return stamp.hexdigest()
+
+
+_STAMPED = (".py", ".json", ".j2", ".h", ".cpp")
+
+
+def _stamped_files(root: str) -> list[str]:
+    """The files under ``root`` that _installation() stamps, in path order. os.scandir, not
+    Path.rglob: every warm load walks sofac's ~200 files, and pathlib's walk costs several ms."""
+    found: list[str] = []
+    pending = [root]
+    while pending:
+        folder = pending.pop()
+        with os.scandir(folder) as entries:
+            for entry in entries:
+                if entry.is_dir():
+                    if entry.name != "__pycache__":
+                        pending.append(entry.path)
+                elif entry.name.endswith(_STAMPED):
+                    found.append(entry.path)
+    return sorted(found, key=lambda path: path.split(os.sep))
 
 
 def _key(path: Path, options: dict[str, Any]) -> str:
@@ -128,11 +150,32 @@ def lookup(path: str | Path, **options: Any) -> Record | None:
         return Record(
             _spec_from_json(meta["spec"], arrays),
             build.Built(library, meta["build_key"], True, 0.0),
-            scene_warnings.from_json(meta["warnings"]),
+            _warnings_from_json(meta["warnings"]),
+            _host(meta["host"]),
         )
     except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile):
         # No record, or a damaged one: a miss
         return None
+
+
+def _warnings_from_json(items: list[dict[str, Any]]) -> tuple[Diagnostic, ...]:
+    if not items:
+        return ()  # most scenes: no need to import the warnings module
+    from sofac import scene_warnings
+
+    return scene_warnings.from_json(items)
+
+
+def _host(entry: list[str] | None) -> build.Built | None:
+    """The host module's cache entry a record names (its library and key), if still valid. The
+    record's key covers what the host depends on (sofac's files, the compiler binary, Python);
+    when the entry is gone, the host is found or built as usual."""
+    if entry is None:
+        return None
+    library, key = Path(entry[0]), entry[1]
+    if not build.valid_entry(library.parent, key, library.name):
+        return None
+    return build.Built(library, key, True, 0.0)
 
 
 def store(
@@ -150,6 +193,10 @@ def store(
     dependencies += [(str(p), _sha256(p) if found else None) for p, found in scene.lookups.items()]
     if any(digest is None for _, digest in dependencies[: len(scene.sources)]):
         return  # a source could not be read back: nothing to check a later load against
+    from sofac import scene_warnings
+    from sofac.simulation import loader
+
+    host = loader.host_built()
     meta = {
         "format": FORMAT,
         "library": str(built.library),
@@ -157,6 +204,7 @@ def store(
         "dependencies": dependencies,
         "spec": _spec_to_json(spec),
         "warnings": scene_warnings.to_json(warnings),
+        "host": [str(host.library), host.key] if host is not None else None,
     }
     arrays = {f"b{i}": b.initial for i, b in enumerate(spec.buffers)}
     target = _file(_key(Path(os.path.realpath(path)), _options(**options)))

@@ -313,6 +313,20 @@ inline void assemble_springs(Assembler& A, const Springs& s, const double* jacob
     }
 }
 
+// VectorSpringForceField: K = ks [[-I, I], [I, -I]] per spring, A += kfact K.
+inline void assemble_vector_springs(Assembler& A, const VectorSprings& s, Index offset1, Index offset2,
+                                    double kfact) {
+    const double value = kfact * s.stiffness[0];
+    for (Index k = 0; k < s.count; ++k)
+        for (int c = 0; c < 3; ++c) {
+            const Index a = offset1 + 3 * s.a[k] + c, b = offset2 + 3 * s.b[k] + c;
+            A.add(a, a, -value);
+            A.add(a, b, value);
+            A.add(b, a, value);
+            A.add(b, b, -value);
+        }
+}
+
 // Elements (FEM): `matrix(element_data, e, method, out)` gives the positive stiffness of element e
 // (corners x corners blocks of 3x3, row-major); the force Jacobian is its negative.
 // With Block > 1, `matrix(element_data, first, method, out)` gives the matrices of elements first ..

@@ -152,6 +152,19 @@ public:
         }
     }
 
+    // Point i's weights on its element's points (3 on a triangle, 2 on an edge).
+    void weights(Index i, double* w) const {
+        const Point& p = points_[static_cast<std::size_t>(i)];
+        if (p.count == 3) {
+            w[0] = 1 - p.fx - p.fy;
+            w[1] = p.fx;
+            w[2] = p.fy;
+        } else {
+            w[0] = 1 - p.fx;
+            w[1] = p.fx;
+        }
+    }
+
     Index growths = 0;
 
 private:

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <Eigen/CholmodSupport>
+#include <Eigen/Dense>
 #include <Eigen/Sparse>
 #include <algorithm>
 #include <cstddef>
@@ -29,7 +30,11 @@ namespace sofac {
 // supernodal kernel has no per-supernode thread teams: unlike CHOLMOD's, it is faster than the
 // simplicial one on small factors too, e.g. W3's beam at 6x6x20 nodes, 2.8e7 flops: 6.8 against
 // 9.3 ms per step.)
-enum class Factorization { LDLT, LLT };
+//
+// SVD (SOFA's SVDLinearSolver): the matrix copied dense and decomposed by Eigen's JacobiSVD (thin U
+// and V, as SOFA's), then x = V S^+ U^T b where S^+ inverts the singular values above
+// `min_singular_value` and zeroes the others. Everything is sized once by analyze().
+enum class Factorization { LDLT, LLT, SVD };
 
 // The Fortran BLAS and LAPACK routines CHOLMOD's supernodal kernel calls (Debian links CHOLMOD with
 // the reference libraries, which allocate nothing). gfortran passes each CHARACTER argument's
@@ -216,6 +221,8 @@ struct DirectSolver {
     Eigen::VectorXd rhs, solution;
     bool ok = true;
     bool factored = false;  // PrecomputedLinearSolver: factorised once, on the first step
+    double min_singular_value = 1e-6;  // SVD: singular values at or below it are treated as 0
+    double condition_number = 0.0;     // SVD: largest / smallest singular value of the last matrix
 
     DirectSolver() { factorization.cholmod().print = 0; }  // failures are reported, not printed
     DirectSolver(const DirectSolver&) = delete;
@@ -236,6 +243,14 @@ struct DirectSolver {
     // Once, on the recorded pattern: CHOLMOD's symbolic analysis (ordering, elimination tree, and
     // for L L^T the choice of the supernodal or the simplicial kernel).
     void analyze(Factorization kind) {
+        if (kind == Factorization::SVD) {
+            const Index n = matrix.rows();
+            svd_ = true;
+            dense_.setZero(n, n);
+            svd_decomposition_ = Eigen::JacobiSVD<Eigen::MatrixXd>(n, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+            projected_rhs_.setZero(n);
+            return;
+        }
         cholmod_common& common = factorization.cholmod();
         if (kind == Factorization::LDLT) {
             factorization.setMode(Eigen::CholmodLDLt);  // simplicial, L D L^T, the factor kept as is
@@ -262,6 +277,14 @@ struct DirectSolver {
     // cholmod_rowfac (no allocation).
     void factor() {
         project();
+        if (svd_) {
+            dense_ = matrix;  // same size: no allocation
+            svd_decomposition_.compute(dense_);
+            const auto& sigma = svd_decomposition_.singularValues();
+            condition_number = sigma.size() ? sigma(0) / sigma(sigma.size() - 1) : 0.0;
+            ok = true;
+            return;
+        }
         cholmod_common& common = factorization.cholmod();
         cholmod_factor* L = factorization.factor();
         if (L == nullptr) {  // no analysis: Eigen's path, which reports the failure
@@ -300,6 +323,15 @@ struct DirectSolver {
             solution.setConstant(std::numeric_limits<double>::quiet_NaN());
             return;
         }
+        if (svd_) {
+            // SOFA's order: U^T b, divided by each singular value above the threshold, then V times it.
+            const auto& sigma = svd_decomposition_.singularValues();
+            projected_rhs_.noalias() = svd_decomposition_.matrixU().transpose() * rhs;
+            for (Index i = 0; i < projected_rhs_.size(); ++i)
+                projected_rhs_(i) = sigma(i) > min_singular_value ? projected_rhs_(i) / sigma(i) : 0.0;
+            solution.noalias() = svd_decomposition_.matrixV() * projected_rhs_;
+            return;
+        }
         cholmod_dense b{};
         b.nrow = b.nzmax = b.d = static_cast<std::size_t>(rhs.size());
         b.ncol = 1;
@@ -324,6 +356,10 @@ private:
     cholmod_dense* e_ = nullptr;
     cholmod_sparse* permuted_ = nullptr;  // triu(A(p,p)'), the matrix the simplicial factorisation reads
     SupernodalCholesky supernodal_;
+    bool svd_ = false;  // Factorization::SVD: the dense members below replace CHOLMOD
+    Eigen::MatrixXd dense_;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd_decomposition_;
+    Eigen::VectorXd projected_rhs_;  // U^T b, then S^+ U^T b
 };
 
 // (Block) Jacobi preconditioner of PCGLinearSolver: z = D^-1 r with D the diagonal (block size 1)

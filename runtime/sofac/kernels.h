@@ -212,15 +212,58 @@ struct Springs {
     Index count;
 };
 
+// VectorSpringForceField (Vec3d): spring k joins a[k] of object1 and b[k] of object2, with rest
+// vector rest[k]; one stiffness and one damping for all (SOFA's default springs).
+struct VectorSprings {
+    const Index* a;
+    const Index* b;
+    const double* rest;  // count x 3
+    const double* stiffness;
+    const double* damping;
+    Index count;
+};
+
+// f = (d - r) ks + (v2 - v1) kd with d = x2[b] - x1[a], in SOFA's order; f1[a] += f, f2[b] -= f.
+inline void vector_spring_forces(const VectorSprings& s, const double* x1, const double* v1, double* f1,
+                                 const double* x2, const double* v2, double* f2) {
+    const double ks = s.stiffness[0], kd = s.damping[0];
+    for (Index k = 0; k < s.count; ++k) {
+        const Index i = 3 * s.a[k], j = 3 * s.b[k];
+        for (int c = 0; c < 3; ++c) {
+            const double squash = (x2[j + c] - x1[i + c]) - s.rest[3 * k + c];
+            const double force = squash * ks + (v2[j + c] - v1[i + c]) * kd;
+            f1[i + c] += force;
+            f2[j + c] -= force;
+        }
+    }
+}
+
+// df = (dx2[b] - dx1[a]) (ks kfact): SOFA's addDForce, no damping term.
+inline void vector_spring_dforces(const VectorSprings& s, const double* dx1, double* df1, const double* dx2,
+                                  double* df2, double kfact) {
+    const double factor = s.stiffness[0] * kfact;
+    for (Index k = 0; k < s.count; ++k) {
+        const Index i = 3 * s.a[k], j = 3 * s.b[k];
+        for (int c = 0; c < 3; ++c) {
+            const double dforce = (dx2[j + c] - dx1[i + c]) * factor;
+            df1[i + c] += dforce;
+            df2[j + c] -= dforce;
+        }
+    }
+}
+
 // With `jacobians` (implicit schemes), also stores each spring's dF/dx block for spring_dforces,
 // (ks - F/d) n n^T + (F/d) I with F the whole intensity (elastic and damping), as SOFA does, in
 // factored form: S + 2 numbers per spring, c = ks - F/d, t = F/d and n (spring_block rebuilds
 // entry (i, j) as (c n_i) n_j [+ t], the very numbers a stored S x S block would hold).
-// `Damped` = false leaves out the damping term (the plan proves every damping is zero: no velocity
-// is read); `Flagged` = false skips the per-spring enabled / elongation-only flags (all springs
-// enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
+// `SpringDamping::Undamped` leaves out the damping term (the plan proves every damping is zero: no
+// velocity is read); `SpringFlags::None` skips the per-spring enabled / elongation-only flags (all
+// springs enabled, none elongation-only). Plain scalar code: the sums run in the order Eigen's small
 // fixed-size expressions use (left to right), so every variant gives the same numbers bit for bit.
-template <class D1, class D2, bool Damped = true, bool Flagged = true>
+enum class SpringDamping { Undamped, Damped };
+enum class SpringFlags { None, PerSpring };
+
+template <class D1, class D2, SpringDamping Damping = SpringDamping::Damped, SpringFlags Flags = SpringFlags::PerSpring>
 inline void spring_forces(const Springs& s, const double* x1, const double* v1, double* f1, const double* x2,
                           const double* v2, double* f2, double* jacobians) {
     static_assert(D1::spatial == D2::spatial, "springs join points of the same dimension");
@@ -242,7 +285,7 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         for (int i = 1; i < S; ++i) squared += u[i] * u[i];
         const double d = std::sqrt(squared);
         bool active = d > 1.0e-9;
-        if constexpr (Flagged) active = active && s.enabled[k] && !(s.elongation_only[k] && !(d > rest[k]));
+        if constexpr (Flags == SpringFlags::PerSpring) active = active && s.enabled[k] && !(s.elongation_only[k] && !(d > rest[k]));
         if (!active) {
             if (jacobians) {
                 SOFAC_UNROLL
@@ -255,7 +298,7 @@ inline void spring_forces(const Springs& s, const double* x1, const double* v1, 
         for (int i = 0; i < S; ++i) u[i] *= inverse_length;
         const double ks = stiffness[k];
         double intensity = ks * (d - rest[k]);
-        if constexpr (Damped) {
+        if constexpr (Damping == SpringDamping::Damped) {
             const double* const va = v1 + D1::deriv * a;
             const double* const vb = v2 + D2::deriv * b;
             double relative_speed = u[0] * (vb[0] - va[0]);

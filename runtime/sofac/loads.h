@@ -248,6 +248,209 @@ inline void project_onto_point(double* x, const Index* indices, Index count, con
         for (int c = 0; c < DT::coord; ++c) x[DT::coord * indices[k] + c] = target[c];
 }
 
+// ---- FixedPlane, FixedTranslation, Direction, FixedRotation, LinearMovement -----------------------
+
+// The part of a derivative FixedPlane acts on: a rigid's translation, a vector's every coordinate.
+template <class DT>
+constexpr int translation_width() {
+    return DT::rigid ? DT::spatial : DT::deriv;
+}
+
+// FixedPlaneProjectiveConstraint's projectResponse: d = d - dir (d . dir) on the listed DOFs, with
+// `direction` as given (SOFA does not normalise it).
+template <class DT>
+inline void project_out_direction(double* dx, const Index* indices, Index count, const double* direction) {
+    constexpr int W = translation_width<DT>();
+    for (Index k = 0; k < count; ++k) {
+        double* d = dx + DT::deriv * indices[k];
+        double along = d[0] * direction[0];
+        for (int c = 1; c < W; ++c) along += d[c] * direction[c];
+        for (int c = 0; c < W; ++c) d[c] = d[c] - direction[c] * along;
+    }
+}
+
+// DirectionProjectiveConstraint's projectPosition: x_i = o_i + n ((x_i - o_i) . n), o_i the point's
+// initial position (SOFA's m_origin), n the unit direction.
+template <class DT>
+inline void project_onto_lines(double* x, const Index* indices, Index count, const double* origins,
+                               const double* direction) {
+    constexpr int S = DT::spatial;
+    for (Index k = 0; k < count; ++k) {
+        double* p = x + DT::coord * indices[k];
+        const double* o = origins + S * k;
+        double along = (p[0] - o[0]) * direction[0];
+        for (int c = 1; c < S; ++c) along += (p[c] - o[c]) * direction[c];
+        for (int c = 0; c < S; ++c) p[c] = o[c] + direction[c] * along;
+    }
+}
+
+// SOFA's quaternion arithmetic (type::Quat, x y z w), written out so that the operations and their
+// order are SOFA's.
+struct SofaQuat {
+    double q[4];
+
+    SofaQuat operator*(const SofaQuat& b) const {
+        return {{q[3] * b.q[0] + q[0] * b.q[3] + q[1] * b.q[2] - q[2] * b.q[1],
+                 q[3] * b.q[1] + q[1] * b.q[3] + q[2] * b.q[0] - q[0] * b.q[2],
+                 q[3] * b.q[2] + q[2] * b.q[3] + q[0] * b.q[1] - q[1] * b.q[0],
+                 q[3] * b.q[3] - (q[0] * b.q[0] + q[1] * b.q[1] + q[2] * b.q[2])}};
+    }
+    // Quat::inverse: the conjugate divided by the norm (not its square, as SOFA's).
+    SofaQuat inverse() const {
+        double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        if (norm == 0.0) return {{0.0, 0.0, 0.0, 0.0}};
+        norm = 1.0 / norm;
+        return {{-q[0] * norm, -q[1] * norm, -q[2] * norm, q[3] * norm}};
+    }
+    // Quat::normalize: only when the squared norm differs from 1 by more than 1e-10.
+    void normalize() {
+        const double magnitude = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
+        if (std::abs(magnitude - 1.0) <= 1e-10) return;
+        if (magnitude == 0.0) {
+            q[3] = 1.0;
+            return;
+        }
+        const double scale = 1.0 / std::sqrt(magnitude);
+        for (double& c : q) c *= scale;
+    }
+    // Quat::createQuaterFromEuler, SOFA's default order (ZYX).
+    static SofaQuat from_euler(const double* angles) {
+        const double c1 = std::cos(angles[0] / 2), c2 = std::cos(angles[1] / 2), c3 = std::cos(angles[2] / 2);
+        const double s1 = std::sin(angles[0] / 2), s2 = std::sin(angles[1] / 2), s3 = std::sin(angles[2] / 2);
+        return {{s1 * c2 * c3 - c1 * s2 * s3, c1 * s2 * c3 + s1 * c2 * s3, c1 * c2 * s3 - s1 * s2 * c3,
+                 c1 * c2 * c3 + s1 * s2 * s3}};
+    }
+    // Quat::slerp2: spherical interpolation from this (t = 0) to b (t = 1).
+    SofaQuat slerp2(const SofaQuat& b, double t) const {
+        const double cos_half = q[3] * b.q[3] + q[0] * b.q[0] + q[1] * b.q[1] + q[2] * b.q[2];
+        if (std::abs(cos_half) >= 1.0) return *this;
+        const double half = std::acos(cos_half);
+        const double sin_half = std::sqrt(1.0 - cos_half * cos_half);
+        if (std::abs(sin_half) < 0.001)
+            return {{q[0] * 0.5 + b.q[0] * 0.5, q[1] * 0.5 + b.q[1] * 0.5, q[2] * 0.5 + b.q[2] * 0.5,
+                     q[3] * 0.5 + b.q[3] * 0.5}};
+        const double ra = std::sin((1 - t) * half) / sin_half, rb = std::sin(t * half) / sin_half;
+        return {{q[0] * ra + b.q[0] * rb, q[1] * ra + b.q[1] * rb, q[2] * ra + b.q[2] * rb, q[3] * ra + b.q[3] * rb}};
+    }
+};
+
+// FixedRotationProjectiveConstraint's projectPosition on every rigid: for each fixed axis (x, y, z
+// in that order), the twist about it is removed from the orientation (swing-twist decomposition)
+// and the initial orientation's twist about it is kept instead; q = remaining * kept.
+inline void fixed_rotation_position(double* x, Index count, const double* initial_orientations,
+                                    const Index* fixed_axes) {
+    // q = twist * swing with twist about `axis`; returns the twist, leaves the swing in q.
+    auto split = [](SofaQuat& q, int axis) {
+        SofaQuat twist{{0.0, 0.0, 0.0, q.q[3]}};
+        twist.q[axis] = q.q[axis];  // (v . e) e for a coordinate axis e
+        if (twist.q[0] == 0.0 && twist.q[1] == 0.0 && twist.q[2] == 0.0 && twist.q[3] == 0.0)
+            twist = SofaQuat{{0.0, 0.0, 0.0, 1.0}};
+        twist.normalize();
+        q = q * twist.inverse();
+        q.normalize();
+        return twist;
+    };
+    for (Index i = 0; i < count; ++i) {
+        double* o = x + 7 * i + 3;
+        SofaQuat remaining{{o[0], o[1], o[2], o[3]}};
+        const double* p = initial_orientations + 4 * i;
+        SofaQuat previous{{p[0], p[1], p[2], p[3]}};
+        SofaQuat kept{{0.0, 0.0, 0.0, 1.0}};
+        for (int axis = 0; axis < 3; ++axis) {
+            if (!fixed_axes[axis]) continue;
+            split(remaining, axis);
+            kept = split(previous, axis) * kept;
+        }
+        const SofaQuat result = remaining * kept;
+        for (int c = 0; c < 4; ++c) o[c] = result.q[c];
+    }
+}
+
+// LinearMovementProjectiveConstraint: SOFA's findKeyTimes at `time`. Active (true) when a key time
+// follows `time` and `time` is not before the first key; then the surrounding keys' times and
+// movements.
+template <class DT>
+struct KeyedMovement {
+    double* memory;  // [captured, x0 (count x coord)]: the listed DOFs at the first projectPosition
+    const double* key_times;
+    const double* key_movements;  // keys x deriv
+    Index keys;
+    bool relative;
+
+    bool find(double time, double& previous_time, double& next_time, const double*& previous,
+              const double*& next) const {
+        if (keys == 0 || time < key_times[0] || time > key_times[keys - 1]) return false;
+        previous_time = next_time = key_times[0];
+        previous = next = key_movements;
+        for (Index k = 0; k < keys; ++k) {
+            if (key_times[k] <= time) {
+                previous_time = key_times[k];
+                previous = key_movements + DT::deriv * k;
+            } else {
+                next_time = key_times[k];
+                next = key_movements + DT::deriv * k;
+                return next_time != previous_time;
+            }
+        }
+        return false;  // `time` is the last key: SOFA's loop ends without finding the next one
+    }
+};
+
+// projectResponse: the listed DOFs' derivatives zeroed while a movement is under way.
+template <class DT>
+inline void keyed_movement_response(const KeyedMovement<DT>& k, double* dx, const Index* indices, Index count,
+                                    double time) {
+    double t0, t1;
+    const double *m0, *m1;
+    if (k.find(time, t0, t1, m0, m1)) project_fixed<DT>(dx, indices, count);
+}
+
+// projectVelocity: v = (m1 - m0) / (t1 - t0) on the listed DOFs.
+template <class DT>
+inline void keyed_movement_velocity(const KeyedMovement<DT>& k, double* v, const Index* indices, Index count,
+                                    double time) {
+    double t0, t1;
+    const double *m0, *m1;
+    if (!k.find(time, t0, t1, m0, m1)) return;
+    const double inverse = 1.0 / (t1 - t0);
+    for (Index i = 0; i < count; ++i)
+        for (int c = 0; c < DT::deriv; ++c) v[DT::deriv * indices[i] + c] = (m1[c] - m0[c]) * inverse;
+}
+
+// projectPosition: x = x0 + m (relative) or m, m = m0 + (m1 - m0) (t - t0) / (t1 - t0); a rigid's
+// orientation is x0's times the slerp of the keys' Euler rotations (ZYX), or that slerp alone.
+template <class DT>
+inline void keyed_movement_position(const KeyedMovement<DT>& k, double* x, const Index* indices, Index count,
+                                    double time) {
+    double* initial = k.memory + 1;
+    if (k.memory[0] == 0.0) {
+        for (Index i = 0; i < count; ++i)
+            for (int c = 0; c < DT::coord; ++c) initial[DT::coord * i + c] = x[DT::coord * indices[i] + c];
+        k.memory[0] = 1.0;
+    }
+    double t0, t1;
+    const double *m0, *m1;
+    if (!k.find(time, t0, t1, m0, m1)) return;
+    const double ratio = (time - t0) / (t1 - t0);
+    double m[DT::deriv];
+    for (int c = 0; c < DT::deriv; ++c) m[c] = m0[c] + (m1[c] - m0[c]) * ratio;
+    if constexpr (DT::rigid) {
+        static_assert(DT::coord == 7, "LinearMovementProjectiveConstraint: Rigid3d only among rigids");
+        const SofaQuat turn = SofaQuat::from_euler(m0 + 3).slerp2(SofaQuat::from_euler(m1 + 3), ratio);
+        for (Index i = 0; i < count; ++i) {
+            double* p = x + 7 * indices[i];
+            const double* p0 = initial + 7 * i;
+            for (int c = 0; c < 3; ++c) p[c] = k.relative ? p0[c] + m[c] : m[c];
+            const SofaQuat q = k.relative ? SofaQuat{{p0[3], p0[4], p0[5], p0[6]}} * turn : turn;
+            for (int c = 0; c < 4; ++c) p[3 + c] = q.q[c];
+        }
+    } else {
+        for (Index i = 0; i < count; ++i)
+            for (int c = 0; c < DT::coord; ++c)
+                x[DT::coord * indices[i] + c] = k.relative ? initial[DT::coord * i + c] + m[c] : m[c];
+    }
+}
+
 // ---- LinearVelocityProjectiveConstraint ------------------------------------------------------------
 
 // The constraint's memory (SOFA's members), one array: [prevT, nextT, finished, captured,

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -43,8 +44,12 @@ struct PenaltyModel {
     std::vector<double> normals;  // triangle models: the normals of the last tree update
     std::vector<double> external; // point / sphere models: the explicit contact forces of this step
     SphereModel sphere{};         // sphere models: the radii (the response reads them)
+    Box last_root{};              // the root box of the previous detection
+    Box swept{};                  // the union of that box and this step's
+    double motion = 0.0;          // how far a side of its root box moved since then
     // Contact-point states under this model's node, in creation order: 2 * pair + side.
     std::vector<Index> children;
+    std::vector<double> element_k;  // add_k's blocks, element by element
 };
 
 // One model pair the broad phase can produce (the compile-time table), with its response.
@@ -142,6 +147,7 @@ public:
     template <class Narrow>
     void detect(Narrow&& narrow) {
         const Index n = static_cast<Index>(models.size());
+        watch_fast_motion();
         const Index found = brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
         auto& outputs = outputs_map_.map();
         for (auto& entry : outputs) pairs[entry.second].outputs.clear();  // beginNarrowPhase
@@ -238,6 +244,49 @@ public:
         }
     }
 
+    // A += kfact K for the contacts on `model` with static partners (the group's assembled system):
+    // -ks kfact w_a w_b n n^T between the points a, b of each contact point's element, w the contact
+    // point's weights. Every element's blocks are added at every call, zeros included, so that
+    // the assembler's recorded pattern (all couplings within an element) never changes.
+    template <class Assembler>
+    void add_k(Index model, Assembler& A, Index offset, double kfact) {
+        PenaltyModel& m = models[model];
+        const int width = m.kind == ContactSide::kTriangle ? 3 : (m.kind == ContactSide::kLine ? 2 : 1);
+        const std::size_t per = static_cast<std::size_t>(9 * width * width);
+        m.element_k.assign(per * static_cast<std::size_t>(m.elements), 0.0);
+        for (const auto& entry : contacts_map_.map()) {
+            const PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            if (s < 0) continue;
+            for (const PenaltyContact& c : p.ff.contacts) {
+                if (!(c.pen > 0)) continue;
+                const Index element = s == 0 ? c.element1 : c.element2;
+                double w[3] = {1.0, 0.0, 0.0};
+                if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
+                double* block = m.element_k.data() + per * static_cast<std::size_t>(element);
+                const double k = c.ks * kfact;
+                for (int a = 0; a < width; ++a)
+                    for (int b = 0; b < width; ++b)
+                        for (int i = 0; i < 3; ++i)
+                            for (int j = 0; j < 3; ++j)
+                                block[9 * (width * a + b) + 3 * i + j] -= k * w[a] * w[b] * c.normal[i] * c.normal[j];
+            }
+        }
+        for (Index e = 0; e < m.elements; ++e) {
+            const double* block = m.element_k.data() + per * static_cast<std::size_t>(e);
+            for (int a = 0; a < width; ++a) {
+                const Index pa = width == 1 ? e : m.cells[width * e + a];
+                for (int b = 0; b < width; ++b) {
+                    const Index pb = width == 1 ? e : m.cells[width * e + b];
+                    for (int i = 0; i < 3; ++i)
+                        for (int j = 0; j < 3; ++j)
+                            A.add(offset + 3 * pa + i, offset + 3 * pb + j, block[9 * (width * a + b) + 3 * i + j]);
+                }
+            }
+        }
+    }
+
     // Potential energy of the active contacts (sum of ks pen^2 / 2).
     double energy() const {
         double e = 0.0;
@@ -257,6 +306,10 @@ public:
             n += p.outputs.growths + p.dedup.growths + p.ff.growths + p.points[0].growths + p.points[1].growths;
         return n;
     }
+    // Steps x pairs where a model moved farther than the detection's reach near its partner: the
+    // detection at the start of each step may have missed a contact in between (tunnelling).
+    Index fast_motions() const { return fast_motions_; }
+
     // Outputs SOFA would have made of NaN (dropped) or of a zero distance (normal (1, 0, 0)).
     Index degenerate_outputs() const {
         Index n = 0;
@@ -270,6 +323,36 @@ public:
     std::vector<Index> pair_of;  // n x n index into pairs, -1: none
 
 private:
+    // Before each detection: how far each model's root box moved since the previous one, and the
+    // pairs whose swept boxes meet while one of them moved farther than the pair's reach.
+    void watch_fast_motion() {
+        for (PenaltyModel& m : models) {
+            if (!m.tree.built() || m.tree.empty()) continue;
+            const Box& now = m.tree.root().box;
+            m.swept = now;
+            m.motion = 0.0;
+            if (watching_) {
+                for (int c = 0; c < 3; ++c) {
+                    m.motion = std::max({m.motion, std::abs(now.min[c] - m.last_root.min[c]),
+                                         std::abs(now.max[c] - m.last_root.max[c])});
+                    m.swept.min[c] = std::min(now.min[c], m.last_root.min[c]);
+                    m.swept.max[c] = std::max(now.max[c], m.last_root.max[c]);
+                }
+            }
+            m.last_root = now;
+        }
+        if (watching_) {
+            for (const PenaltyPair& p : pairs) {
+                const PenaltyModel& a = models[p.model[0]];
+                const PenaltyModel& b = models[p.model[1]];
+                if (a.tree.empty() || b.tree.empty()) continue;
+                const double reach = alarm_distance_ + a.contact_distance + b.contact_distance;
+                if ((a.motion > reach || b.motion > reach) && boxes_meet(a.swept, b.swept, reach)) ++fast_motions_;
+            }
+        }
+        watching_ = true;
+    }
+
     bool has_points(const PenaltyPair& p, int side) const {
         const ContactSide kind = models[p.model[side]].kind;
         return kind == ContactSide::kTriangle || kind == ContactSide::kLine;
@@ -332,6 +415,8 @@ private:
     }
 
     double alarm_distance_ = 0.0, contact_distance_ = 0.0;
+    bool watching_ = false;  // a detection ran before: root boxes to compare with
+    Index fast_motions_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;
     std::vector<Index> broad_pairs_;
@@ -348,6 +433,12 @@ using ContactPipelines = std::vector<std::unique_ptr<collide::PenaltyContacts>>;
 
 inline void contact_add_force(ContactPipelines& pipelines, Index pipeline, Index model, double* f, const double* x) {
     pipelines[pipeline]->add_force(model, f, x);
+}
+
+template <class Assembler>
+inline void contact_assemble(ContactPipelines& pipelines, Index pipeline, Index model, Assembler& A, Index offset,
+                             double kfact) {
+    pipelines[pipeline]->add_k(model, A, offset, kfact);
 }
 
 inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,

@@ -21,17 +21,14 @@ struct Instance {
     std::vector<double> b2_position;  // /deformableBody/Dof1.position (state)
     std::vector<double> b3_velocity;  // /deformableBody/Dof1.velocity (state)
     std::vector<double> b4_force;  // /deformableBody/Dof1.force (scratch)
-    std::vector<double> b5_rest_position;  // /deformableBody/Dof1.rest_position (data)
     std::vector<double> b6_acceleration;  // /deformableBody/Dof1.acceleration (scratch)
     std::vector<double> b7_position;  // /rigidBody/Dof2.position (state)
     std::vector<double> b8_velocity;  // /rigidBody/Dof2.velocity (state)
     std::vector<double> b9_force;  // /rigidBody/Dof2.force (scratch)
-    std::vector<double> b10_rest_position;  // /rigidBody/Dof2.rest_position (data)
     std::vector<double> b11_acceleration;  // /rigidBody/Dof2.acceleration (scratch)
     std::vector<double> b12_position;  // /rigidBody/rigidParticles/Dof3.position (state)
     std::vector<double> b13_velocity;  // /rigidBody/rigidParticles/Dof3.velocity (state)
     std::vector<double> b14_force;  // /rigidBody/rigidParticles/Dof3.force (scratch)
-    std::vector<double> b15_rest_position;  // /rigidBody/rigidParticles/Dof3.rest_position (data)
     std::vector<Index> b16_indices1;  // /F13.indices1 (data)
     std::vector<Index> b17_indices2;  // /F13.indices2 (data)
     std::vector<double> b18_stiffness;  // /F13.stiffness (param)
@@ -68,11 +65,11 @@ void forces_g0(Instance& S) {
     sofac::clear(S.b9_force.data(), Index(S.b9_force.size()));
     sofac::clear(S.b14_force.data(), Index(S.b14_force.size()));
     // SpringForceField '/F13' (hybrid_pendulum.scn:51)
-    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, true, false>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b12_position.data(), S.b13_velocity.data(), S.b14_force.data(), nullptr);
+    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b12_position.data(), S.b13_velocity.data(), S.b14_force.data(), nullptr);
     // UniformMass '/deformableBody/M1' (hybrid_pendulum.scn:56)
     sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 2, S.b23_vertexMass.data(), 0, S.b1_gravity.data());
     // SpringForceField '/deformableBody/F1' (hybrid_pendulum.scn:58)
-    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, true, false>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), nullptr);
+    sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), nullptr);
     // UniformMass '/rigidBody/M2' (hybrid_pendulum.scn:64)
     sofac::mass_gravity<sofac::Rigid3d>(S.b9_force.data(), 1, S.b32_vertexMass.data(), 0, S.b1_gravity.data());
     // J^T: RigidMapping '/rigidBody/rigidParticles/Map23' (hybrid_pendulum.scn:69)
@@ -130,7 +127,7 @@ extern "C" {
 
 SOFAC_EXPORT int sofac_abi_version() { return SOFAC_ABI_VERSION; }
 
-SOFAC_EXPORT int sofac_buffer_count() { return 36; }
+SOFAC_EXPORT int sofac_buffer_count() { return 33; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
@@ -139,37 +136,34 @@ SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* siz
     sofac::fill(S->b2_position, data[2], sizes[2]);
     sofac::fill(S->b3_velocity, data[3], sizes[3]);
     sofac::fill(S->b4_force, data[4], sizes[4]);
-    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
-    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
-    sofac::fill(S->b7_position, data[7], sizes[7]);
-    sofac::fill(S->b8_velocity, data[8], sizes[8]);
-    sofac::fill(S->b9_force, data[9], sizes[9]);
-    sofac::fill(S->b10_rest_position, data[10], sizes[10]);
-    sofac::fill(S->b11_acceleration, data[11], sizes[11]);
-    sofac::fill(S->b12_position, data[12], sizes[12]);
-    sofac::fill(S->b13_velocity, data[13], sizes[13]);
-    sofac::fill(S->b14_force, data[14], sizes[14]);
-    sofac::fill(S->b15_rest_position, data[15], sizes[15]);
-    sofac::fill(S->b16_indices1, data[16], sizes[16]);
-    sofac::fill(S->b17_indices2, data[17], sizes[17]);
-    sofac::fill(S->b18_stiffness, data[18], sizes[18]);
-    sofac::fill(S->b19_damping, data[19], sizes[19]);
-    sofac::fill(S->b20_lengths, data[20], sizes[20]);
-    sofac::fill(S->b21_elongationOnly, data[21], sizes[21]);
-    sofac::fill(S->b22_enabled, data[22], sizes[22]);
-    sofac::fill(S->b23_vertexMass, data[23], sizes[23]);
-    sofac::fill(S->b24_indices, data[24], sizes[24]);
-    sofac::fill(S->b25_indices1, data[25], sizes[25]);
-    sofac::fill(S->b26_indices2, data[26], sizes[26]);
-    sofac::fill(S->b27_stiffness, data[27], sizes[27]);
-    sofac::fill(S->b28_damping, data[28], sizes[28]);
-    sofac::fill(S->b29_lengths, data[29], sizes[29]);
-    sofac::fill(S->b30_elongationOnly, data[30], sizes[30]);
-    sofac::fill(S->b31_enabled, data[31], sizes[31]);
-    sofac::fill(S->b32_vertexMass, data[32], sizes[32]);
-    sofac::fill(S->b33_initialPoints, data[33], sizes[33]);
-    sofac::fill(S->b34_rigidIndexPerPoint, data[34], sizes[34]);
-    sofac::fill(S->b35_offsets, data[35], sizes[35]);
+    sofac::fill(S->b6_acceleration, data[5], sizes[5]);
+    sofac::fill(S->b7_position, data[6], sizes[6]);
+    sofac::fill(S->b8_velocity, data[7], sizes[7]);
+    sofac::fill(S->b9_force, data[8], sizes[8]);
+    sofac::fill(S->b11_acceleration, data[9], sizes[9]);
+    sofac::fill(S->b12_position, data[10], sizes[10]);
+    sofac::fill(S->b13_velocity, data[11], sizes[11]);
+    sofac::fill(S->b14_force, data[12], sizes[12]);
+    sofac::fill(S->b16_indices1, data[13], sizes[13]);
+    sofac::fill(S->b17_indices2, data[14], sizes[14]);
+    sofac::fill(S->b18_stiffness, data[15], sizes[15]);
+    sofac::fill(S->b19_damping, data[16], sizes[16]);
+    sofac::fill(S->b20_lengths, data[17], sizes[17]);
+    sofac::fill(S->b21_elongationOnly, data[18], sizes[18]);
+    sofac::fill(S->b22_enabled, data[19], sizes[19]);
+    sofac::fill(S->b23_vertexMass, data[20], sizes[20]);
+    sofac::fill(S->b24_indices, data[21], sizes[21]);
+    sofac::fill(S->b25_indices1, data[22], sizes[22]);
+    sofac::fill(S->b26_indices2, data[23], sizes[23]);
+    sofac::fill(S->b27_stiffness, data[24], sizes[24]);
+    sofac::fill(S->b28_damping, data[25], sizes[25]);
+    sofac::fill(S->b29_lengths, data[26], sizes[26]);
+    sofac::fill(S->b30_elongationOnly, data[27], sizes[27]);
+    sofac::fill(S->b31_enabled, data[28], sizes[28]);
+    sofac::fill(S->b32_vertexMass, data[29], sizes[29]);
+    sofac::fill(S->b33_initialPoints, data[30], sizes[30]);
+    sofac::fill(S->b34_rigidIndexPerPoint, data[31], sizes[31]);
+    sofac::fill(S->b35_offsets, data[32], sizes[32]);
     return S;
 }
 
@@ -190,37 +184,34 @@ SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
         case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
         case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
         case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
-        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
-        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
-        case 7: *size = std::int64_t(S.b7_position.size()); return S.b7_position.data();
-        case 8: *size = std::int64_t(S.b8_velocity.size()); return S.b8_velocity.data();
-        case 9: *size = std::int64_t(S.b9_force.size()); return S.b9_force.data();
-        case 10: *size = std::int64_t(S.b10_rest_position.size()); return S.b10_rest_position.data();
-        case 11: *size = std::int64_t(S.b11_acceleration.size()); return S.b11_acceleration.data();
-        case 12: *size = std::int64_t(S.b12_position.size()); return S.b12_position.data();
-        case 13: *size = std::int64_t(S.b13_velocity.size()); return S.b13_velocity.data();
-        case 14: *size = std::int64_t(S.b14_force.size()); return S.b14_force.data();
-        case 15: *size = std::int64_t(S.b15_rest_position.size()); return S.b15_rest_position.data();
-        case 16: *size = std::int64_t(S.b16_indices1.size()); return S.b16_indices1.data();
-        case 17: *size = std::int64_t(S.b17_indices2.size()); return S.b17_indices2.data();
-        case 18: *size = std::int64_t(S.b18_stiffness.size()); return S.b18_stiffness.data();
-        case 19: *size = std::int64_t(S.b19_damping.size()); return S.b19_damping.data();
-        case 20: *size = std::int64_t(S.b20_lengths.size()); return S.b20_lengths.data();
-        case 21: *size = std::int64_t(S.b21_elongationOnly.size()); return S.b21_elongationOnly.data();
-        case 22: *size = std::int64_t(S.b22_enabled.size()); return S.b22_enabled.data();
-        case 23: *size = std::int64_t(S.b23_vertexMass.size()); return S.b23_vertexMass.data();
-        case 24: *size = std::int64_t(S.b24_indices.size()); return S.b24_indices.data();
-        case 25: *size = std::int64_t(S.b25_indices1.size()); return S.b25_indices1.data();
-        case 26: *size = std::int64_t(S.b26_indices2.size()); return S.b26_indices2.data();
-        case 27: *size = std::int64_t(S.b27_stiffness.size()); return S.b27_stiffness.data();
-        case 28: *size = std::int64_t(S.b28_damping.size()); return S.b28_damping.data();
-        case 29: *size = std::int64_t(S.b29_lengths.size()); return S.b29_lengths.data();
-        case 30: *size = std::int64_t(S.b30_elongationOnly.size()); return S.b30_elongationOnly.data();
-        case 31: *size = std::int64_t(S.b31_enabled.size()); return S.b31_enabled.data();
-        case 32: *size = std::int64_t(S.b32_vertexMass.size()); return S.b32_vertexMass.data();
-        case 33: *size = std::int64_t(S.b33_initialPoints.size()); return S.b33_initialPoints.data();
-        case 34: *size = std::int64_t(S.b34_rigidIndexPerPoint.size()); return S.b34_rigidIndexPerPoint.data();
-        case 35: *size = std::int64_t(S.b35_offsets.size()); return S.b35_offsets.data();
+        case 5: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
+        case 6: *size = std::int64_t(S.b7_position.size()); return S.b7_position.data();
+        case 7: *size = std::int64_t(S.b8_velocity.size()); return S.b8_velocity.data();
+        case 8: *size = std::int64_t(S.b9_force.size()); return S.b9_force.data();
+        case 9: *size = std::int64_t(S.b11_acceleration.size()); return S.b11_acceleration.data();
+        case 10: *size = std::int64_t(S.b12_position.size()); return S.b12_position.data();
+        case 11: *size = std::int64_t(S.b13_velocity.size()); return S.b13_velocity.data();
+        case 12: *size = std::int64_t(S.b14_force.size()); return S.b14_force.data();
+        case 13: *size = std::int64_t(S.b16_indices1.size()); return S.b16_indices1.data();
+        case 14: *size = std::int64_t(S.b17_indices2.size()); return S.b17_indices2.data();
+        case 15: *size = std::int64_t(S.b18_stiffness.size()); return S.b18_stiffness.data();
+        case 16: *size = std::int64_t(S.b19_damping.size()); return S.b19_damping.data();
+        case 17: *size = std::int64_t(S.b20_lengths.size()); return S.b20_lengths.data();
+        case 18: *size = std::int64_t(S.b21_elongationOnly.size()); return S.b21_elongationOnly.data();
+        case 19: *size = std::int64_t(S.b22_enabled.size()); return S.b22_enabled.data();
+        case 20: *size = std::int64_t(S.b23_vertexMass.size()); return S.b23_vertexMass.data();
+        case 21: *size = std::int64_t(S.b24_indices.size()); return S.b24_indices.data();
+        case 22: *size = std::int64_t(S.b25_indices1.size()); return S.b25_indices1.data();
+        case 23: *size = std::int64_t(S.b26_indices2.size()); return S.b26_indices2.data();
+        case 24: *size = std::int64_t(S.b27_stiffness.size()); return S.b27_stiffness.data();
+        case 25: *size = std::int64_t(S.b28_damping.size()); return S.b28_damping.data();
+        case 26: *size = std::int64_t(S.b29_lengths.size()); return S.b29_lengths.data();
+        case 27: *size = std::int64_t(S.b30_elongationOnly.size()); return S.b30_elongationOnly.data();
+        case 28: *size = std::int64_t(S.b31_enabled.size()); return S.b31_enabled.data();
+        case 29: *size = std::int64_t(S.b32_vertexMass.size()); return S.b32_vertexMass.data();
+        case 30: *size = std::int64_t(S.b33_initialPoints.size()); return S.b33_initialPoints.data();
+        case 31: *size = std::int64_t(S.b34_rigidIndexPerPoint.size()); return S.b34_rigidIndexPerPoint.data();
+        case 32: *size = std::int64_t(S.b35_offsets.size()); return S.b35_offsets.data();
         default: *size = 0; return nullptr;
     }
 }

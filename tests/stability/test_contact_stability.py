@@ -49,3 +49,16 @@ def test_contact_too_stiff_for_an_explicit_step_is_reported(tmp_path: Path) -> N
             sim.step()
     assert "energy" in str(diverged.value)
     assert sim.steps < 40  # it reaches the contact distance after about 12 steps; stopped soon after
+
+
+def test_a_fast_body_tunnelling_through_a_thin_floor_is_reported(tmp_path: Path) -> None:
+    """At 100 m/s with dt = 0.01 the sphere moves 1 m per step, past the floor's reach (alarm 0.5)
+    between two detections: it goes through. The run says so (ContactWarning), it is not silent."""
+    scene = tmp_path / "fast.scn"
+    text = FLOOR.read_text().replace('position="0.1 0.4 -0.2"', 'position="0.1 3.5 -0.2" velocity="0 -100 0"')
+    scene.write_text(text)
+    sim = sofac.load(scene)
+    with pytest.warns(sofac.ContactWarning, match="tunnelling") as caught:
+        sim.step(10)
+    assert sim["/Particle/dofs"].position[0, 1] < -1.0  # it did go through
+    assert "contactReport" not in str(caught[0].message) and "CollisionPipeline" in str(caught[0].message)

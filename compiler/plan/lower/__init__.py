@@ -4,6 +4,7 @@ function here that turns it into calls of the step.
 
 from __future__ import annotations
 
+from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
 from sofac.plan.lower.constraints import lower_bilateral, lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
@@ -30,8 +31,13 @@ from sofac.plan.lower.masses import (
     lower_uniform_mass,
 )
 from sofac.plan.lower.projective import (
+    lower_direction,
     lower_fixed,
+    lower_fixed_plane,
+    lower_fixed_rotation,
+    lower_fixed_translation,
     lower_line_or_plane,
+    lower_linear_movement,
     lower_linear_velocity,
     lower_partial_fixed,
     lower_point_constraint,
@@ -43,6 +49,7 @@ from sofac.plan.lower.springs import (
     lower_quad_bending_springs,
     lower_springs,
     lower_triangular_bending_springs,
+    lower_vector_springs,
 )
 
 LOWERINGS: dict[str, Lowering] = {
@@ -69,6 +76,7 @@ LOWERINGS: dict[str, Lowering] = {
     "diagonal_mass": lower_diagonal_mass,
     "springs": lower_springs,
     "mesh_springs": lower_mesh_springs,
+    "vector_springs": lower_vector_springs,
     "constant_force": lower_constant_force,
     "rest_shape_springs": lower_rest_shape,
     "fixed": lower_fixed,
@@ -76,6 +84,11 @@ LOWERINGS: dict[str, Lowering] = {
     "line_or_plane": lower_line_or_plane,
     "point_constraint": lower_point_constraint,
     "linear_velocity": lower_linear_velocity,
+    "linear_movement": lower_linear_movement,
+    "fixed_plane": lower_fixed_plane,
+    "fixed_translation": lower_fixed_translation,
+    "fixed_rotation": lower_fixed_rotation,
+    "direction": lower_direction,
     "plane_force": lower_plane_force,
     "triangle_pressure": lower_triangle_pressure,
     "rigid_mapping": lower_rigid_mapping,
@@ -84,4 +97,6 @@ LOWERINGS: dict[str, Lowering] = {
     "constraint_solver": lower_constraint_solver,
     "constraint_correction": lower_constraint_correction,
     "bilateral_constraint": lower_bilateral,
+    "beam_fem": lower_beam_fem,
+    "beam_linear_mapping": lower_beam_linear_mapping,
 }

@@ -21,6 +21,8 @@ from sofac.plan.ir import (
     FemMethod,
     Group,
     Op,
+    SpringDamping,
+    SpringFlags,
     StatePlan,
     bind,
     call,
@@ -370,7 +372,11 @@ def _add_springs(
     if not damped and count:
         planner.pruned.setdefault(kd.key, "every spring's damping is zero: no damping term computed")
     flagged = bool(np.any(elongation.initial)) or not bool(np.all(enabled.initial))
-    variant = (*types, damped, flagged)
+    variant = (
+        *types,
+        SpringDamping.DAMPED if damped else SpringDamping.UNDAMPED,
+        SpringFlags.PER_SPRING if flagged else SpringFlags.NONE,
+    )
     origin = origin_of(component)
     jacobians: Buffer | Env = Env.NONE
     if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx

@@ -12,6 +12,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
 from sofac.plan.ir import (
     OFFSET,
+    Aggregate,
     Env,
     Group,
     Op,
@@ -377,3 +378,90 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
                     rows.append((i, j, ks / length, kd / length, length))
     springs = np.array(rows, dtype=float).reshape(-1, 5)
     _add_springs(planner, checked, springs, state, state, group)
+
+
+def lower_vector_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """VectorSpringForceField as SOFA's bwdInit builds it: with useTopology, one spring per edge
+    (i, j) of the topology with rest vector x0[j] - x0[i] (object1's rest positions), else one per
+    point i of object1 joining object1[i] and object2[i] with a zero rest vector."""
+    component = checked.component
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        if not isinstance(target, Component):
+            target = checked.state or planner.checked.node_state(component.node)
+        ends.append(planner.states.get(id(target)) if target is not None else None)
+    first, second = ends
+    if first is None or second is None:
+        planner.unsupported(checked, "its springs must join MechanicalObjects")
+        return
+    group = owner.get(id(first.component))
+    if group is None and owner.get(id(second.component)) is None:
+        planner.ignored.append((component, "its states have no ODE solver"))
+        return
+    if group is None or owner.get(id(second.component)) is not group:
+        planner.unsupported(checked, "springs between states of different ODE solvers are not compiled yet")
+        return
+    for name in ("springs", "filename"):
+        if planner.value(component, name):
+            planner.unsupported(checked, f"springs given by {name} are not compiled yet")
+            return
+    if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(checked, "a rayleighStiffness of its own is not compiled yet")
+        return
+    if bool(planner.value(component, "useTopology")):
+        topology = checked.links.get("topology")
+        if not isinstance(topology, Component):
+            topology = _topology_of(planner, checked)
+        edges = planner.value(topology, "edges") if topology is not None else None
+        rest = planner.checked.positions(first.component)
+        if edges is None or not np.size(edges) or rest is None:
+            planner.unsupported(
+                checked, "with useTopology it needs a topology whose edges are known at compile time"
+            )
+            return
+        pairs = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        rest = np.asarray(rest, dtype=float).reshape(-1, 3)
+        vectors = rest[pairs[:, 1]] - rest[pairs[:, 0]]
+    else:
+        pairs = np.repeat(np.arange(first.size, dtype=np.int64)[:, None], 2, axis=1)
+        vectors = np.zeros((first.size, 3))
+    if len(pairs) and (pairs[:, 0].max() >= first.size or pairs[:, 1].max() >= second.size):
+        planner.unsupported(checked, "its springs use points past the end of object1 or object2")
+        return
+    ends_1 = planner.buffer(component, "indices1", pairs[:, 0].copy(), "i64")
+    ends_2 = planner.buffer(component, "indices2", pairs[:, 1].copy(), "i64")
+    rest_buffer = planner.buffer(component, "restVector", vectors, columns=3)
+    ks = planner.buffer(component, "stiffness", [float(planner.value(component, "stiffness"))], role="param")
+    kd = planner.buffer(component, "viscosity", [float(planner.value(component, "viscosity"))], role="param")
+    table = Aggregate("VectorSprings", (ends_1, ends_2, rest_buffer, ks, kd, len(pairs)))
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "vector_spring_forces",
+                    table,
+                    first.x,
+                    first.v,
+                    first.f,
+                    second.x,
+                    second.v,
+                    second.f,
+                )
+            ],
+        )
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call("vector_spring_dforces", table, first.dx, first.df, second.dx, second.df, Env.KFACT)],
+            )
+        )
+        if group.direct or group.assembled_cg:
+            offsets = (group.assembly_offset(first, checked), group.assembly_offset(second, checked))
+            group.assemble.append(
+                Op(origin, [_call("assemble_vector_springs", Env.ASSEMBLER, table, *offsets, Env.KFACT)])
+            )

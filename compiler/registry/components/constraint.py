@@ -153,16 +153,85 @@ LINEAR_MOVEMENT_PROJECTIVE_CONSTRAINT = ComponentSpec(
     templates=_KEYED,
     default_template="Vec3d",
     renamed_from=("LinearMovementConstraint",),
-    unsupported_reason="prescribed motion (LinearMovementProjectiveConstraint) is not supported yet",
+    lowering="linear_movement",
+    supported=True,
     effects=_PROJECTION,
     fields=(
-        _INDICES,
-        FieldSpec("keyTimes", Reals(), doc="key times"),
-        FieldSpec("movements", Coords(deriv=True), doc="displacement at each key time"),
+        _INDICES_FROM_0,
+        FieldSpec("keyTimes", Reals(), (0.0,), "key times (default: 0)"),
+        FieldSpec("movements", Coords(deriv=True), doc="displacement at each key time (default: one zero)"),
         FieldSpec("relativeMovements", Bool(), True, "movements are relative to the initial positions"),
         FieldSpec("showMovement", Bool(), False),
         *PROJECTIVE_FIELDS,
     ),
+)
+
+
+def _compiled(
+    name: str, old: str, lowering: str, templates: tuple[str, ...], doc: str, *fields: FieldSpec
+) -> ComponentSpec:
+    return ComponentSpec(
+        name=name,
+        lowering=lowering,
+        category=Category.PROJECTIVE_CONSTRAINT,
+        module=_MODULE,
+        doc=doc,
+        templates=templates,
+        default_template=templates[0],
+        renamed_from=(old,),
+        supported=True,
+        effects=_PROJECTION,
+        fields=(*fields, *PROJECTIVE_FIELDS),
+    )
+
+
+FIXED_PLANE_PROJECTIVE_CONSTRAINT = _compiled(
+    "FixedPlaneProjectiveConstraint",
+    "FixedPlaneConstraint",
+    "fixed_plane",
+    ("Rigid3d", "Vec3d", "Vec6d"),
+    "Removes, from the responses of the selected points, their component along `direction` (the "
+    "points between the planes dmin < x.direction < dmax when dmin != dmax).",
+    _INDICES,
+    FieldSpec("direction", Reals(), doc="plane normal (used as given: not normalised)"),
+    FieldSpec("dmin", Real(), 0.0, "minimum distance of the planes to the origin"),
+    FieldSpec("dmax", Real(), 0.0, "maximum distance of the planes to the origin"),
+)
+
+FIXED_ROTATION_PROJECTIVE_CONSTRAINT = _compiled(
+    "FixedRotationProjectiveConstraint",
+    "FixedRotationConstraint",
+    "fixed_rotation",
+    ("Rigid3d",),
+    "Prevents rotations of every rigid DOF about the selected axes (positions projected after each step).",
+    FieldSpec("FixedXRotation", Bool(), False),
+    FieldSpec("FixedYRotation", Bool(), False),
+    FieldSpec("FixedZRotation", Bool(), False),
+)
+
+FIXED_TRANSLATION_PROJECTIVE_CONSTRAINT = _compiled(
+    "FixedTranslationProjectiveConstraint",
+    "FixedTranslationConstraint",
+    "fixed_translation",
+    ("Rigid3d", "Rigid2d", "Vec6d"),
+    "Zeroes the responses of the selected DOFs (SOFA clears the whole derivative, rotations too); "
+    "velocities and positions are left as they are.",
+    _INDICES_FROM_0,
+    FieldSpec("fixAll", Bool(), False),
+    FieldSpec("coordinates", Coords(), doc="coordinates of the fixed points"),
+    _DRAW_SIZE,
+)
+
+DIRECTION_PROJECTIVE_CONSTRAINT = _compiled(
+    "DirectionProjectiveConstraint",
+    "ProjectDirectionConstraint",
+    "direction",
+    ("Vec3d", "Vec2d"),
+    "Restricts the motion of the selected points to the line through their initial positions along "
+    "a direction.",
+    _INDICES_FROM_0,
+    FieldSpec("direction", Reals(), doc="allowed direction (normalised)"),
+    _DRAW_SIZE,
 )
 
 
@@ -207,35 +276,6 @@ OTHER_PROJECTIVE_CONSTRAINTS = (
         FieldSpec("rotation", Reals(9), doc="rotation matrix"),
         FieldSpec("quaternion", Reals(4), doc="rotation quaternion"),
         FieldSpec("translation", Reals(3), doc="translation"),
-    ),
-    _other(
-        "FixedPlaneProjectiveConstraint",
-        "FixedPlaneConstraint",
-        ("Rigid3d", "Vec3d", "Vec6d"),
-        "Fixes, along a direction, the points lying between two planes.",
-        _INDICES,
-        FieldSpec("direction", Reals(), doc="plane normal"),
-        FieldSpec("dmin", Real(), 0.0, "minimum distance of the planes to the origin"),
-        FieldSpec("dmax", Real(), 0.0, "maximum distance of the planes to the origin"),
-    ),
-    _other(
-        "FixedRotationProjectiveConstraint",
-        "FixedRotationConstraint",
-        ("Rigid3d",),
-        "Prevents rotations of rigid DOFs about selected axes.",
-        FieldSpec("FixedXRotation", Bool(), False),
-        FieldSpec("FixedYRotation", Bool(), False),
-        FieldSpec("FixedZRotation", Bool(), False),
-    ),
-    _other(
-        "FixedTranslationProjectiveConstraint",
-        "FixedTranslationConstraint",
-        ("Rigid3d", "Rigid2d", "Vec6d"),
-        "Fixes the translation (not the rotation) of the selected DOFs.",
-        _INDICES,
-        FieldSpec("fixAll", Bool(), False),
-        FieldSpec("coordinates", Coords(), doc="coordinates of the fixed points"),
-        _DRAW_SIZE,
     ),
     _other(
         "HermiteSplineProjectiveConstraint",
@@ -313,15 +353,6 @@ OTHER_PROJECTIVE_CONSTRAINTS = (
         FieldSpec("animationSpeed", Real(), 1.0),
         FieldSpec("active", Bool(), True),
     ),
-    _other(
-        "DirectionProjectiveConstraint",
-        "ProjectDirectionConstraint",
-        ("Vec3d", "Vec2d"),
-        "Restricts the motion of the selected points to a direction.",
-        _INDICES,
-        FieldSpec("direction", Reals(), doc="allowed direction"),
-        _DRAW_SIZE,
-    ),
     ComponentSpec(
         name="AttachProjectiveConstraint",
         category=Category.PROJECTIVE_CONSTRAINT,
@@ -361,5 +392,9 @@ COMPONENTS = (
     POINT_PROJECTIVE_CONSTRAINT,
     LINEAR_VELOCITY_PROJECTIVE_CONSTRAINT,
     LINEAR_MOVEMENT_PROJECTIVE_CONSTRAINT,
+    FIXED_PLANE_PROJECTIVE_CONSTRAINT,
+    FIXED_ROTATION_PROJECTIVE_CONSTRAINT,
+    FIXED_TRANSLATION_PROJECTIVE_CONSTRAINT,
+    DIRECTION_PROJECTIVE_CONSTRAINT,
     *OTHER_PROJECTIVE_CONSTRAINTS,
 )

@@ -463,7 +463,31 @@ GRAVITY = ComponentSpec(
     fields=(FieldSpec("gravity", Reals(3), (0.0, 0.0, 0.0), "gravity vector in world coordinates"),),
 )
 
+VECTOR_SPRING_FORCE_FIELD = ComponentSpec(
+    name="VectorSpringForceField",
+    lowering="vector_springs",
+    category=Category.INTERACTION_FORCEFIELD,
+    module=_SPRING_MODULE,
+    doc="Linear vector springs f = ks (x2[j] - x1[i] - r) + kd (v2[j] - v1[i]): with useTopology, one "
+    "per edge of the topology (r from the rest positions), else one per point i = j of object1 "
+    "(r = 0), coupling the two states point by point. No damping in the stiffness (SOFA's).",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=_SPRING_EFFECTS,
+    fields=(
+        FieldSpec("springs", Text(), doc="springs (ks kd rest vector); SOFA then applies none"),
+        FieldSpec("filename", FileName(), doc="file of edges and springs"),
+        FieldSpec("stiffness", Real(), 1.0, "stiffness of the default springs"),
+        FieldSpec("viscosity", Real(), 1.0, "damping of the default springs"),
+        FieldSpec("useTopology", Bool(), False, "one spring per edge of the topology"),
+        TOPOLOGY_LINK,
+        *PAIR_FORCEFIELD_FIELDS,
+    ),
+)
+
 COMPONENTS = (
+    VECTOR_SPRING_FORCE_FIELD,
     SPRING_FORCE_FIELD,
     MESH_SPRING_FORCE_FIELD,
     REGULAR_GRID_SPRING_FORCE_FIELD,

@@ -171,6 +171,75 @@ def _eigen(name: str, what: str, role: str = "") -> ComponentSpec:
     )
 
 
+ASYNC_SPARSE_LDL_SOLVER = ComponentSpec(
+    name="AsyncSparseLDLSolver",
+    lowering="direct",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="SparseLDLSolver whose factorisation runs in a thread while the step goes on. With the "
+    "animation loops sofac compiles (no constraint correction asks for an early solve) it solves "
+    "every step with the current matrix, as SparseLDLSolver: the same results.",
+    templates=_SPARSE_DIRECT_TEMPLATES,
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("precomputeSymbolicDecomposition", Bool(), True, "reuse the symbolic factorisation"),
+        FieldSpec("L_nnz", Int(), 0, "output: non-zeros of L"),
+        FieldSpec("enableAssembly", Bool(), True, "assemble the system (else reuse the last factor)"),
+        _ORDERING,
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
+CHOLESKY_SOLVER = ComponentSpec(
+    name="CholeskySolver",
+    lowering="direct",
+    role="llt",
+    category=Category.LINEAR_SOLVER,
+    module=_DIRECT,
+    doc="Dense Cholesky (L L^T) factorisation of the system matrix; sofac factors the same matrix "
+    "sparse (CHOLMOD's L L^T): the same solution, to round-off.",
+    templates=(SPARSE_MATRIX, FULL_MATRIX, "SparseMatrixd", "FullMatrixd", "NewMatSymmetricMatrix"),
+    default_template=SPARSE_MATRIX,
+    supported=True,
+    effects=_SOLVE,
+    fields=(*LINEAR_SOLVER_FIELDS,),
+)
+
+LU_LINEAR_SOLVER = ComponentSpec(
+    name="LULinearSolver",
+    lowering="direct",
+    category=Category.LINEAR_SOLVER,
+    module="SofaNewmat",
+    doc="Dense LU factorisation (SofaNewmat plugin). The implicit system matrix is symmetric, so "
+    "sofac solves it with SparseLDLSolver's factorisation: the same solution, to round-off.",
+    templates=("NewMatMatrix", "NewMatSymmetricMatrix", "NewMatBandMatrix", "NewMatSymmetricBandMatrix"),
+    default_template="NewMatMatrix",
+    supported=True,
+    effects=_SOLVE,
+    fields=(_VERBOSE_LOG, *LINEAR_SOLVER_FIELDS),
+)
+
+EIGEN_CHOLMOD_SUPERNODAL_LLT = ComponentSpec(
+    name="EigenCholmodSupernodalLLT",
+    lowering="direct",
+    role="llt",
+    category=Category.LINEAR_SOLVER,
+    module="SofaCHOLMOD",
+    doc="CHOLMOD's supernodal L L^T (SofaCHOLMOD plugin): sofac's direct solvers factor L L^T with "
+    "CHOLMOD's analysis and supernodal kernel.",
+    templates=_SPARSE_DIRECT_TEMPLATES,
+    default_template=CRS_SCALAR,
+    supported=True,
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("numThreads", Int(), 1, "CHOLMOD's threads (sofac's kernel runs on one)"),
+        _ORDERING,
+        *LINEAR_SOLVER_FIELDS,
+    ),
+)
+
 EIGEN_SIMPLICIAL_LDLT = _eigen("EigenSimplicialLDLT", "L D L^T")
 EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T", role="llt")
 EIGEN_SPARSE_LU = _eigen("EigenSparseLU", "LU")
@@ -183,7 +252,8 @@ BTD_LINEAR_SOLVER = ComponentSpec(
     doc="Thomas algorithm on a block-tridiagonal matrix (6x6 blocks, beams).",
     templates=(BTD_MATRIX,),
     default_template=BTD_MATRIX,
-    unsupported_reason="BTDLinearSolver (block-tridiagonal) is not implemented yet",
+    lowering="btd",
+    supported=True,
     effects=_SOLVE,
     fields=(
         FieldSpec("verbose", Bool(), False, "dump the system every iteration"),
@@ -198,11 +268,14 @@ SVD_LINEAR_SOLVER = ComponentSpec(
     name="SVDLinearSolver",
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
-    doc="Dense SVD of the system matrix (small singular values clamped).",
-    templates=(FULL_MATRIX, CRS_SCALAR, CRS_MAT3),
+    doc="Dense SVD of the assembled, projected system matrix (Eigen's JacobiSVD, as SOFA's); "
+    "singular values at or below minSingularValue are treated as 0 (a pseudo-inverse).",
+    templates=(FULL_MATRIX, "FullMatrixd", CRS_SCALAR, CRS_MAT3),
     default_template=FULL_MATRIX,
     former_names=("SVDLinear", "SVD"),
-    unsupported_reason="SVDLinearSolver (dense SVD) is not implemented yet",
+    lowering="direct",
+    role="svd",
+    supported=True,
     effects=_SOLVE,
     fields=(
         FieldSpec("verbose", Bool(), False),
@@ -474,6 +547,10 @@ COMPONENTS = (
     SPARSE_LDL_SOLVER,
     SPARSE_CHOLESKY_SOLVER,
     SPARSE_LU_SOLVER,
+    ASYNC_SPARSE_LDL_SOLVER,
+    CHOLESKY_SOLVER,
+    LU_LINEAR_SOLVER,
+    EIGEN_CHOLMOD_SUPERNODAL_LLT,
     EIGEN_SIMPLICIAL_LDLT,
     EIGEN_SIMPLICIAL_LLT,
     EIGEN_SPARSE_LU,

@@ -98,6 +98,13 @@ MESH_OBJ_LOADER = _mesh_loader(
 )
 MESH_GMSH_LOADER = _mesh_loader("MeshGmshLoader", "Gmsh .msh (format 1, 2 ASCII, 4).")
 MESH_VTK_LOADER = _mesh_loader("MeshVTKLoader", "Legacy VTK (.vtk) and XML UnstructuredGrid (.vtu).")
+MESH_STL_LOADER = _mesh_loader(
+    "MeshSTLLoader",
+    "STL triangles, ASCII or binary (vertices merged by exact equality, in order of first appearance).",
+    FieldSpec("headerSize", Int(), 80, "bytes of a binary file's header (sofac reads 80)"),
+    FieldSpec("forceBinary", Bool(), False, "read as binary even if the file starts with 'solid'"),
+    FieldSpec("mergePositionUsingMap", Bool(), True, "merge equal vertices with a map (same result)"),
+)
 
 SPHERE_LOADER = ComponentSpec(
     name="SphereLoader",
@@ -132,4 +139,11 @@ STRING_MESH_CREATOR = ComponentSpec(
     ),
 )
 
-COMPONENTS = (MESH_OBJ_LOADER, MESH_GMSH_LOADER, MESH_VTK_LOADER, SPHERE_LOADER, STRING_MESH_CREATOR)
+COMPONENTS = (
+    MESH_OBJ_LOADER,
+    MESH_GMSH_LOADER,
+    MESH_VTK_LOADER,
+    MESH_STL_LOADER,
+    SPHERE_LOADER,
+    STRING_MESH_CREATOR,
+)

@@ -161,6 +161,7 @@ CUBE_TOPOLOGY = ComponentSpec(
     doc="Surface of a box between min and max: points, edges and quads (nx ny nz points per side).",
     supported=True,
     effects=_GENERATED,
+    compute="cube_topology",
     fields=(
         *(
             FieldSpec(name, Int(), 0, f"resolution along {name[1]}", valid=MUST_BE_NONNEGATIVE)
@@ -371,6 +372,12 @@ HEXA2QUAD = _topological_mapping(
     FieldSpec("flipNormals", Bool(), False, "reverse the quad orientation"),
     compute="hexa_to_quad",
 )
+QUAD2TRIANGLE = _topological_mapping(
+    "Quad2TriangleTopologicalMapping",
+    "Splits each input quad into two triangles written to the output container.",
+    FieldSpec("swapping", Bool(), True, "alternate the diagonal with the quad's grid position"),
+    compute="quad_to_triangle",
+)
 TETRA2TRIANGLE = _topological_mapping(
     "Tetra2TriangleTopologicalMapping",
     "Writes the boundary triangles of the input tetrahedra to the output container.",
@@ -433,6 +440,7 @@ COMPONENTS = (
     *DYNAMIC_TOPOLOGY,
     HEXA2TETRA,
     HEXA2QUAD,
+    QUAD2TRIANGLE,
     TETRA2TRIANGLE,
     MESH2POINT,
     TOPOLOGICAL_CHANGE_PROCESSOR,

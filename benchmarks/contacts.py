@@ -1,0 +1,109 @@
+"""Penalty contact scenes: time per step split into detection, response and the rest (the solve,
+with the contact forces in it), and what collision models that never meet cost.
+
+    python benchmarks/contacts.py               # SOFA's contact scenes (corpus) + tests/data ones
+    python benchmarks/contacts.py --steps 50 --repeat 3
+
+Detection (trees, broad and narrow phase) and response (contact order, de-duplication, contact
+points, the explicit forces of simulated pairs) are timed inside the compiled step and read from
+``<pipeline>.contactReport``; the rest is the step's wall time minus both. The last table times a
+particle that never comes near a floor, with and without the collision pipeline, in one run: their
+ratio is what the unused collision models cost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import tempfile
+import time
+from pathlib import Path
+
+import sofac
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+CORPUS = [
+    "Component/SolidMechanics/Spring/MeshSpringForceField.scn",
+    "Demos/chainHybrid.scn",
+    "Demos/chainAll.scn",
+    "Demos/collisionMultiple.scn",
+    "Component/Collision/Detection/CompositeCollisionPipeline_none.scn",
+]
+LOCAL = ["tests/data/contact_particle_floor.scn", "tests/data/contact_two_particles.scn"]
+
+
+def shared() -> Path | None:
+    for candidate in (os.environ.get("SOFAC_SHARED"), REPO.parent / "shared"):
+        if candidate and (Path(candidate) / "corpus" / "sofa").is_dir():
+            return Path(candidate)
+    return None
+
+
+def split(path: Path, steps: int, repeat: int) -> tuple[float, float, float]:
+    """Best of ``repeat`` runs: (total, detection, response) in ms per step."""
+    sim = sofac.load(path)
+    best = (float("inf"), 0.0, 0.0)
+    for _ in range(repeat):
+        sim.reset()
+        started = time.perf_counter()
+        sim.step(steps)
+        total = (time.perf_counter() - started) / steps * 1e3
+        reports = [sim.output(b.key) for b in sim.spec.buffers if b.key.endswith(".contactReport")]
+        detection = sum(r[3] for r in reports) / steps * 1e3
+        response = sum(r[4] for r in reports) / steps * 1e3
+        best = min(best, (total, detection, response))
+    return best
+
+
+def never_meeting(steps: int, repeat: int) -> tuple[float, float]:
+    """ms per step of a particle far above a floor, with the collision pipeline and without it."""
+    text = (REPO / LOCAL[0]).read_text()
+    far = text.replace('position="0.1 0.4 -0.2"', 'position="0.1 100 -0.2"').replace(
+        'gravity="0 -9.81 0"', 'gravity="0 0 0"'
+    )
+    bare = re.sub(
+        r"<(CollisionPipeline|BruteForceBroadPhase|BVHNarrowPhase|MinProximityIntersection|CollisionResponse|TriangleCollisionModel|PointCollisionModel)[^>]*/>",
+        "",
+        far,
+    )
+    times = []
+    with tempfile.TemporaryDirectory() as folder:
+        for name, scene in (("with", far), ("without", bare)):
+            path = Path(folder) / f"{name}.scn"
+            path.write_text(scene)
+            sim = sofac.load(path)
+            best = float("inf")
+            for _ in range(repeat):
+                started = time.perf_counter()
+                sim.step(steps)
+                best = min(best, (time.perf_counter() - started) / steps * 1e3)
+            times.append(best)
+    return times[0], times[1]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=100)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    root = shared()
+    scenes = [REPO / s for s in LOCAL]
+    if root is not None:
+        scenes = [root / "corpus" / "sofa" / s for s in CORPUS] + scenes
+    print(f"{'scene':<58} {'ms/step':>9} {'detect':>8} {'respond':>8} {'rest':>8}")
+    for path in scenes:
+        total, detection, response = split(path, args.steps, args.repeat)
+        rest = total - detection - response
+        print(f"{path.name:<58} {total:9.3f} {detection:8.3f} {response:8.3f} {rest:8.3f}")
+    with_models, without = never_meeting(20 * args.steps, args.repeat)
+    print(
+        f"\nmodels that never meet: {with_models * 1e3:.2f} us/step with the pipeline, "
+        f"{without * 1e3:.2f} us/step without: ratio {with_models / without:.2f}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
