@@ -89,6 +89,8 @@ CODES: dict[str, CodeInfo] = {
     "W231": _w("a loader read only by visual models has a missing file"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
+    "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),
+    "E246": _e("Lagrangian constraint on a state without a constraint correction"),
     # --- usage
     "E002": _e("usage error"),
 }

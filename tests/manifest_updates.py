@@ -15,3 +15,18 @@ IMPLEMENTED_SINCE_MANIFEST = {
         "LinearMovementProjectiveConstraint"
     ),
 }
+
+# Components sofac compiles since the manifest while the scenes naming them stay rejected for others
+# (FreeMotionAnimationLoop and its solvers and corrections without constraint rows, issue 17).
+SUPPORTED_SINCE_MANIFEST = frozenset(
+    {
+        "FreeMotionAnimationLoop",
+        "BlockGaussSeidelConstraintSolver",
+        "GenericConstraintSolver",
+        "NNCGConstraintSolver",
+        "UnbuiltGaussSeidelConstraintSolver",
+        "LCPConstraintSolver",
+        "UncoupledConstraintCorrection",
+        "LinearSolverConstraintCorrection",
+    }
+)

@@ -261,11 +261,18 @@ def test_unsupported_components_are_errors_only_without_allow_unsupported(
 
 
 def test_the_line_check_catches_a_wrong_line(results: dict[str, Result]) -> None:
-    """misplaced() is not vacuous: the same diagnostics one line further down are reported."""
-    name, result = next((n, r) for n, r in sorted(results.items()) if any(d.code == "E222" for d in r.diags))
-    moved = Diagnostics(
-        Diagnostic(d.code, replace(d.loc, line=d.loc.line + 1), d.message, d.hint, d.severity)
-        for d in result.diags
-        if d.code == "E222"
-    )
-    assert misplaced(Result(result.path, result.checked, moved), Lines()), name
+    """misplaced() is not vacuous: the same diagnostics one line further down are reported (in the
+    first scenes with E222s: one line down can land on a component of the same type)."""
+    caught = []
+    for _, result in sorted(results.items()):
+        if not any(d.code == "E222" for d in result.diags):
+            continue
+        moved = Diagnostics(
+            Diagnostic(d.code, replace(d.loc, line=d.loc.line + 1), d.message, d.hint, d.severity)
+            for d in result.diags
+            if d.code == "E222"
+        )
+        caught.append(bool(misplaced(Result(result.path, result.checked, moved), Lines())))
+        if len(caught) == 3:
+            break
+    assert any(caught), caught

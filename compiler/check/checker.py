@@ -160,6 +160,7 @@ class _Checker:
                 self._check_required(checked)
         self._check_mappings()
         self._check_solvers()
+        self._check_constraint_corrections()
         self._add_data_repositories()
         for checked in self.checked:
             if checked.spec is not None:
@@ -177,6 +178,44 @@ class _Checker:
         for checked in self.checked.states():
             checked.size = self.state_size(checked.component)
         return self.checked
+
+    def _check_constraint_corrections(self) -> None:
+        """A Lagrangian constraint moves a simulated state only through a constraint correction on
+        it (or on the independent state it is mapped from): without one, SOFA never applies it."""
+        corrected = {
+            id(state)
+            for c in self.checked
+            if c.category is Category.CONSTRAINT_CORRECTION
+            for state in [c.links.get("mstate") or self._node_state(c.component.node)]
+            if isinstance(state, Component)
+        }
+        for checked in self.checked:
+            if checked.category is not Category.LAGRANGIAN_CONSTRAINT:
+                continue
+            states = [checked.links.get(name) for name in ("object1", "object2", "mstate")]
+            if not any(isinstance(s, Component) for s in states):
+                states = [self._node_state(checked.component.node)]
+            for state in states:
+                independent = state
+                seen: set[int] = set()
+                while isinstance(independent, Component) and id(independent) not in seen:
+                    seen.add(id(independent))
+                    mapping = self.checked.mapping_of(independent)
+                    if mapping is None:
+                        break
+                    independent = mapping.links.get("input")
+                if not isinstance(independent, Component) or id(independent) in corrected:
+                    continue
+                if self.checked.solver_of(independent.node) is None:
+                    continue  # a static state: the constraint only reads it
+                self.diags.add(
+                    "E246",
+                    checked.component.loc,
+                    f"{checked.component.type_name} acts on {independent.path!r}, which has no constraint "
+                    "correction: SOFA would never apply the constraint to it",
+                    "add an UncoupledConstraintCorrection (or a LinearSolverConstraintCorrection) in the "
+                    f"node of {independent.path!r}",
+                )
 
     # --- names -------------------------------------------------------------------------------
     def _resolve_spec(self, component: Component) -> CheckedComponent:

@@ -18,6 +18,7 @@ import jinja2
 from sofac import __version__
 from sofac.plan.ir import (
     CHILD,
+    CONSTRAINT_PHASES,
     OFFSET,
     PARENT,
     STEP_PHASES,
@@ -29,6 +30,7 @@ from sofac.plan.ir import (
     Collision,
     CollisionModel,
     Constant,
+    ConstraintPhase,
     Count,
     Element,
     Env,
@@ -185,6 +187,8 @@ def _names(item: Statement) -> list[str]:
 def _headers(plan: Plan) -> list[str]:
     """The runtime headers a plan's calls need, beyond the always-included ones."""
     statements: list[Statement] = []
+    if plan.constraints is not None:
+        statements += plan.constraints.calls()
     for group in plan.groups:
         statements += group.calls()
         # (J's assembly reaches the step through group.assemble, where an assembled system uses it)
@@ -313,7 +317,7 @@ class _GroupView:
     """A group as the template reads it: views of its states, mappings and projections, and the
     values derived for the template; any other attribute is the group's own."""
 
-    def __init__(self, group: Group) -> None:
+    def __init__(self, group: Group, constraints: ConstraintPhase | None = None) -> None:
         self._group = group
         self.origin = origin_of(group.solver)
         self.states = [_StateView(s) for s in group.states]
@@ -348,6 +352,11 @@ class _GroupView:
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
+        # FreeMotionAnimationLoop: states without a correction keep x and v over the free motion.
+        self.frozen = [
+            (_StateView(s), *constraints.saved[s.ident])
+            for s in (constraints.frozen_in(group) if constraints else [])
+        ]
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):  # not the group's (and no recursion before _group is set)
@@ -468,7 +477,13 @@ def generate_source(plan: Plan) -> str:
         version=__version__,
         scene_file=_comment(plan.scene_file),
         buffers=buffers,
-        groups=[_GroupView(g) for g in plan.groups],
+        groups=[_GroupView(g, plan.constraints) for g in plan.groups],
+        constraints=plan.constraints,
+        constraint_phases=[
+            (name, [_OpView(op) for op in getattr(plan.constraints, name)]) for name in CONSTRAINT_PHASES
+        ]
+        if plan.constraints
+        else [],
         any_direct=any(g.direct or g.preconditioner for g in plan.groups),
         on_read=any(g.on_read for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),

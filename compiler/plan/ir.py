@@ -465,6 +465,65 @@ class ContactGuard:
     touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
 
 
+# The phases of FreeMotionAnimationLoop's constraint step, in step order (each a list of Ops):
+# J rows built on the constraints' states and carried up the mappings (applyJT), violations read
+# from the free vectors, W from the corrections, the solve, then each correction's x, v update.
+CONSTRAINT_PHASES = ("rows", "violation", "compliance", "solve", "correction")
+
+
+@dataclass
+class Correction:
+    """A constraint correction: how constraint forces on its (independent) state move it."""
+
+    origin: str
+    kind: str  # "uncoupled" (a per-DOF compliance) or "linear_solver" (A^-1 of the group's solve)
+    state: StatePlan
+    group: Group
+    checked: CheckedComponent | None = None
+
+
+@dataclass
+class ConstraintPhase:
+    """FreeMotionAnimationLoop: each group's solve is the free motion; then the constraint rows,
+    their solve by the loop's constraint solver and the corrections; then projections and mappings.
+
+    With no row (``capacity`` 0) every correction adds C Jᵀ 0 = 0: x = x_free, v = v_free, which is
+    the groups' own step. Independent states without a correction are ``frozen``: SOFA never writes
+    their free motion back, so they keep x and v (``saved`` holds them over the groups' step)."""
+
+    loop: str  # origin of the FreeMotionAnimationLoop
+    solver: str  # origin of the constraint solver ("" : none in the scene, SOFA's default BGS)
+    method: str  # "block_gauss_seidel", "unbuilt_gauss_seidel", "nncg", "lcp"
+    # maxIterations, tolerance, sor, regularization, scaleTolerance, allVerified (LCP: mu, minW...)
+    settings: dict[str, Buffer]
+    # f64 [7]: solves, iterations and residual of the last solve, solves that hit the iteration
+    # limit, and the time, residual and iterations of the last such solve (the run's warning)
+    report: Buffer
+    corrections: list[Correction] = field(default_factory=list)
+    frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)
+    saved: dict[str, tuple[Buffer, Buffer]] = field(default_factory=dict)  # frozen state ident -> (x, v)
+    capacity: int = 0  # constraint rows the phase can hold
+    # Row blocks in row order: (first row, runtime Resolution, parameter, offset of its kept forces
+    # in ``kept`` or -1), and the forces kept across steps (bilateral warm start).
+    blocks: list[tuple[int, int, float, int]] = field(default_factory=list)
+    kept: Buffer | None = None
+    # Jacobian entries per constrained state (ident): (row, dof, derivative values), SOFA's
+    # MatrixDeriv before it is sorted into rows.
+    entries: dict[str, list[tuple[int, int, tuple[float, ...]]]] = field(default_factory=dict)
+    solve: list[Op] = field(default_factory=list)  # the solver on W, dfree, f (after ``compliance``)
+    rows: list[Op] = field(default_factory=list)
+    violation: list[Op] = field(default_factory=list)
+    compliance: list[Op] = field(default_factory=list)
+    correction: list[Op] = field(default_factory=list)
+
+    def calls(self) -> list[Statement]:
+        return [c for phase in CONSTRAINT_PHASES for op in getattr(self, phase) for c in op.calls]
+
+    def frozen_in(self, group: Group) -> list[StatePlan]:
+        """A group's states that the phase keeps where they were."""
+        return [state for state, owner in self.frozen if owner is group]
+
+
 @dataclass
 class CollisionModel:
     """A collision model of the pipeline, in SOFA's order (depth first below the pipeline's node)."""
@@ -560,6 +619,7 @@ class Plan:
     # Compiled for threads, with groups that share no buffer: they step side by side.
     parallel_groups: bool = False
     interactive: bool = False  # with a point force on each state, set from Python (plan_scene)
+    constraints: ConstraintPhase | None = None  # FreeMotionAnimationLoop's constraint phase
 
     def buffer(self, key: str) -> Buffer:
         for buffer in self.buffers:

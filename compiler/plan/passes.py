@@ -247,6 +247,8 @@ def leave_unread_out(planner: Planner, groups: list[Group]) -> None:
     read = states_named([c for g in groups for c in g.calls()]) | {
         id(p.state) for g in groups for p in g.projections
     }
+    if planner.constraints is not None:  # constraint rows read their states
+        read |= states_named(planner.constraints.calls())
     if planner.guard is not None:  # the contact guard reads its models' positions before each step
         read |= {id(state) for _, state in planner.guard.models}
     mappings = [m for g in groups for m in g.mappings]

@@ -26,6 +26,7 @@ from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
     Collision,
+    ConstraintPhase,
     ContactGuard,
     Group,
     Op,
@@ -35,6 +36,7 @@ from sofac.plan.ir import (
 )
 from sofac.plan.lower import LOWERINGS
 from sofac.plan.lower.common import _mapping_inputs, _topology_of
+from sofac.plan.lower.constraints import finish_constraint_phase
 from sofac.plan.passes import (
     add_point_forces,
     contact_guard,
@@ -93,6 +95,7 @@ class Planner:
         self.buffer_count = 0  # buffers ever made: identifiers stay unique when one is dropped
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
+        self.constraints: ConstraintPhase | None = None  # FreeMotionAnimationLoop's constraint phase
 
     # --- helpers -------------------------------------------------------------------------------
     def value(self, component: Component, name: str) -> Any:
@@ -172,6 +175,7 @@ class Planner:
             interactive=self.interactive,
             contact_guard=self.guard,
             collisions=self.collisions,
+            constraints=self.constraints,
             parallel_groups=self.threads > 1
             and independent_groups(groups, {self.dt.ident, self.gravity.ident}),
         )
@@ -365,6 +369,7 @@ class Planner:
                 continue
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
+        self.constraints = finish_constraint_phase(self, list(groups.values()))
         if self.colliding:  # before J is routed: contacts add blocks on mapped collision states
             self.collisions = plan_collisions(self, owner)
         for group in groups.values():

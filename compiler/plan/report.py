@@ -88,9 +88,33 @@ def format_schedule(plan: Plan) -> str:
         if group.on_read:
             lines.append("  mapped only when read from Python (nothing in the step reads them):")
             lines.extend(f"    - {m.origin} -> {m.child.path}" for m in group.on_read)
+    lines.extend(_constraint_schedule(plan))
     idle = [s for s in plan.states if not s.mapped and not any(s in g.states for g in plan.groups)]
     for state in idle:
         lines.append(f"not integrated (no ODE solver): {state.path}")
     for component, why in plan.ignored:
         lines.append(f"kept out of the step: {origin_of(component)}: {why}")
     return "\n".join(lines)
+
+
+def _constraint_schedule(plan: Plan) -> list[str]:
+    """FreeMotionAnimationLoop's constraint phase: the solver and its settings, the corrections,
+    the states SOFA leaves frozen."""
+    phase = plan.constraints
+    if phase is None:
+        return []
+    settings = ", ".join(f"{name}={float(buffer.initial[0])!r}" for name, buffer in phase.settings.items())
+    solver = phase.solver or "SOFA's default BlockGaussSeidelConstraintSolver"
+    lines = [
+        f"constraint phase of {phase.loop} (the solves above are the free motion):",
+        f"  solver {solver}: {phase.method}" + (f" ({settings})" if settings else ""),
+        f"  constraint rows: {phase.capacity}"
+        + (" (x = x_free, v = v_free: each correction adds C J^T 0)" if not phase.capacity else ""),
+        "  corrections:",
+    ]
+    lines.extend(f"    - {c.origin}: {c.kind} on {c.state.path}" for c in phase.corrections)
+    lines.extend(
+        f"  frozen (no constraint correction, SOFA never writes its free motion back): {s.path}"
+        for s, _ in phase.frozen
+    )
+    return lines

@@ -330,6 +330,17 @@ class Simulation:
         self._solver_of = {s.path: spec.solvers[s.solver] for s in spec.states if s.solver >= 0}
         self._independent = [s for s in self._states.values() if not s.info.mapped]
         self._touching = self._views[spec.contact.touching] if spec.contact else None
+        # FreeMotionAnimationLoop's solve report (ir.ConstraintPhase.report): a solve that hit its
+        # iteration limit is a warning, as SOFA logs it.
+        self._constraint_report = next(
+            (
+                (b.key, v)
+                for b, v in zip(spec.buffers, self._views, strict=True)
+                if b.key.endswith(".constraint_report")
+            ),
+            None,
+        )
+        self._limited_seen = 0  # solves that hit the limit, already warned about
         self._contact_seen = [np.zeros(3) for _ in spec.contact_reports]  # counters already reported
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
@@ -431,8 +442,27 @@ class Simulation:
                 self._report_contacts()
             if done < count or not self._finite():
                 raise self._non_finite_error()
+            self._warn_unconverged_constraints()
             if energy_bound is not None or self._energy_guard is not None:
                 self._check_energy(energy_bound)
+
+    def _warn_unconverged_constraints(self) -> None:
+        if self._constraint_report is None:
+            return
+        key, report = self._constraint_report
+        limited = int(report[3])
+        if limited > self._limited_seen:
+            import warnings
+
+            warnings.warn(
+                f"{key.rsplit('.', 1)[0]}: the constraint solver reached its iteration limit in "
+                f"{limited - self._limited_seen} solve(s) (last at t={float(report[4])!r}: residual "
+                f"{float(report[5])!r}, SOFA's iteration count {int(report[6])}); raise maxIterations or "
+                "the tolerance",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+            self._limited_seen = limited
 
     def _step_saving(self, steps: int) -> int:
         """Runs ``steps`` steps one at a time, writing the energy files; returns the number done."""
@@ -727,6 +757,7 @@ class Simulation:
                 view[:] = buffer.initial
         self._native.time = 0.0
         self._steps = 0
+        self._limited_seen = 0
         self._kept = None
         for seen in self._contact_seen:
             seen[:] = 0.0

@@ -530,7 +530,6 @@ inline void keyed_velocity_velocity(const KeyedVelocity<DT>& k, double* v, const
 template <class DT>
 inline void keyed_velocity_position(const KeyedVelocity<DT>& k, double* x, const Index* indices, Index count,
                                     const Index* coordinates, Index n_coordinates, double time, double dt) {
-    static_assert(!DT::rigid, "LinearVelocityProjectiveConstraint is compiled for Vec types only");
     double* last = k.last_positions();
     if (k.memory[3] == 0.0) {
         for (Index i = 0; i < count; ++i)
@@ -541,6 +540,16 @@ inline void keyed_velocity_position(const KeyedVelocity<DT>& k, double* x, const
     if (!k.active()) return;
     double velocity[DT::deriv];
     k.velocity(time, velocity);
+    if constexpr (DT::rigid) {
+        // x = xP + v dt with SOFA's RigidCoord + Deriv (the planner refuses `coordinates` on rigids).
+        (void)coordinates, (void)n_coordinates;
+        for (Index i = 0; i < count; ++i) {
+            double* p = x + DT::coord * indices[i];
+            advance<DT>(p, last + DT::coord * i, velocity, dt, 1);
+            for (int c = 0; c < DT::coord; ++c) last[DT::coord * i + c] = p[c];
+        }
+        return;
+    }
     for (Index i = 0; i < count; ++i) {
         double* p = x + DT::coord * indices[i];
         for (Index c = 0; c < (n_coordinates ? n_coordinates : DT::coord); ++c) {

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
+from sofac.plan.lower.constraints import lower_bilateral, lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
@@ -93,6 +94,9 @@ LOWERINGS: dict[str, Lowering] = {
     "rigid_mapping": lower_rigid_mapping,
     "identity_mapping": lower_subset_mapping,
     "subset_mapping": lower_subset_mapping,
+    "constraint_solver": lower_constraint_solver,
+    "constraint_correction": lower_constraint_correction,
+    "bilateral_constraint": lower_bilateral,
     "beam_fem": lower_beam_fem,
     "beam_linear_mapping": lower_beam_linear_mapping,
 }

@@ -160,14 +160,6 @@ def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: di
         return
     state, group = found
     component = checked.component
-    if state.datatype.rigid:
-        planner.unsupported(checked, "on rigid DOFs it is not compiled yet (Vec types only)")
-        return
-    if group.assembled:
-        planner.unsupported(
-            checked, f"with {_matrix_solver(group)} it is not compiled yet; {_matrix_free_hint(group)}"
-        )
-        return
     width, coord = state.datatype.deriv_size, state.datatype.coord_size
     times = np.asarray(planner.value(component, "keyTimes"), dtype=float).ravel()
     given = planner.value(component, "velocities")  # SOFA starts the list with one zero velocity
@@ -176,7 +168,21 @@ def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: di
     if len(times) != len(velocities):
         planner.unsupported(checked, f"it has {len(times)} keyTimes but {len(velocities)} velocities")
         return
+    after_end = bool(planner.value(component, "continueAfterEnd"))
+    # A direct solver's matrix is marked once, at creation: only a constraint active at every step
+    # (keys around the start time, continued after the last one) keeps those marks right.
+    always_active = len(times) >= 2 and times[0] <= 0.0 < times[-1] and after_end
+    if group.assembled and not always_active:
+        planner.unsupported(
+            checked,
+            f"with {_matrix_solver(group)} it is compiled only when active at every step (keyTimes "
+            f'starting at 0 or before, continueAfterEnd="1"); {_matrix_free_hint(group)}',
+        )
+        return
     coordinates = _indices(planner, checked, "coordinates", 0, all_if_empty=False)
+    if state.datatype.rigid and len(coordinates):
+        planner.unsupported(checked, "on rigid DOFs it is compiled without `coordinates` only")
+        return
     if len(coordinates) and (coordinates.min() < 0 or coordinates.max() >= width):
         planner.unsupported(checked, f"its coordinates must be between 0 and {width - 1}")
         return
@@ -187,7 +193,6 @@ def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: di
     velocity_buffer = planner.buffer(component, "velocities", velocities, columns=width)
     coordinate_buffer = planner.buffer(component, "coordinates", coordinates, "i64")
     t = state.datatype.name
-    after_end = bool(planner.value(component, "continueAfterEnd"))
     keyed = Aggregate("KeyedVelocity", (memory, time_buffer, velocity_buffer, len(times), after_end), (t,))
     selected = (indices, Count(indices))
     chosen = (coordinate_buffer, Count(coordinate_buffer))
@@ -197,6 +202,9 @@ def lower_linear_velocity(planner: Planner, checked: CheckedComponent, owner: di
             state,
             _call(kernel("keyed_velocity_response", t), keyed, VECTOR, *selected, Env.TIME),
             velocity=True,
+            mark=_call(kernel("mark_fixed", t), Env.FIXED, OFFSET, indices, Count(indices))
+            if group.assembled
+            else None,
             position=_call(
                 kernel("keyed_velocity_position", t),
                 keyed,

@@ -1,15 +1,23 @@
 """The Lagrangian constraint pipeline: FreeMotionAnimationLoop, constraint solvers and corrections.
 
-None of it is supported yet; the specs let sofac name the components and reject them clearly.
+The loop, the solvers and the corrections compile (plan/lower/constraints.py: the constraint phase
+of the plan); the constraint models do not yet, and are refused clearly.
 """
 
 from __future__ import annotations
 
 from ..fields import Bool, Coords, Int, Ints, Link, LinkList, Real, Reals
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
-from .common import ANIMATION_LOOP_FIELDS, MSTATE_LINK, MUST_BE_NONNEGATIVE, PAIR_LINKS, TOPOLOGY_LINK
+from .common import (
+    ANIMATION_LOOP_FIELDS,
+    MSTATE_LINK,
+    MUST_BE_NONNEGATIVE,
+    MUST_BE_POSITIVE,
+    PAIR_LINKS,
+    TOPOLOGY_LINK,
+)
 
-_REASON = "Lagrangian constraints (FreeMotionAnimationLoop) are not supported yet"
+_REASON = "Lagrangian constraint rows are not compiled yet (FreeMotionAnimationLoop without constraints is)"
 _SOLVER_MODULE = "Sofa.Component.Constraint.Lagrangian.Solver"
 _CORRECTION_MODULE = "Sofa.Component.Constraint.Lagrangian.Correction"
 _SOLVE = frozenset({Effect.CONSTRAINT_SOLVE})
@@ -21,7 +29,7 @@ FREE_MOTION_ANIMATION_LOOP = ComponentSpec(
     doc="Step with a free (unconstrained) motion, collision detection, then a constraint solve that "
     "corrects positions and velocities.",
     former_names=("FreeMotionMasterSolver",),
-    unsupported_reason=_REASON,
+    supported=True,
     effects=frozenset({Effect.INTEGRATION, Effect.CONSTRAINT_SOLVE}),
     fields=(
         FieldSpec(
@@ -50,14 +58,16 @@ LCP_CONSTRAINT_SOLVER = ComponentSpec(
     category=Category.CONSTRAINT_SOLVER,
     module=_SOLVER_MODULE,
     doc="Solves the contact LCP (with friction) by projected Gauss-Seidel.",
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_solver",
+    role="lcp",
     effects=_SOLVE,
     fields=(
         FieldSpec("displayDebug", Bool(), False),
         FieldSpec("initial_guess", Bool(), True, "warm start from the previous solution"),
         FieldSpec("build_lcp", Bool(), True, "assemble the full LCP"),
         FieldSpec("tolerance", Real(), 0.001, "residual threshold", valid=MUST_BE_NONNEGATIVE),
-        FieldSpec("maxIt", Int(), 1000, "maximum Gauss-Seidel iterations"),
+        FieldSpec("maxIt", Int(), 1000, "maximum Gauss-Seidel iterations", valid=MUST_BE_POSITIVE),
         FieldSpec("regularizationTerm", Real(), 0.0, "added to the compliance diagonal"),
         FieldSpec("mu", Real(), 0.6, "friction coefficient", valid=MUST_BE_NONNEGATIVE),
         FieldSpec("minW", Real(), 0.0),
@@ -73,7 +83,7 @@ LCP_CONSTRAINT_SOLVER = ComponentSpec(
 
 # GenericConstraintSolver Data (base of the Gauss-Seidel and NNCG solvers).
 _GENERIC_SOLVER_FIELDS = (
-    FieldSpec("maxIterations", Int(), 1000, "maximum iterations", aliases=("maxIt",)),
+    FieldSpec("maxIterations", Int(), 1000, "maximum iterations", aliases=("maxIt",), valid=MUST_BE_POSITIVE),
     FieldSpec("tolerance", Real(), 0.001, "residual threshold", valid=MUST_BE_NONNEGATIVE),
     FieldSpec("sor", Real(), 1.0, "successive over-relaxation factor (0-2)"),
     FieldSpec("regularizationTerm", Real(), 0.0, "added to the compliance diagonal"),
@@ -98,7 +108,9 @@ BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER = ComponentSpec(
     module=_SOLVER_MODULE,
     doc="Projected block Gauss-Seidel on the assembled constraint compliance.",
     former_names=("GenericConstraintSolver",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_solver",
+    role="block_gauss_seidel",
     effects=_SOLVE,
     fields=_BUILT_SOLVER_FIELDS,
 )
@@ -108,7 +120,9 @@ NNCG_CONSTRAINT_SOLVER = ComponentSpec(
     category=Category.CONSTRAINT_SOLVER,
     module=_SOLVER_MODULE,
     doc="Non-smooth non-linear conjugate gradient constraint solver.",
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_solver",
+    role="nncg",
     effects=_SOLVE,
     fields=_BUILT_SOLVER_FIELDS,
 )
@@ -118,7 +132,9 @@ UNBUILT_GAUSS_SEIDEL_CONSTRAINT_SOLVER = ComponentSpec(
     category=Category.CONSTRAINT_SOLVER,
     module=_SOLVER_MODULE,
     doc="Gauss-Seidel constraint solver without assembling the compliance matrix.",
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_solver",
+    role="unbuilt_gauss_seidel",
     effects=_SOLVE,
     fields=_GENERIC_SOLVER_FIELDS,
 )
@@ -133,7 +149,9 @@ LINEAR_SOLVER_CONSTRAINT_CORRECTION = ComponentSpec(
     doc="Constraint compliance computed with the object's linear solver (exact, costly).",
     templates=_CORRECTION_TYPES,
     default_template="Vec3d",
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_correction",
+    role="linear_solver",
     effects=_SOLVE,
     fields=(
         FieldSpec("wire_optimization", Bool(), False, "reorder constraints along a wire-like topology"),
@@ -152,7 +170,9 @@ UNCOUPLED_CONSTRAINT_CORRECTION = ComponentSpec(
     doc="Diagonal (per-DOF) constraint compliance approximation.",
     templates=("Vec1d", "Vec2d", "Vec3d", "Rigid3d"),
     default_template="Vec1d",
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="constraint_correction",
+    role="uncoupled",
     effects=_SOLVE,
     fields=(
         FieldSpec("compliance", Reals(), doc="compliance per DOF (Rigid3d: 7 values)"),
@@ -179,7 +199,8 @@ BILATERAL_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec3d", "Rigid3d"),
     default_template="Vec3d",
     renamed_from=("BilateralInteractionConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="bilateral_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("first_point", Ints(), doc="constrained DOFs of object1", indexes="object1"),

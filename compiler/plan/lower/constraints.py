@@ -1,0 +1,733 @@
+"""Lowerings of FreeMotionAnimationLoop's constraint side: the constraint solver and the
+constraint corrections, gathered into the plan's :class:`ConstraintPhase`.
+
+SOFA's step under FreeMotionAnimationLoop (FreeMotionAnimationLoop::step): each ODE solver writes
+its solve into the free vectors; the collision pipeline runs on the start-of-step positions; the
+constraint solver builds the rows, W from the corrections, solves, and each correction writes
+x = x_free + posFactor * dx, v = v_free + velFactor * dx; then projectPositionAndVelocity and the
+mappings. A state without a correction never receives its free motion. With no row, every
+correction adds C Jᵀ 0: the groups' own step, bit for bit (x_free + 0 for points; for rigid frames
+SOFA's exponential update by a zero rotation gives back the orientation exactly).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component
+from sofac.plan.ir import (
+    CHILD,
+    PARENT,
+    Aggregate,
+    Buffer,
+    Call,
+    ConstraintPhase,
+    Correction,
+    Element,
+    Env,
+    Group,
+    MappingOp,
+    Op,
+    StatePlan,
+    bind,
+    call,
+    kernel,
+    origin_of,
+)
+from sofac.registry import Category
+from sofac.registry.spec import Effect
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+# Settings the runtime's solvers read, by solver family (field names as the registry spells them).
+_GENERIC_SETTINGS = (
+    "maxIterations",
+    "tolerance",
+    "sor",
+    "regularizationTerm",
+    "scaleTolerance",
+    "allVerified",
+)
+_LCP_SETTINGS = (
+    "maxIt",
+    "tolerance",
+    "mu",
+    "minW",
+    "maxF",
+    "regularizationTerm",
+    "initial_guess",
+    "build_lcp",
+)
+
+_ONLY_UNDER_FREE_MOTION = (
+    "constraint solvers and corrections act only under FreeMotionAnimationLoop "
+    "(this scene's animation loop never calls them)"
+)
+
+
+def _free_motion_loop(planner: Planner) -> CheckedComponent | None:
+    """The scene's animation loop when it is one that solves constraints (FreeMotionAnimationLoop)."""
+    for checked in planner.checked:
+        if (
+            checked.category is Category.ANIMATION_LOOP
+            and checked.spec is not None
+            and Effect.CONSTRAINT_SOLVE in checked.spec.effects
+        ):
+            return checked
+    return None
+
+
+def _loop_solver(planner: Planner, loop: CheckedComponent) -> CheckedComponent | None:
+    """The loop's constraint solver: its `constraintSolver` link, else the first one found from the
+    loop's node down (SOFA's getObject(SearchDown)); None: SOFA adds a default BGS."""
+    linked = loop.links.get("constraintSolver")
+    if isinstance(linked, Component):
+        return planner.checked.of(linked)
+    below = [
+        c
+        for c in planner.checked
+        if c.category is Category.CONSTRAINT_SOLVER
+        and (c.component.node is loop.component.node or loop.component.node in c.component.node.ancestors())
+    ]
+    return below[0] if below else None
+
+
+def constraint_phase(planner: Planner) -> ConstraintPhase | None:
+    """The plan's constraint phase, made the first time a lowering asks (None: not FreeMotion)."""
+    phase: ConstraintPhase | None = getattr(planner, "constraint_phase", None)
+    if phase is not None:
+        return phase
+    loop = _free_motion_loop(planner)
+    if loop is None:
+        return None
+    solver = _loop_solver(planner, loop)
+    settings = {}
+    method = "block_gauss_seidel"
+    if solver is not None and solver.spec is not None:
+        method = solver.spec.role
+        names = _LCP_SETTINGS if method == "lcp" else _GENERIC_SETTINGS
+        for name in names:
+            value = planner.value(solver.component, name)
+            settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
+    report = planner.buffer(loop.component, "constraint_report", np.zeros(7), role="state")
+    phase = ConstraintPhase(
+        loop=origin_of(loop.component),
+        solver=origin_of(solver.component) if solver is not None else "",
+        method=method,
+        settings=settings,
+        report=report,
+    )
+    planner.constraint_phase = phase  # type: ignore[attr-defined]
+    planner.pending_violations = []  # type: ignore[attr-defined]
+    planner.constraint_solver = solver  # type: ignore[attr-defined]
+    return phase
+
+
+def lower_constraint_solver(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    phase = constraint_phase(planner)
+    if phase is None:
+        planner.unsupported(checked, _ONLY_UNDER_FREE_MOTION)
+        return
+    if getattr(planner, "constraint_solver", None) is not checked:
+        planner.ignored.append((checked.component, "not the animation loop's constraint solver"))
+
+
+def lower_constraint_correction(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    phase = constraint_phase(planner)
+    if phase is None:
+        planner.unsupported(checked, _ONLY_UNDER_FREE_MOTION)
+        return
+    linked = checked.links.get("mstate")
+    component = (
+        linked if isinstance(linked, Component) else planner.checked.node_state(checked.component.node)
+    )
+    state = planner.states.get(id(component)) if component is not None else None
+    if state is None:
+        planner.ignored.append((checked.component, "no MechanicalObject to correct"))
+        return
+    if state.mapped:
+        planner.unsupported(checked, "a correction on a mapped state is not compiled yet")
+        return
+    group = owner.get(id(state.component))
+    if group is None:
+        planner.ignored.append((checked.component, "its state has no ODE solver: it never moves"))
+        return
+    assert checked.spec is not None
+    kind = checked.spec.role
+    if kind == "linear_solver" and (group.scheme != "implicit" or group.linear_solver is None):
+        planner.unsupported(
+            checked,
+            "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
+        )
+        return
+    if any(c.state is state for c in phase.corrections):
+        planner.unsupported(checked, f"{state.path!r} already has a constraint correction")
+        return
+    phase.corrections.append(Correction(origin_of(checked.component), kind, state, group, checked))
+
+
+# The runtime's Resolution values (runtime/sofac/constraints.h).
+BILATERAL_3 = 0
+
+# The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
+_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
+
+
+def _values(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
+    """A list field's values (empty when unset)."""
+    value = planner.value(component, name)
+    return np.asarray(value if value is not None else [], dtype=dtype).ravel()
+
+
+def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """BilateralLagrangianConstraint<Vec3d>: three rows per pair of points, -e_k on object1's point
+    and +e_k on object2's (buildConstraintMatrix), the violation x2_free - x1_free (- rest)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if checked.datatype is None or checked.datatype.name != "Vec3d":
+        planner.unsupported(checked, "it is compiled for Vec3d only")
+        return
+    if planner.value(component, "activate") is False:
+        planner.ignored.append((component, "activate=0: no constraint"))
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    states = []
+    for name in ("object1", "object2"):
+        linked = checked.links.get(name)
+        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
+        if state is None:
+            planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
+            return
+        if state.mapped and not _rigidly_mapped(planner, state):
+            planner.unsupported(
+                checked,
+                f"constraint rows through mappings other than one RigidMapping are not compiled yet ({name})",
+            )
+            return
+        states.append(state)
+    if states[0] is states[1]:
+        planner.unsupported(checked, "object1 and object2 are the same state: not compiled yet")
+        return
+    first_points, second_points = (
+        _values(planner, component, name, np.int64) for name in ("first_point", "second_point")
+    )
+    pairs = min(len(first_points), len(second_points))
+    if pairs == 0:
+        planner.ignored.append((component, "no pair of points: no constraint row"))
+        return
+    first_row = phase.capacity
+    phase.capacity += 3 * pairs
+    if phase.kept is None:
+        phase.kept = planner.buffer(
+            planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
+        )
+    kept_offset = len(phase.kept.initial)
+    phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
+    load = float(planner.value(component, "load"))
+    for p in range(pairs):
+        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p))
+        for k in range(3):
+            unit = tuple(1.0 if c == k else 0.0 for c in range(3))
+            row = first_row + 3 * p + k
+            phase.entries.setdefault(states[0].ident, []).append(
+                (row, int(first_points[p]), tuple(-u for u in unit))
+            )
+            phase.entries.setdefault(states[1].ident, []).append((row, int(second_points[p]), unit))
+    rest = planner.value(component, "rest_vector")
+    rest = np.asarray(rest if rest is not None else [], dtype=float).reshape(-1, 3)
+    m1 = planner.buffer(component, "first_point", first_points[:pairs], "i64")
+    m2 = planner.buffer(component, "second_point", second_points[:pairs], "i64")
+    rest_buffer = planner.buffer(component, "rest_vector", rest, columns=3)
+    planner.pending_violations.append(  # type: ignore[attr-defined]
+        (
+            origin_of(component),
+            first_row,
+            states[0],
+            states[1],
+            m1,
+            m2,
+            pairs,
+            rest_buffer,
+            len(rest),
+        )
+    )
+
+
+def _jacobian_rows(
+    planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
+) -> Aggregate:
+    """A state's J as SOFA's MatrixDeriv holds it: rows ascending, each row's DOFs ascending, the
+    values of one (row, DOF) summed (addCol). A rigid state's rows come from its mapped points
+    (``_carry_through_rigid_mappings``), their values computed each step."""
+    if state.ident in getattr(planner, "rigid_rows", {}):
+        return planner.rigid_rows[state.ident]  # type: ignore[attr-defined]
+    merged: dict[tuple[int, int], list[float]] = {}
+    for row, dof, values in entries:
+        if (row, dof) in merged:
+            merged[(row, dof)] = [a + b for a, b in zip(merged[(row, dof)], values, strict=True)]
+        else:
+            merged[(row, dof)] = list(values)
+    rows = sorted({row for row, _ in merged})
+    starts, dofs, values = [0], [], []
+    for row in rows:
+        for (r, dof), value in sorted(merged.items()):
+            if r == row:
+                dofs.append(dof)
+                values.extend(value)
+        starts.append(len(dofs))
+    width = state.datatype.deriv_size
+    buffers = (
+        planner.buffer(state.component, "J_rows", rows, "i64"),
+        planner.buffer(state.component, "J_starts", starts, "i64"),
+        planner.buffer(state.component, "J_dofs", dofs, "i64"),
+        planner.buffer(state.component, "J_values", values, columns=width),
+    )
+    return Aggregate("JacobianRows", (len(rows), *buffers))
+
+
+def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
+    """The calls of a phase that has rows: violations, W from the corrections, the solve, the
+    corrections, on buffers sized by the rows."""
+    solver = getattr(planner, "constraint_solver", None)
+    n = phase.capacity
+    if phase.method not in _ROW_SOLVERS:
+        if solver is not None:
+            planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
+        return
+    W = planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch")
+    dfree = planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch")
+    f = planner.buffer("/", "constraint_f", np.zeros(n), role="scratch")
+    d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
+    scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
+    phase.rows.append(Op(phase.loop, [call("constraint_clear", W, dfree, f, d, n)]))
+    free_x = _mapped_free_motion(planner, phase)
+    for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
+        x1, x2 = free_x.get(s1.ident, s1.x), free_x.get(s2.ident, s2.x)
+        phase.violation.append(
+            Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
+        )
+    _carry_through_rigid_mappings(planner, phase)
+    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]] = []
+    for correction in phase.corrections:
+        entries = phase.entries.get(correction.state.ident)
+        if entries is None:
+            continue
+        checked = correction.checked
+        assert checked is not None
+        state = correction.state
+        if correction.kind != "uncoupled" or state.datatype.name not in ("Vec3d", "Rigid3d"):
+            planner.unsupported(
+                checked, "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d is compiled"
+            )
+            continue
+        group = correction.group
+        if group.scheme != "implicit" or group.static or group.newmark or group.variational:
+            planner.unsupported(
+                checked, "with constraint rows, it is compiled under EulerImplicitSolver only"
+            )
+            continue
+        component = checked.component
+        J = _jacobian_rows(planner, state, entries)
+        comp = _values(planner, component, "compliance", np.float64)
+        if state.datatype.rigid and len(comp) != 7:
+            found = _rigid_compliance(planner, checked, group, state)
+            if found is None:
+                continue
+            comp = found
+        comp_buffer = planner.buffer(component, "compliance", comp)
+        scaled = planner.buffer(component, "scaled_compliance", np.zeros(len(comp) + 1), role="scratch")
+        comp0 = Element(
+            planner.buffer(
+                component,
+                "defaultCompliance",
+                [float(planner.value(component, "defaultCompliance"))],
+                role="param",
+            )
+        )
+        dt = float(planner.dt.initial[0])
+        use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
+        # EulerImplicitSolver: position factor dt, velocity factor 1 (its integration factors)
+        factor = dt if use_ode else 1.0
+        position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
+        velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
+        t = state.datatype.name
+        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp)))
+        phase.compliance.append(
+            Op(
+                correction.origin,
+                [
+                    call(
+                        kernel("uncoupled_add_compliance", t),
+                        W,
+                        n,
+                        J,
+                        comp0,
+                        comp_buffer,
+                        len(comp),
+                        factor,
+                        scaled,
+                    )
+                ],
+            )
+        )
+        lam = planner.buffer(
+            component, "lambda", np.zeros_like(state.v.initial), columns=state.v.columns, role="scratch"
+        )
+        dx = planner.buffer(
+            component,
+            "constraint_dx",
+            np.zeros_like(state.v.initial),
+            columns=state.v.columns,
+            role="scratch",
+        )
+        phase.correction.append(
+            Op(
+                correction.origin,
+                [
+                    call(
+                        kernel("uncoupled_correct", t),
+                        state.x,
+                        state.v,
+                        lam,
+                        dx,
+                        J,
+                        f,
+                        state.size,
+                        comp0,
+                        comp_buffer,
+                        len(comp),
+                        position,
+                        velocity,
+                    )
+                ],
+            )
+        )
+    firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
+    kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
+    parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
+    kept = planner.buffer("/", "constraint_block_kept", [b[3] for b in phase.blocks], "i64")
+    assert phase.kept is not None
+    settings = (
+        [
+            Element(phase.settings[name])
+            for name in (
+                "maxIterations",
+                "tolerance",
+                "sor",
+                "scaleTolerance",
+                "allVerified",
+                "regularizationTerm",
+            )
+        ]
+        if phase.settings
+        else []
+    )
+    if not settings:  # SOFA's default BlockGaussSeidelConstraintSolver
+        settings = [1000.0, 0.001, 1.0, 1.0, 0.0, 0.0]
+    if phase.method == "unbuilt_gauss_seidel":
+        _unbuilt_solve(
+            planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
+        )
+        return
+    phase.solve.append(
+        Op(
+            phase.solver or phase.loop,
+            [
+                call(
+                    kernel("solve_constraints", len(phase.blocks)),
+                    _ROW_SOLVERS[phase.method],
+                    W,
+                    dfree,
+                    f,
+                    d,
+                    scratch,
+                    n,
+                    firsts,
+                    kinds,
+                    parameters,
+                    kept,
+                    phase.kept,
+                    *settings,
+                    phase.report,
+                    Env.TIME,
+                )
+            ],
+        )
+    )
+
+
+def _unbuilt_solve(
+    planner: Planner,
+    phase: ConstraintPhase,
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]],
+    problem: tuple,
+    blocks: tuple,
+) -> None:
+    """UnbuiltGaussSeidelConstraintSolver: W's diagonal blocks from the raw compliances, the
+    displacements through the corrections (no built W: the compliance calls are dropped)."""
+    phase.compliance.clear()
+    types = {t for t, *_ in items}
+    solver = getattr(planner, "constraint_solver", None)
+    if len(types) != 1 or (
+        solver is not None and float(planner.value(solver.component, "regularizationTerm")) > 0
+    ):
+        if solver is not None:
+            planner.unsupported(
+                solver,
+                "on constraint rows it is compiled for corrections of one DataType, without regularization",
+            )
+        return
+    (t,) = types
+    aggregates = []
+    for _, J, state, comp0, comp, size in items:
+        zeros = np.zeros_like(state.v.initial)
+        force = planner.buffer(
+            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
+        )
+        disp = planner.buffer(
+            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
+        )
+        aggregates.append(
+            Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        )
+    settings = [
+        Element(phase.settings[name])
+        for name in ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified")
+    ]
+    assert phase.kept is not None
+    phase.solve.append(
+        Op(
+            phase.solver,
+            [
+                call(
+                    kernel("solve_unbuilt", t, len(phase.blocks)),
+                    *problem,
+                    *blocks,
+                    phase.kept,
+                    *settings,
+                    phase.report,
+                    Env.TIME,
+                    *aggregates,
+                )
+            ],
+        )
+    )
+
+
+def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """Mapped by one RigidMapping from an independent Rigid3d state."""
+    mapping = planner.checked.mapping_of(state.component)
+    spec = mapping.spec if mapping is not None else None
+    parent = mapping.links.get("input") if mapping is not None else None
+    parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
+    return (
+        spec is not None
+        and spec.lowering == "rigid_mapping"
+        and parent_state is not None
+        and not parent_state.mapped
+        and parent_state.datatype.name == "Rigid3d"
+    )
+
+
+def _mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
+    for group in planner.constraint_groups:  # type: ignore[attr-defined]
+        for mapping in group.mappings:
+            if mapping.child is state:
+                return mapping
+    return None
+
+
+def _mapped_free_motion(planner: Planner, phase: ConstraintPhase) -> dict[str, Buffer]:
+    """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
+    the parent (propagateDx, with the mapping's rotated points of the last apply), then
+    x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
+    free: dict[str, Buffer] = {}
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = _mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        zeros_v, zeros_x = np.zeros_like(state.v.initial), np.zeros_like(state.x.initial)
+        v_free = planner.buffer(
+            state.component, "freeVelocity", zeros_v, columns=state.v.columns, role="scratch"
+        )
+        x_free = planner.buffer(
+            state.component, "freePosition", zeros_x, columns=state.x.columns, role="scratch"
+        )
+        jacobian = bind(mapping.jacobian, {PARENT: mapping.parent.v, CHILD: v_free})
+        t = state.datatype.name
+        advance = call(kernel("advance", t), x_free, state.x, v_free, Element(planner.dt), state.size)
+        phase.rows.append(Op(mapping.origin, [jacobian, advance]))
+        free[state.ident] = x_free
+    return free
+
+
+def _carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> None:
+    """RigidMapping::applyJT on the constraint matrix: a mapped point's entry n on a row becomes its
+    frame's (n, r x n), r the point's rotated offset; rows keep their index."""
+    planner.rigid_rows = {}  # type: ignore[attr-defined]
+    by_parent: dict[str, list[tuple[int, int, int, tuple[float, ...], MappingOp]]] = {}
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = _mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        frames = mapping.jacobian.args[2]
+        assert isinstance(frames, Buffer)
+        for row, point, values in phase.entries[state.ident]:
+            frame = int(frames.initial[point])
+            by_parent.setdefault(mapping.parent.ident, []).append((row, frame, point, values, mapping))
+    for parent_ident, items in by_parent.items():
+        parent = next(s for s in planner.states.values() if s.ident == parent_ident)
+        keys = [(row, frame) for row, frame, _, _, _ in items]
+        if (
+            len(set(keys)) != len(keys)
+            or parent_ident in phase.entries
+            or len({id(i[4]) for i in items}) != 1
+        ):
+            planner.unsupported(
+                planner.checked.of(parent.component),
+                "constraint rows from several mapped states, or several entries of one row on one frame, "
+                "are not compiled yet",
+            )
+            continue
+        order = sorted(range(len(items)), key=lambda i: keys[i])
+        rows = sorted({row for row, _ in keys})
+        starts, dofs, points, directions = [0], [], [], []
+        for row in rows:
+            for i in order:
+                if items[i][0] == row:
+                    dofs.append(items[i][1])
+                    points.append(items[i][2])
+                    directions.extend(items[i][3])
+            starts.append(len(dofs))
+        mapping = items[0][4]
+        offsets = mapping.jacobian.args[3]
+        assert isinstance(offsets, Buffer)
+        values = planner.buffer(
+            parent.component, "J_values", np.zeros(6 * len(dofs)), columns=6, role="scratch"
+        )
+        buffers = (
+            planner.buffer(parent.component, "J_rows", rows, "i64"),
+            planner.buffer(parent.component, "J_starts", starts, "i64"),
+            planner.buffer(parent.component, "J_dofs", dofs, "i64"),
+            values,
+        )
+        point_buffer = planner.buffer(parent.component, "J_points", points, "i64")
+        direction_buffer = planner.buffer(parent.component, "J_directions", directions, columns=3)
+        kernel_call = call(
+            "rigid_constraint_jacobian", values, point_buffer, direction_buffer, offsets, len(dofs)
+        )
+        phase.rows.append(Op(mapping.origin, [kernel_call]))
+        planner.rigid_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))  # type: ignore[attr-defined]
+        phase.entries[parent_ident] = []  # rows known: the correction finds them
+
+
+def _invert3(m: list[float]) -> list[float]:
+    """SOFA's type::invertMatrix for 3x3, operation for operation (runtime invert3)."""
+    det = (
+        m[0] * m[4] * m[8]
+        + m[3] * m[7] * m[2]
+        + m[6] * m[1] * m[5]
+        - m[0] * m[7] * m[5]
+        - m[3] * m[1] * m[8]
+        - m[6] * m[4] * m[2]
+    )
+    out = [0.0] * 9
+    out[0] = (m[4] * m[8] - m[7] * m[5]) / det
+    out[3] = (m[5] * m[6] - m[8] * m[3]) / det
+    out[6] = (m[3] * m[7] - m[6] * m[4]) / det
+    out[1] = (m[7] * m[2] - m[1] * m[8]) / det
+    out[4] = (m[8] * m[0] - m[2] * m[6]) / det
+    out[7] = (m[6] * m[1] - m[0] * m[7]) / det
+    out[2] = (m[1] * m[5] - m[4] * m[2]) / det
+    out[5] = (m[2] * m[3] - m[5] * m[0]) / det
+    out[8] = (m[0] * m[4] - m[3] * m[1]) / det
+    return out
+
+
+def _rigid_compliance(
+    planner: Planner, checked: CheckedComponent, group: Group, state: StatePlan
+) -> np.ndarray | None:
+    """UncoupledConstraintCorrection<Rigid3d>::init without 7 compliance values: 1/m and the inverse
+    of inertia * m from the node's UniformMass (or defaultCompliance and a unit mass's inverse)."""
+    component = checked.component
+    use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
+    dt = float(planner.dt.initial[0])
+    ode_factor = 1.0 if use_ode else dt * dt
+    if component.get("defaultCompliance") is not None:
+        first = float(planner.value(component, "defaultCompliance"))
+        inertia_mass = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    else:
+        masses = [
+            c.args[3]
+            for op in group.mass_dx
+            for c in op.calls
+            if isinstance(c, Call) and c.kernel == "mass_multiply" and c.args[0] is state.df
+        ]
+        mass = masses[0].initial if len(masses) == 1 and isinstance(masses[0], Buffer) else None
+        if mass is None or len(mass) != 10:
+            planner.unsupported(
+                checked, "its compliance needs the state's one UniformMass (or compliance, defaultCompliance)"
+            )
+            return None
+        first = ode_factor / float(mass[0])
+        inertia_mass = [float(v) for v in mass[1:10]]
+    inverse = _invert3(inertia_mass)
+    return np.array([first, *(ode_factor * inverse[i] for i in (0, 1, 2, 4, 5, 8))])
+
+
+def finish_constraint_phase(planner: Planner, groups: list[Group]) -> ConstraintPhase | None:
+    """The phase once every component is lowered: which independent states SOFA leaves frozen
+    (no correction), with the buffers that keep their x and v over the groups' step."""
+    phase = constraint_phase(planner)
+    if phase is None:
+        return None
+    loop = _free_motion_loop(planner)
+    assert loop is not None
+    # The loop is the step's driver, not a bystander: its effects are listed, it is not "kept out".
+    planner.ignored = [(c, why) for c, why in planner.ignored if c is not loop.component]
+    planner.lowered.append(loop.component)
+    corrected = {id(c.state) for c in phase.corrections}
+    for group in groups:
+        for state in group.states:
+            if id(state) in corrected:
+                continue
+            phase.frozen.append((state, group))
+            phase.saved[state.ident] = (
+                planner.buffer(
+                    state.component,
+                    "frozen_position",
+                    state.x.initial,
+                    columns=state.x.columns,
+                    role="scratch",
+                ),
+                planner.buffer(
+                    state.component,
+                    "frozen_velocity",
+                    state.v.initial,
+                    columns=state.v.columns,
+                    role="scratch",
+                ),
+            )
+            planner.diags.add(
+                "W245",
+                state.component.loc,
+                f"{state.path!r} has no constraint correction: under FreeMotionAnimationLoop SOFA never "
+                "writes its free motion back, so it does not move",
+                "add an UncoupledConstraintCorrection or a LinearSolverConstraintCorrection next to it",
+            )
+    if phase.capacity:
+        planner.constraint_groups = groups  # type: ignore[attr-defined]
+        _phase_with_rows(planner, phase)
+    return phase

@@ -1,0 +1,824 @@
+// Lagrangian constraints: the solvers of SOFA's constraint framework and what they work on.
+//
+// A problem has n rows. W (n x n, row-major) is the compliance in constraint space, dfree the
+// violations of the free motion, f the constraint forces (impulses: x = x_free + dt C J^T f with
+// EulerImplicit's factors). Rows come in blocks, each with its resolution (SOFA's
+// ConstraintResolution subclasses, here an enum and a switch: no virtual call):
+//   Bilateral3            BilateralConstraintResolution3Dof: exact 3x3 solve, warm started
+//   Bilateral1            BilateralConstraintResolution: f -= d / w, warm started
+//   Unilateral1           UnilateralConstraintResolution: f -= d / w, then f >= 0
+//   UnilateralFriction3   UnilateralConstraintResolutionWithFriction: normal, then tangents in
+//                         Coulomb's cone of coefficient `parameter`
+// Solvers, with SOFA's stopping tests, iteration counts and order of operations:
+//   block_gauss_seidel    BlockGaussSeidelConstraintSolver::doSolve (built W)
+//   nncg                  NNCGConstraintSolver::doSolve
+//   unbuilt_gauss_seidel  UnbuiltGaussSeidelConstraintSolver::doSolve (diagonal blocks of W, the
+//                         displacements through the corrections)
+//   lcp_gauss_seidel      LCPConstraintSolver's nlcp_gaussseidel (built, with friction)
+// and the UncoupledConstraintCorrection kernels (W += factor J C J^T, dx = C J^T f).
+//
+// Storage is the caller's (instance buffers sized at compile time): nothing here allocates.
+#pragma once
+
+#include <cmath>
+#include <limits>
+
+#include "types.h"
+
+namespace sofac {
+
+enum class Resolution : int { Bilateral3 = 0, Bilateral1 = 1, Unilateral1 = 2, UnilateralFriction3 = 3 };
+
+inline constexpr int resolution_lines(Resolution kind) {
+    return kind == Resolution::Bilateral3 || kind == Resolution::UnilateralFriction3 ? 3 : 1;
+}
+
+// One block of rows and its resolution's state.
+struct RowBlock {
+    Index first = 0;  // first row
+    Resolution kind = Resolution::Unilateral1;
+    double parameter = 1.0;      // Bilateral*: load; UnilateralFriction3: mu
+    double* previous = nullptr;  // Bilateral*: forces kept from the last solve (warm start), or none
+    double block[9] = {};        // Bilateral3: inverse of W's block; UnilateralFriction3: W00 W01 W02 W11 W12 W22
+    bool singular = false;       // Bilateral3: the block did not invert (SOFA leaves the inverse zero)
+};
+
+struct ConstraintProblem {
+    Index n = 0;
+    double* W = nullptr;      // n x n, row-major
+    double* dfree = nullptr;  // n
+    double* f = nullptr;      // n
+    double* d = nullptr;      // n, scratch
+    RowBlock* blocks = nullptr;
+    Index block_count = 0;
+    double* scratch = nullptr;  // 3 n: NNCG's lambda, deltaF, p; SOR's previous forces (n)
+
+    double w(Index i, Index j) const { return W[n * i + j]; }
+};
+
+struct ConstraintSettings {
+    Index max_iterations = 1000;
+    double tolerance = 1e-3;
+    double sor = 1.0;
+    bool scale_tolerance = true;
+    bool all_verified = false;
+};
+
+struct ConstraintResult {
+    Index iterations = 0;  // SOFA's currentIterations (BGS, NNCG: sweeps + 1, as result_output counts)
+    Index sweeps = 0;      // Gauss-Seidel sweeps done
+    double error = 0.0;    // the last sweep's error (SOFA's currentError)
+    bool converged = false;
+    Index singular_blocks = 0;  // Bilateral3 blocks of W that did not invert (redundant rows)
+    bool stalled = false;       // NNCG: stopped as the forces stopped changing (SOFA: not converged)
+};
+
+// SOFA's type::invertMatrix for 3x3 (cofactors over the determinant; false when |det| <= eps).
+inline bool invert3(const double m[9], double out[9]) {
+    const double det = m[0] * m[4] * m[8] + m[3] * m[7] * m[2] + m[6] * m[1] * m[5] - m[0] * m[7] * m[5] -
+                       m[3] * m[1] * m[8] - m[6] * m[4] * m[2];
+    if (std::fabs(det) <= std::numeric_limits<double>::epsilon()) return false;
+    out[0] = (m[4] * m[8] - m[7] * m[5]) / det;
+    out[3] = (m[5] * m[6] - m[8] * m[3]) / det;
+    out[6] = (m[3] * m[7] - m[6] * m[4]) / det;
+    out[1] = (m[7] * m[2] - m[1] * m[8]) / det;
+    out[4] = (m[8] * m[0] - m[2] * m[6]) / det;
+    out[7] = (m[6] * m[1] - m[0] * m[7]) / det;
+    out[2] = (m[1] * m[5] - m[4] * m[2]) / det;
+    out[5] = (m[2] * m[3] - m[5] * m[0]) / det;
+    out[8] = (m[0] * m[4] - m[3] * m[1]) / det;
+    return true;
+}
+
+// ConstraintResolution::init: block data from W, warm start from the kept forces.
+inline void resolution_init(RowBlock& b, const ConstraintProblem& p) {
+    const Index l = b.first;
+    switch (b.kind) {
+        case Resolution::Bilateral3: {
+            double m[9];
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) m[3 * i + j] = p.w(l + i, l + j);
+            b.singular = !invert3(m, b.block);
+            if (b.singular)
+                for (double& value : b.block) value = 0.0;
+            if (b.previous)
+                for (int i = 0; i < 3; ++i) p.f[l + i] = b.previous[i];
+            break;
+        }
+        case Resolution::Bilateral1:
+            if (b.previous) p.f[l] = b.previous[0];
+            break;
+        case Resolution::UnilateralFriction3:
+            b.block[0] = p.w(l, l);
+            b.block[1] = p.w(l, l + 1);
+            b.block[2] = p.w(l, l + 2);
+            b.block[3] = p.w(l + 1, l + 1);
+            b.block[4] = p.w(l + 1, l + 2);
+            b.block[5] = p.w(l + 2, l + 2);
+            break;
+        case Resolution::Unilateral1:
+            break;
+    }
+}
+
+// ConstraintResolution::resolution: the block's new forces from its displacement d (W f + dfree).
+inline void resolution_solve(const RowBlock& b, const ConstraintProblem& p, double* d, double* f) {
+    const Index l = b.first;
+    switch (b.kind) {
+        case Resolution::Bilateral3:
+            for (int i = 0; i < 3; ++i)
+                for (int j = 0; j < 3; ++j) f[l + i] -= d[l + j] * b.block[3 * i + j] * b.parameter;
+            break;
+        case Resolution::Bilateral1:
+            f[l] -= d[l] / p.w(l, l);
+            break;
+        case Resolution::Unilateral1:
+            f[l] -= d[l] / p.w(l, l);
+            if (f[l] < 0) f[l] = 0.0;
+            break;
+        case Resolution::UnilateralFriction3: {
+            const double* w = b.block;
+            const double f0 = f[l];
+            f[l] -= d[l] / w[0];
+            if (f[l] < 0) {
+                f[l] = 0;
+                f[l + 1] = 0;
+                f[l + 2] = 0;
+                return;
+            }
+            d[l + 1] += w[1] * (f[l] - f0);
+            d[l + 2] += w[2] * (f[l] - f0);
+            f[l + 1] -= 2 * d[l + 1] / (w[3] + w[5]);
+            f[l + 2] -= 2 * d[l + 2] / (w[3] + w[5]);
+            const double tangential = std::sqrt(f[l + 1] * f[l + 1] + f[l + 2] * f[l + 2]);
+            const double limit = b.parameter * f[l];
+            if (tangential > limit) {
+                const double factor = limit / tangential;
+                f[l + 1] *= factor;
+                f[l + 2] *= factor;
+            }
+            break;
+        }
+    }
+}
+
+// ConstraintResolution::store: the forces kept for the next solve's warm start.
+inline void resolution_store(const RowBlock& b, const double* f) {
+    if (!b.previous) return;
+    for (int i = 0; i < resolution_lines(b.kind); ++i) b.previous[i] = f[b.first + i];
+}
+
+inline void init_blocks(ConstraintProblem& p, ConstraintResult& result) {
+    for (Index k = 0; k < p.block_count; ++k) {
+        resolution_init(p.blocks[k], p);
+        result.singular_blocks += p.blocks[k].singular ? 1 : 0;
+    }
+}
+
+// The error of one block after its resolution (errF: its forces before), SOFA's measure.
+inline double block_error(const ConstraintProblem& p, const RowBlock& b, const double* before, double tol,
+                          bool& verified) {
+    const int nb = resolution_lines(b.kind);
+    const Index j = b.first;
+    if (nb > 1) {
+        double error = 0.0;
+        for (int l = 0; l < nb; ++l) {
+            double line = 0.0;
+            for (int m = 0; m < nb; ++m) {
+                const double dof = p.w(j + l, j + m) * (p.f[j + m] - before[m]);
+                line += dof * dof;
+            }
+            line = std::sqrt(line);
+            if (line > tol) verified = false;
+            error += line;
+        }
+        return error;
+    }
+    const double error = std::fabs(p.w(j, j) * (p.f[j] - before[0]));
+    if (error > tol) verified = false;
+    return error;
+}
+
+// BlockGaussSeidelConstraintSolver::gaussSeidel_increment: one sweep over the blocks in row order,
+// d recomputed densely (k ascending over all rows, the block's own included).
+inline double gauss_seidel_sweep(ConstraintProblem& p, bool measure, double tol, bool& verified) {
+    double error = 0.0;
+    for (Index k = 0; k < p.block_count; ++k) {
+        const RowBlock& b = p.blocks[k];
+        const int nb = resolution_lines(b.kind);
+        const Index j = b.first;
+        double before[3];
+        for (int l = 0; l < nb; ++l) {
+            before[l] = p.f[j + l];
+            p.d[j + l] = p.dfree[j + l];
+        }
+        for (Index c = 0; c < p.n; ++c)
+            for (int l = 0; l < nb; ++l) p.d[j + l] += p.w(j + l, c) * p.f[c];
+        resolution_solve(b, p, p.d, p.f);
+        if (measure)
+            error += block_error(p, b, before, tol, verified);
+        else
+            verified = true;
+    }
+    return error;
+}
+
+inline double scaled_tolerance(const ConstraintProblem& p, const ConstraintSettings& s) {
+    return s.scale_tolerance && !s.all_verified ? s.tolerance * double(p.n) : s.tolerance;
+}
+
+inline void store_blocks(const ConstraintProblem& p) {
+    for (Index k = 0; k < p.block_count; ++k) resolution_store(p.blocks[k], p.f);
+}
+
+// BlockGaussSeidelConstraintSolver::doSolve. scratch: n numbers when sor != 1.
+inline ConstraintResult block_gauss_seidel(ConstraintProblem& p, const ConstraintSettings& s) {
+    ConstraintResult result;
+    if (p.n == 0) return result;  // error 0, iterations 0
+    const double tol = scaled_tolerance(p, s);
+    init_blocks(p, result);
+    double error = 0.0;
+    Index sweeps = 0;
+    for (Index it = 0; it < s.max_iterations; ++it) {
+        ++sweeps;
+        bool verified = true;
+        if (s.sor != 1.0)
+            for (Index j = 0; j < p.n; ++j) p.scratch[j] = p.f[j];
+        error = gauss_seidel_sweep(p, true, tol, verified);
+        if (s.sor != 1.0)
+            for (Index j = 0; j < p.n; ++j) p.f[j] = s.sor * p.f[j] + (1 - s.sor) * p.scratch[j];
+        if (s.all_verified ? verified : error < tol) {
+            result.converged = true;
+            break;
+        }
+    }
+    result.sweeps = sweeps;
+    result.iterations = sweeps + 1;  // GenericConstraintProblem::result_output
+    result.error = error;
+    store_blocks(p);
+    return result;
+}
+
+inline double dot(const double* a, const double* b, Index n) {
+    double sum = 0.0;
+    for (Index i = 0; i < n; ++i) sum += a[i] * b[i];
+    return sum;
+}
+
+// NNCGConstraintSolver::doSolve: a Gauss-Seidel sweep as the first direction, then sweeps
+// accelerated by a Fletcher-Reeves step (restarted when beta > 1). scratch: 3 n numbers.
+inline ConstraintResult nncg(ConstraintProblem& p, const ConstraintSettings& s) {
+    ConstraintResult result;
+    if (p.n == 0) return result;
+    const Index n = p.n;
+    double* lambda = p.scratch;
+    double* delta = p.scratch + n;
+    double* direction = p.scratch + 2 * n;
+    for (Index j = 0; j < 3 * n; ++j) p.scratch[j] = 0.0;
+    const double tol = scaled_tolerance(p, s);
+    init_blocks(p, result);
+    bool verified = true;
+    for (Index j = 0; j < n; ++j) lambda[j] = p.f[j];
+    double error = gauss_seidel_sweep(p, false, tol, verified);
+    for (Index j = 0; j < n; ++j) {
+        delta[j] = -(p.f[j] - lambda[j]);
+        direction[j] = -delta[j];
+    }
+    Index count = 0;
+    for (Index it = 1; it < s.max_iterations; ++it) {
+        ++count;
+        verified = true;
+        for (Index j = 0; j < n; ++j) lambda[j] = p.f[j];
+        error = gauss_seidel_sweep(p, true, tol, verified);
+        if (s.all_verified ? verified : error < tol) {
+            result.converged = true;
+            break;
+        }
+        // deltaF_new (kept in lambda, which is not read again this iteration)
+        for (Index j = 0; j < n; ++j) lambda[j] = -(p.f[j] - lambda[j]);
+        const double beta = dot(lambda, lambda, n) / dot(delta, delta, n);
+        for (Index j = 0; j < n; ++j) delta[j] = lambda[j] * 1;
+        if (beta > 1) {
+            for (Index j = 0; j < n; ++j) direction[j] = 0.0;
+        } else {
+            for (Index j = 0; j < n; ++j) {
+                p.f[j] += beta * direction[j];
+                direction[j] = beta * direction[j] - delta[j];
+            }
+        }
+        if (std::sqrt(dot(lambda, lambda, n)) < tol) {
+            result.stalled = true;
+            break;
+        }
+    }
+    result.sweeps = count + 1;
+    result.iterations = count + 1;
+    result.error = error;
+    store_blocks(p);
+    return result;
+}
+
+// UnbuiltGaussSeidelConstraintSolver::doSolve. W holds only the blocks' diagonal blocks;
+// `corrections` gives each block's displacement from the forces so far and takes force changes:
+//   corrections.add_displacement(d, first, last)   d[first..last] += J C (J^T f) of those rows
+//   corrections.set_force_change(df, first, last)  J^T df of those rows into the corrections
+// Forces start from zero (SOFA erases them after the warm start of `init`).
+template <class Corrections>
+inline ConstraintResult unbuilt_gauss_seidel(ConstraintProblem& p, const ConstraintSettings& s,
+                                             Corrections& corrections) {
+    ConstraintResult result;
+    if (p.n == 0) return result;
+    const double tol = scaled_tolerance(p, s);
+    init_blocks(p, result);
+    for (Index j = 0; j < p.n; ++j) p.f[j] = 0.0;
+    double error = 0.0;
+    Index iteration = 0;
+    for (iteration = 0; iteration < s.max_iterations; ++iteration) {
+        bool verified = true;
+        if (s.sor != 1.0)
+            for (Index j = 0; j < p.n; ++j) p.scratch[j] = p.f[j];
+        error = 0.0;
+        for (Index k = 0; k < p.block_count; ++k) {
+            const RowBlock& b = p.blocks[k];
+            const int nb = resolution_lines(b.kind);
+            const Index j = b.first;
+            double before[3];
+            for (int l = 0; l < nb; ++l) {
+                before[l] = p.f[j + l];
+                p.d[j + l] = p.dfree[j + l];
+            }
+            corrections.add_displacement(p.d, j, j + nb - 1);
+            resolution_solve(b, p, p.d, p.f);
+            error += block_error(p, b, before, tol, verified);
+            bool update = false;
+            for (int l = 0; l < nb; ++l) update |= (p.f[j + l] != 0.0 || before[l] != 0.0);
+            if (update) {
+                double kept[3];
+                for (int l = 0; l < nb; ++l) {
+                    kept[l] = p.f[j + l];
+                    p.f[j + l] -= before[l];
+                }
+                corrections.set_force_change(p.f, j, j + nb - 1);
+                for (int l = 0; l < nb; ++l) p.f[j + l] = kept[l];
+            }
+        }
+        if (s.sor != 1.0)
+            for (Index j = 0; j < p.n; ++j) p.f[j] = s.sor * p.f[j] + (1 - s.sor) * p.scratch[j];
+        if (s.all_verified ? verified : error < tol) {
+            result.converged = true;
+            break;
+        }
+    }
+    // result_output(iter): iter is the loop index at exit (sweeps - 1 when converged), plus one
+    result.sweeps = result.converged ? iteration + 1 : iteration;
+    result.iterations = iteration + 1;
+    result.error = error;
+    store_blocks(p);
+    return result;
+}
+
+// LCPConstraintSolver, built, mu > 0: helper::nlcp_gaussseidel on contacts of 3 rows (normal and
+// two tangents), Coulomb's cone of coefficient mu (the solver's own). f starts from zero unless
+// `initial_force`. Converged when the sum over contacts of |d - d_before| < tol (numContacts + 1);
+// then contacts whose normal force reaches maxF (when set) are released.
+struct LcpSettings {
+    Index max_iterations = 1000;
+    double tolerance = 1e-3;
+    double mu = 0.6;
+    double min_w = 0.0;
+    double max_f = 0.0;
+    bool initial_force = false;
+};
+
+inline double abs_error(const double a[3], const double b[3]) {
+    return std::sqrt((b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]));
+}
+
+// LocalBlock33::GS_State: one contact's forces from its displacement d (own forces excluded);
+// d then includes them, unless the contact separates (f = 0, d unchanged).
+inline void lcp_contact(const double w[6], double mu, double d[3], double f[3]) {
+    double fn = f[0], ft = f[1], fs = f[2];
+    const double d0 = w[0] * fn + w[1] * ft + w[2] * fs + d[0];
+    fn -= d0 / w[0];
+    if (fn < 0) {
+        f[0] = f[1] = f[2] = 0;
+        return;
+    }
+    const double d1 = w[1] * fn + w[3] * ft + w[4] * fs + d[1];
+    const double d2 = w[2] * fn + w[4] * ft + w[5] * fs + d[2];
+    ft -= 2 * d1 / (w[3] + w[5]);
+    fs -= 2 * d2 / (w[3] + w[5]);
+    const double tangential = std::sqrt(ft * ft + fs * fs);
+    if (tangential > mu * fn) {
+        ft *= mu * fn / tangential;
+        fs *= mu * fn / tangential;
+    }
+    d[0] += w[0] * fn + w[1] * ft + w[2] * fs;
+    d[1] += w[1] * fn + w[3] * ft + w[4] * fs;
+    d[2] += w[2] * fn + w[4] * ft + w[5] * fs;
+    f[0] = fn, f[1] = ft, f[2] = fs;
+}
+
+inline ConstraintResult lcp_gauss_seidel(ConstraintProblem& p, const LcpSettings& s) {
+    ConstraintResult result;
+    const Index n = p.n;
+    const Index contacts = n / 3;
+    if (n == 0 || n % 3) return result;
+    if (!s.initial_force)
+        for (Index j = 0; j < n; ++j) p.f[j] = 0.0;
+    double error = 0.0;
+    Index it = 0;
+    for (it = 0; it < s.max_iterations; ++it) {
+        error = 0.0;
+        for (Index c = 0; c < contacts; ++c) {
+            const Index r = 3 * c;
+            double* fc = p.f + r;
+            double f1[3] = {fc[0], fc[1], fc[2]};
+            fc[0] = fc[1] = fc[2] = 0.0;
+            double d[3] = {p.dfree[r], p.dfree[r + 1], p.dfree[r + 2]};
+            for (Index i = 0; i < n; ++i) {
+                d[0] += p.w(r, i) * p.f[i];
+                d[1] += p.w(r + 1, i) * p.f[i];
+                d[2] += p.w(r + 2, i) * p.f[i];
+            }
+            double before[3];
+            for (int l = 0; l < 3; ++l)
+                before[l] = d[l] + p.w(r + l, r) * f1[0] + p.w(r + l, r + 1) * f1[1] + p.w(r + l, r + 2) * f1[2];
+            if (s.min_w != 0.0 && std::fabs(p.w(r, r)) <= s.min_w) {
+                f1[0] = f1[1] = f1[2] = 0.0;  // compliance too small: no force
+            } else {
+                const double w[6] = {p.w(r, r),         p.w(r, r + 1),     p.w(r, r + 2),
+                                     p.w(r + 1, r + 1), p.w(r + 1, r + 2), p.w(r + 2, r + 2)};
+                lcp_contact(w, s.mu, d, f1);
+            }
+            error += abs_error(d, before);
+            fc[0] = f1[0], fc[1] = f1[1], fc[2] = f1[2];
+        }
+        if (error < s.tolerance * double(contacts + 1)) {
+            result.converged = true;
+            if (s.max_f != 0.0)
+                for (Index c = 0; c < contacts; ++c)
+                    if (std::fabs(p.f[3 * c]) >= s.max_f) p.f[3 * c] = p.f[3 * c + 1] = p.f[3 * c + 2] = 0.0;
+            break;
+        }
+    }
+    result.sweeps = result.converged ? it + 1 : it;
+    result.iterations = result.sweeps;
+    result.error = error;
+    return result;
+}
+
+// ---- UncoupledConstraintCorrection -------------------------------------------------------------
+//
+// A state's constraint Jacobian, rows in ascending order, each a run of (dof, derivative)
+// entries with ascending dofs (SOFA's MatrixDeriv): row r's entries are entries[start[r] ..
+// start[r + 1]), its constraint index row_index[r]; values hold DT::deriv numbers per entry.
+struct JacobianRows {
+    Index rows = 0;
+    const Index* row_index = nullptr;
+    const Index* start = nullptr;  // rows + 1
+    const Index* dof = nullptr;
+    const double* values = nullptr;
+};
+
+// c(n1, n2) of one DOF: (n1 . n2) comp (Vec, comp[dof] or the default) or SOFA's rigid formula on
+// the 7 compliance numbers (translation comp[0], rotation the symmetric 3x3 comp[1..6]).
+template <class DT>
+inline double uncoupled_pair(Index dof, const double* n1, const double* n2, double comp0, const double* comp,
+                             Index comp_size) {
+    if constexpr (DT::rigid && DT::deriv == 6) {
+        (void)dof, (void)comp0, (void)comp_size;
+        double w = (n1[0] * n2[0] + n1[1] * n2[1] + n1[2] * n2[2]) * comp[0];
+        const double* a = n1 + 3;
+        const double* b = n2 + 3;
+        w += (a[0] * comp[1] + a[1] * comp[2] + a[2] * comp[3]) * b[0];
+        w += (a[0] * comp[2] + a[1] * comp[4] + a[2] * comp[5]) * b[1];
+        w += (a[0] * comp[3] + a[1] * comp[5] + a[2] * comp[6]) * b[2];
+        return w;
+    } else {
+        double product = 0.0;
+        for (int c = 0; c < DT::deriv; ++c) product += n1[c] * n2[c];
+        return product * (dof < comp_size ? comp[dof] : comp0);
+    }
+}
+
+// UncoupledConstraintCorrection::addComplianceInConstraintSpace: W += factor-scaled J C J^T
+// (comp and comp0 multiplied by `factor` first, as SOFA does), n the rows of W.
+template <class DT>
+inline void uncoupled_add_compliance(double* W, Index n, const JacobianRows& J, double comp0, const double* comp,
+                                     Index comp_size, double factor, double* scaled_comp) {
+    comp0 *= factor;
+    for (Index i = 0; i < comp_size; ++i) scaled_comp[i] = comp[i] * factor;
+    for (Index r = 0; r < J.rows; ++r) {
+        if (J.start[r] == J.start[r + 1]) continue;
+        const Index row = J.row_index[r];
+        double w = 0.0;
+        for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+            w += uncoupled_pair<DT>(J.dof[e], J.values + DT::deriv * e, J.values + DT::deriv * e, comp0, scaled_comp,
+                                    comp_size);
+        W[n * row + row] += w;
+        for (Index s = r + 1; s < J.rows; ++s) {
+            if (J.start[s] == J.start[s + 1]) continue;
+            const Index column = J.row_index[s];
+            double v = 0.0;
+            Index a = J.start[r], b = J.start[s];
+            while (a < J.start[r + 1] && b < J.start[s + 1]) {
+                if (J.dof[a] < J.dof[b]) {
+                    ++a;
+                } else if (J.dof[b] < J.dof[a]) {
+                    ++b;
+                } else {
+                    v += uncoupled_pair<DT>(J.dof[a], J.values + DT::deriv * a, J.values + DT::deriv * b, comp0,
+                                            scaled_comp, comp_size);
+                    ++a, ++b;
+                }
+            }
+            if (v != 0.0) {
+                W[n * row + column] += v;
+                W[n * column + row] += v;
+            }
+        }
+    }
+}
+
+// lambda += J^T f over the state's rows (MapMapSparseMatrix::multTransposeBaseVector).
+template <class DT>
+inline void add_jacobian_transpose(double* lambda, const JacobianRows& J, const double* f) {
+    for (Index r = 0; r < J.rows; ++r) {
+        const double force = f[J.row_index[r]];
+        for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+            for (int c = 0; c < DT::deriv; ++c) lambda[DT::deriv * J.dof[e] + c] += J.values[DT::deriv * e + c] * force;
+    }
+}
+
+// computeDx: dx = C lambda per DOF (Vec: comp[dof] or comp0; rigid: comp[0] and the 3x3 block).
+template <class DT>
+inline void uncoupled_dx(double* dx, const double* lambda, Index dofs, double comp0, const double* comp,
+                         Index comp_size) {
+    for (Index i = 0; i < dofs; ++i) {
+        const double* f = lambda + DT::deriv * i;
+        double* out = dx + DT::deriv * i;
+        if constexpr (DT::rigid && DT::deriv == 6) {
+            for (int c = 0; c < 3; ++c) out[c] = f[c] * comp[0];
+            out[3] = f[3] * comp[1] + f[4] * comp[2] + f[5] * comp[3];
+            out[4] = f[3] * comp[2] + f[4] * comp[4] + f[5] * comp[5];
+            out[5] = f[3] * comp[3] + f[4] * comp[5] + f[5] * comp[6];
+        } else {
+            const double c = i < comp_size ? comp[i] : comp0;
+            for (int k = 0; k < DT::deriv; ++k) out[k] = f[k] * c;
+        }
+    }
+}
+
+// applyMotionCorrection: x = x_free + position_factor dx, v = v_free + velocity_factor dx, and
+// dx scaled by position_factor (rigid frames: SOFA's RigidCoord += Deriv).
+template <class DT>
+inline void apply_motion_correction(double* x, const double* x_free, double* v, const double* v_free, double* dx,
+                                    Index dofs, double position_factor, double velocity_factor) {
+    for (Index i = 0; i < dofs; ++i) {
+        double* step = dx + DT::deriv * i;
+        double scaled[DT::deriv];
+        for (int c = 0; c < DT::deriv; ++c) scaled[c] = step[c] * position_factor;
+        if constexpr (DT::rigid && DT::coord == 7) {
+            const Vec3 turn_vector(scaled[3], scaled[4], scaled[5]);
+            for (int c = 0; c < 3; ++c) x[7 * i + c] = x_free[7 * i + c] + scaled[c];
+            const Quat turn = quat_from_rotation_vector(turn_vector);
+            orientation(x, i) = turn * orientation(x_free, i);
+        } else {
+            for (int c = 0; c < DT::coord; ++c) x[DT::coord * i + c] = x_free[DT::coord * i + c] + scaled[c];
+        }
+        for (int c = 0; c < DT::deriv; ++c) {
+            v[DT::deriv * i + c] = v_free[DT::deriv * i + c] + step[c] * velocity_factor;
+            step[c] = scaled[c];
+        }
+    }
+}
+
+// ---- the compiled constraint phase (FreeMotionAnimationLoop) ----------------------------------
+
+// GenericConstraintProblem::clear(n): W, dfree, f and d zeroed.
+inline void constraint_clear(double* W, double* dfree, double* f, double* d, Index n) {
+    for (Index i = 0; i < n * n; ++i) W[i] = 0.0;
+    for (Index i = 0; i < n; ++i) dfree[i] = f[i] = d[i] = 0.0;
+}
+
+// BilateralLagrangianConstraint<Vec3d>::getPositionViolation: rows first + 3 p + k get
+// x2_free[m2[p]] - x1_free[m1[p]] (- rest[p] when given).
+inline void bilateral_violation(double* dfree, Index first, const double* x1, const double* x2, const Index* m1,
+                                const Index* m2, Index pairs, const double* rest, Index rest_count) {
+    for (Index p = 0; p < pairs; ++p)
+        for (int k = 0; k < 3; ++k) {
+            double value = x2[3 * m2[p] + k] - x1[3 * m1[p] + k];
+            if (p < rest_count) value -= rest[3 * p + k];
+            dfree[first + 3 * p + k] = value;
+        }
+}
+
+// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameter, offset
+// of its kept forces in `previous` or -1); K blocks, on the stack. report: solves, iterations and
+// error of the last solve, solves that hit the iteration limit, and the time, error and iterations
+// of the last such solve.
+template <int K>
+inline void solve_constraints(int method, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
+                              const Index* first, const Index* kind, const double* parameter, const Index* kept,
+                              double* previous, double max_iterations, double tolerance, double sor,
+                              double scale_tolerance, double all_verified, double regularization, double* report,
+                              double time) {
+    RowBlock blocks[K];
+    for (int k = 0; k < K; ++k) {
+        blocks[k].first = first[k];
+        blocks[k].kind = Resolution(kind[k]);
+        blocks[k].parameter = parameter[k];
+        blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
+    }
+    if (regularization > std::numeric_limits<double>::epsilon())
+        for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
+    ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
+    const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
+                                      all_verified != 0.0};
+    const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (!result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
+// RigidMapping::applyJT on constraint rows: entry e of the frame's rows gets (n, r x n), n the
+// mapped point's direction and r its rotated offset (the mapping's last apply).
+inline void rigid_constraint_jacobian(double* values, const Index* points, const double* directions,
+                                      const double* offsets, Index count) {
+    for (Index e = 0; e < count; ++e) {
+        const double* n = directions + 3 * e;
+        const double* r = offsets + 3 * points[e];
+        double* out = values + 6 * e;
+        out[0] = n[0], out[1] = n[1], out[2] = n[2];
+        out[3] = r[1] * n[2] - r[2] * n[1];
+        out[4] = r[2] * n[0] - r[0] * n[2];
+        out[5] = r[0] * n[1] - r[1] * n[0];
+    }
+}
+
+// UncoupledConstraintCorrection on a Vec state after the solve: lambda = J^T f, dx = C lambda,
+// x = x_free + position_factor dx, v = v_free + velocity_factor dx (x, v hold the free motion).
+template <class DT>
+inline void uncoupled_correct(double* x, double* v, double* lambda, double* dx, const JacobianRows& J, const double* f,
+                              Index dofs, double comp0, const double* comp, Index comp_size, double position_factor,
+                              double velocity_factor) {
+    for (Index i = 0; i < DT::deriv * dofs; ++i) lambda[i] = 0.0;
+    add_jacobian_transpose<DT>(lambda, J, f);
+    uncoupled_dx<DT>(dx, lambda, dofs, comp0, comp, comp_size);
+    apply_motion_correction<DT>(x, x, v, v, dx, dofs, position_factor, velocity_factor);
+}
+
+// ---- UnbuiltGaussSeidel with uncoupled corrections ---------------------------------------------
+
+// SOFA's Deriv products: Vec: one dot; RigidDeriv: linear dot + angular dot.
+template <class DT>
+inline double deriv_dot(const double* a, const double* b) {
+    if constexpr (DT::rigid && DT::deriv == 6) {
+        return (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) + (a[3] * b[3] + a[4] * b[4] + a[5] * b[5]);
+    } else {
+        double sum = 0.0;
+        for (int c = 0; c < DT::deriv; ++c) sum += a[c] * b[c];
+        return sum;
+    }
+}
+
+// UncoupledConstraintCorrection's unbuilt interface: constraint_force and constraint_disp per DOF
+// (resetForUnbuiltResolution, addConstraintDisplacement, setConstraintDForce,
+// getBlockDiagonalCompliance: the raw compliance, without the ODE factor, as SOFA).
+template <class DT>
+struct UnbuiltUncoupled {
+    JacobianRows J;
+    Index dofs;
+    double comp0;
+    const double* comp;
+    Index comp_size;
+    double* force;  // dofs x deriv
+    double* disp;   // dofs x deriv
+
+    Index row_of(Index id) const {  // the position of constraint `id` among the rows, or -1
+        Index low = 0, high = J.rows;
+        while (low < high) {
+            const Index middle = (low + high) / 2;
+            if (J.row_index[middle] < id)
+                low = middle + 1;
+            else
+                high = middle;
+        }
+        return low < J.rows && J.row_index[low] == id && J.start[low] != J.start[low + 1] ? low : -1;
+    }
+    void reset() const {
+        for (Index i = 0; i < DT::deriv * dofs; ++i) force[i] = disp[i] = 0.0;
+    }
+    void add_displacement(double* d, Index first, Index last) const {
+        for (Index id = first; id <= last; ++id) {
+            const Index r = row_of(id);
+            if (r < 0) continue;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+                d[id] += deriv_dot<DT>(J.values + DT::deriv * e, disp + DT::deriv * J.dof[e]);
+        }
+    }
+    void set_force_change(const double* df, Index first, Index last) const {
+        for (Index id = first; id <= last; ++id) {
+            const Index r = row_of(id);
+            if (r < 0) continue;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e) {
+                const Index dof = J.dof[e];
+                for (int c = 0; c < DT::deriv; ++c) force[DT::deriv * dof + c] += J.values[DT::deriv * e + c] * df[id];
+                uncoupled_dx<DT>(disp + DT::deriv * dof, force + DT::deriv * dof, 1, dof < comp_size ? comp[dof] : comp0,
+                                 comp, DT::rigid ? comp_size : 0);
+            }
+        }
+    }
+    void block_compliance(double* W, Index n, Index first, Index last) const {
+        for (Index id1 = first; id1 <= last; ++id1) {
+            const Index r = row_of(id1);
+            if (r < 0) continue;
+            double w = 0.0;
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+                w += uncoupled_pair<DT>(J.dof[e], J.values + DT::deriv * e, J.values + DT::deriv * e, comp0, comp,
+                                        comp_size);
+            W[n * id1 + id1] += w;
+            for (Index id2 = id1 + 1; id2 <= last; ++id2) {
+                const Index s = row_of(id2);
+                if (s < 0) continue;
+                double v = 0.0;
+                Index a = J.start[r], b = J.start[s];
+                while (a < J.start[r + 1] && b < J.start[s + 1]) {
+                    if (J.dof[a] < J.dof[b]) {
+                        ++a;
+                    } else if (J.dof[b] < J.dof[a]) {
+                        ++b;
+                    } else {
+                        v += uncoupled_pair<DT>(J.dof[a], J.values + DT::deriv * a, J.values + DT::deriv * b, comp0,
+                                                comp, comp_size);
+                        ++a, ++b;
+                    }
+                }
+                if (v != 0.0) {
+                    W[n * id1 + id2] += v;
+                    W[n * id2 + id1] += v;
+                }
+            }
+        }
+    }
+};
+
+// The corrections of a UGS solve, in the solver's list order: each block's displacements and force
+// changes go to the corrections holding its first row (SOFA's cclist).
+template <class DT, int C>
+struct UnbuiltSet {
+    UnbuiltUncoupled<DT> items[C];
+    void add_displacement(double* d, Index first, Index last) const {
+        for (const auto& item : items)
+            if (item.row_of(first) >= 0) item.add_displacement(d, first, last);
+    }
+    void set_force_change(const double* df, Index first, Index last) const {
+        for (const auto& item : items)
+            if (item.row_of(first) >= 0) item.set_force_change(df, first, last);
+    }
+};
+
+// UnbuiltGaussSeidelConstraintSolver on K blocks with C uncoupled corrections of one DataType:
+// W holds only the blocks' diagonal blocks (raw compliance), forces start from zero.
+template <class DT, int K, class... Items>
+inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double* scratch, Index n, const Index* first,
+                          const Index* kind, const double* parameter, const Index* kept, double* previous,
+                          double max_iterations, double tolerance, double sor, double scale_tolerance,
+                          double all_verified, double* report, double time, const Items&... items) {
+    UnbuiltSet<DT, int(sizeof...(Items))> set{{items...}};
+    RowBlock blocks[K];
+    for (int k = 0; k < K; ++k) {
+        blocks[k].first = first[k];
+        blocks[k].kind = Resolution(kind[k]);
+        blocks[k].parameter = parameter[k];
+        blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
+    }
+    for (const auto& item : set.items) item.reset();
+    for (int k = 0; k < K; ++k) {
+        const Index last = first[k] + resolution_lines(blocks[k].kind) - 1;
+        for (const auto& item : set.items)
+            if (item.row_of(first[k]) >= 0) item.block_compliance(W, n, first[k], last);
+    }
+    ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
+    const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
+                                      all_verified != 0.0};
+    const ConstraintResult result = unbuilt_gauss_seidel(p, settings, set);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (!result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
+}  // namespace sofac
