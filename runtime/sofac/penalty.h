@@ -195,7 +195,7 @@ public:
         for (const auto& entry : contacts_map_.map()) {  // the contacts with a static model, in this group
             PenaltyPair& p = pairs[entry.second];
             if (p.root) continue;
-            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            const int s = side_of(p, model);
             if (s < 0) continue;
             if (has_points(p, s)) {
                 p.points[s].apply(x, p.x[s].data());
@@ -224,7 +224,7 @@ public:
         for (const auto& entry : contacts_map_.map()) {
             PenaltyPair& p = pairs[entry.second];
             if (p.root) continue;
-            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            const int s = side_of(p, model);
             if (s < 0) continue;
             const int o = 1 - s;
             if (has_points(p, s)) {
@@ -258,7 +258,7 @@ public:
         for (const auto& entry : contacts_map_.map()) {
             const PenaltyPair& p = pairs[entry.second];
             if (p.root) continue;
-            const int s = p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+            const int s = side_of(p, model);
             if (s < 0) continue;
             for (const PenaltyContact& c : p.ff.contacts) {
                 if (!(c.pen > 0)) continue;
@@ -327,6 +327,11 @@ public:
     std::vector<Index> pair_of;  // n x n index into pairs, -1: none
 
 private:
+    // Which side of a pair a model is (0 or 1), or -1.
+    static int side_of(const PenaltyPair& p, Index model) {
+        return p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
+    }
+
     // Before each detection: how far each model's root box moved since the previous one, and the
     // pairs whose swept boxes meet while one of them moved farther than the pair's reach.
     void watch_fast_motion() {
