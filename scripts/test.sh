@@ -14,7 +14,9 @@ echo "== ruff check ."
 
 echo "== pytest"
 pytest_status=0
-"$PYTHON" -m pytest -q "$@" || pytest_status=$?
+# One worker per core (pytest-xdist), a test file per worker at a time: a file's module fixtures
+# (compiled scenes) are built once. SOFAC_TEST_WORKERS=0 runs everything in this process.
+"$PYTHON" -m pytest -q -n "${SOFAC_TEST_WORKERS:-auto}" --dist loadfile "$@" || pytest_status=$?
 if ((pytest_status == 5)); then
     echo "test.sh: pytest ran no test; that counts as a failure" >&2
     status=1

@@ -36,6 +36,14 @@ def corpus_dir(shared_dir: Path) -> Path:
 @pytest.fixture(scope="session", autouse=True)
 def compile_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One compile cache for the whole test session (each scene compiles once), away from the user's."""
-    folder = Path(os.environ.get("SOFAC_TEST_CACHE") or tmp_path_factory.mktemp("sofac-cache"))
+    if os.environ.get("SOFAC_TEST_CACHE"):
+        folder = Path(os.environ["SOFAC_TEST_CACHE"])
+    elif os.environ.get("PYTEST_XDIST_WORKER"):
+        # pytest-xdist: the workers share one cache (builds take a file lock), so that a scene two
+        # workers load still compiles once; their base temporary folders are siblings.
+        folder = tmp_path_factory.getbasetemp().parent / "sofac-cache"
+        folder.mkdir(exist_ok=True)
+    else:
+        folder = tmp_path_factory.mktemp("sofac-cache")
     os.environ["SOFAC_CACHE_DIR"] = str(folder)
     return folder
