@@ -47,3 +47,23 @@ def compile_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
         folder = tmp_path_factory.mktemp("sofac-cache")
     os.environ["SOFAC_CACHE_DIR"] = str(folder)
     return folder
+
+
+LONG_SUITE = os.environ.get("SOFAC_LONG") == "1"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        "long: a slow test (long regression runs, many compiled scenes); runs only with SOFAC_LONG=1 "
+        "(scripts/test-long.sh), CI runs a representative part",
+    )
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    if LONG_SUITE:
+        return
+    skip = pytest.mark.skip(reason="long suite: run with SOFAC_LONG=1 (scripts/test-long.sh)")
+    for item in items:
+        if "long" in item.keywords:
+            item.add_marker(skip)
