@@ -33,9 +33,11 @@ class SceneWarning(UserWarning):
     """A warning about a scene, with the text ``sofac check`` prints; ``.diagnostic`` is the
     :class:`~sofac.diagnostics.Diagnostic` (code, file, line, attribute, hint)."""
 
-    def __init__(self, diagnostic: Diagnostic) -> None:
-        super().__init__(_text(diagnostic))
-        self.diagnostic = diagnostic
+    def __init__(self, diagnostic: Diagnostic | str) -> None:
+        # A warning made again from its text (pytest-xdist sends warnings between processes as their
+        # arguments) keeps the text and has no diagnostic.
+        super().__init__(diagnostic if isinstance(diagnostic, str) else _text(diagnostic))
+        self.diagnostic = None if isinstance(diagnostic, str) else diagnostic
 
 
 class StrictSceneError(SceneError):
