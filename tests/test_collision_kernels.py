@@ -514,15 +514,18 @@ def python_narrow_phase(
     return calls
 
 
-def test_narrow_phase_order_matches_the_traversal(shim: Shim) -> None:
+# (points of each model, tree depth): small deepest cubes, and large ones (blocks of ~70 leaves,
+# where the runtime first drops the leaves that miss the other block)
+@pytest.mark.parametrize(("sizes", "depth"), [((120, 90), 6), ((600, 500), 3)])
+def test_narrow_phase_order_matches_the_traversal(shim: Shim, sizes: tuple[int, int], depth: int) -> None:
     rng = np.random.default_rng(11)
-    x1, x2 = rng.uniform(-1, 1, (120, 3)), rng.uniform(-0.6, 1.4, (90, 3))
+    x1, x2 = rng.uniform(-1, 1, (sizes[0], 3)), rng.uniform(-0.6, 1.4, (sizes[1], 3))
     cd1, cd2, alarm = 0.02, 0.03, 0.2
     a, b = Model(x1, cd=cd1), Model(x2, cd=cd2)
-    found, _ = shim.detect("min", "PP", a, b, depth=6, alarm=alarm, contact=0.05)
+    found, _ = shim.detect("min", "PP", a, b, depth=depth, alarm=alarm, contact=0.05)
     boxes1 = np.stack([x1 - cd1, x1 + cd1], axis=1)
     boxes2 = np.stack([x2 - cd2, x2 + cd2], axis=1)
-    calls = python_narrow_phase(boxes1, boxes2, 6, alarm + cd1 + cd2)
+    calls = python_narrow_phase(boxes1, boxes2, depth, alarm + cd1 + cd2)
     hits = {(o.elem1, o.elem2) for o in found}
     expected = [c for c in calls if c in hits]
     assert len(found) > 10
