@@ -57,7 +57,8 @@ API int btd_solve(const double* a, Index blocks, const double* b, double* x) {
             if (a[n * i + j] != 0.0) entries.emplace_back(i, j, a[n * i + j]);
     m.setFromTriplets(entries.begin(), entries.end());
     sofac::BlockTridiagonal t;
-    t.load(m);
+    t.resize(blocks);
+    t.add_matrix(m);
     t.factor();
     t.solve(b, x);
     return t.ok ? 1 : 0;

@@ -391,6 +391,24 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     ],
                 )
             )
+            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
+                group.assemble.append(
+                    Op(
+                        where,
+                        [
+                            call(
+                                "contact_assemble_static_coupling",
+                                Env.CONTACTS,
+                                pipeline,
+                                index,
+                                Env.ASSEMBLER,
+                                offset,
+                                Env.KFACT,
+                                Env.BAND,
+                            )
+                        ],
+                    )
+                )
         if group.scheme == "implicit" and static_partner and state.dx is not None:
             group.stiffness_dx.append(
                 Op(

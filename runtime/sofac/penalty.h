@@ -288,6 +288,43 @@ public:
         }
     }
 
+    // The coupling blocks of the contacts on `model` with static partners, as SOFA's
+    // MatrixLinearSystem adds them although the static side is no state of the system: that
+    // state is unknown to its mapping graph, so the blocks df_model/dx_static = ks n n^T (J^T K,
+    // on the model's side) and df_static/dx_model (K J) go to the global matrix at the static
+    // contact point's own scalar index 3 m + i, read as a column (resp. a row) of the system.
+    // `A` holds the mappings' current Jacobians; `matrix.add(row, col, value)` receives kfact
+    // times each entry on the system's DOFs.
+    template <class Assembler, class Matrix>
+    void add_k_static_coupling(Index model, const Assembler& A, Index offset, double kfact, Matrix& matrix) {
+        const PenaltyModel& m = models[model];
+        const int width = m.kind == ContactSide::kTriangle ? 3 : (m.kind == ContactSide::kLine ? 2 : 1);
+        const auto add = [&matrix](Index row, Index col, double value) { matrix.add(row, col, value); };
+        for (const auto& entry : contacts_map_.map()) {
+            const PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = side_of(p, model);
+            if (s < 0) continue;
+            for (const PenaltyContact& c : p.ff.contacts) {
+                if (!(c.pen > 0)) continue;
+                const Index element = s == 0 ? c.element1 : c.element2;
+                const Index other = s == 0 ? c.m2 : c.m1;
+                double w[3] = {1.0, 0.0, 0.0};
+                if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
+                const double k = c.ks * kfact;
+                for (int a = 0; a < width; ++a) {
+                    const Index pa = offset + 3 * (width == 1 ? element : m.cells[width * element + a]);
+                    for (int i = 0; i < 3; ++i)
+                        for (int j = 0; j < 3; ++j) {
+                            const double value = k * w[a] * c.normal[i] * c.normal[j];
+                            A.expand(pa + i, 3 * other + j, value, add);
+                            A.expand(3 * other + i, pa + j, value, add);
+                        }
+                }
+            }
+        }
+    }
+
     // Whether a contact of this step involves the model (else its contact forces are zero).
     bool in_contact(Index model) const { return live_pairs_[static_cast<std::size_t>(model)] > 0; }
 
@@ -453,6 +490,12 @@ template <class Assembler>
 inline void contact_assemble(ContactPipelines& pipelines, Index pipeline, Index model, Assembler& A, Index offset,
                              double kfact) {
     pipelines[pipeline]->add_k(model, A, offset, kfact);
+}
+
+template <class Assembler, class Matrix>
+inline void contact_assemble_static_coupling(ContactPipelines& pipelines, Index pipeline, Index model,
+                                             const Assembler& A, Index offset, double kfact, Matrix& matrix) {
+    pipelines[pipeline]->add_k_static_coupling(model, A, offset, kfact, matrix);
 }
 
 inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
