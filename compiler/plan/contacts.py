@@ -391,6 +391,18 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     ],
                 )
             )
+            if not group.btd and group.linear_solver is not None:
+                solver = group.linear_solver
+                planner.diags.add(
+                    "W232",
+                    solver.loc,
+                    f"{solver.type_name} at line {solver.loc.line} assembles the contacts of "
+                    f"{model.origin} with a static model: SOFA's MatrixLinearSystem also adds their "
+                    "coupling blocks at the static contact points' indices, read as this system's "
+                    "DOFs; sofac leaves them out for this solver, so its solve can differ from SOFA's "
+                    "while they touch",
+                    "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
+                )
             if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
                 group.assemble.append(
                     Op(
