@@ -375,23 +375,13 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
         )
         if group.assembled and static_partner:  # A += kfact K: blocks between each element's points
             offset = group.assembly_offset(state, planner.checked.of(state.component))
-            group.assemble.append(
-                Op(
-                    where,
-                    [
-                        call(
-                            "contact_assemble",
-                            Env.CONTACTS,
-                            pipeline,
-                            index,
-                            Env.ASSEMBLER,
-                            offset,
-                            Env.KFACT,
-                        )
-                    ],
+            assembly = (Env.CONTACTS, pipeline, index, Env.ASSEMBLER, offset, Env.KFACT)
+            group.assemble.append(Op(where, [call("contact_assemble", *assembly)]))
+            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
+                group.assemble.append(
+                    Op(where, [call("contact_assemble_static_coupling", *assembly, Env.BAND)])
                 )
-            )
-            if not group.btd and group.linear_solver is not None:
+            elif group.linear_solver is not None:
                 solver = group.linear_solver
                 planner.diags.add(
                     "W232",
@@ -402,24 +392,6 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     "DOFs; sofac leaves them out for this solver, so its solve can differ from SOFA's "
                     "while they touch",
                     "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
-                )
-            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
-                group.assemble.append(
-                    Op(
-                        where,
-                        [
-                            call(
-                                "contact_assemble_static_coupling",
-                                Env.CONTACTS,
-                                pipeline,
-                                index,
-                                Env.ASSEMBLER,
-                                offset,
-                                Env.KFACT,
-                                Env.BAND,
-                            )
-                        ],
-                    )
                 )
         if group.scheme == "implicit" and static_partner and state.dx is not None:
             group.stiffness_dx.append(
