@@ -87,6 +87,7 @@ CODES: dict[str, CodeInfo] = {
     "W229": _w("a loader nobody reads has a missing file"),
     "W230": _w("anisotropic rigid inertia on a rotating body (SOFA applies it in world axes)"),
     "W231": _w("a loader read only by visual models has a missing file"),
+    "W232": _w("assembled solve of contacts with a static model (SOFA adds coupling blocks sofac omits)"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
     "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),

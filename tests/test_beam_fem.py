@@ -57,10 +57,22 @@ API int btd_solve(const double* a, Index blocks, const double* b, double* x) {
             if (a[n * i + j] != 0.0) entries.emplace_back(i, j, a[n * i + j]);
     m.setFromTriplets(entries.begin(), entries.end());
     sofac::BlockTridiagonal t;
-    t.load(m);
+    t.resize(blocks);
+    t.add_matrix(m);
     t.factor();
     t.solve(b, x);
     return t.ok ? 1 : 0;
+}
+// Entries through BTDMatrix's add, then its projection of the `fixed` scalar DOFs: the band's
+// 3 x blocks blocks (row-major 6x6 each) and the count of entries past the last row.
+API Index btd_band(const Index* rows, const Index* cols, const double* values, Index count, Index blocks,
+                   const char* fixed, double* band) {
+    sofac::BlockTridiagonal t;
+    t.resize(blocks);
+    for (Index k = 0; k < count; ++k) t.add(rows[k], cols[k], values[k]);
+    t.project(std::vector<char>(fixed, fixed + 6 * blocks));
+    for (Index k = 0; k < 3 * blocks; ++k) std::copy_n(t.band[k].m, 36, band + 36 * k);
+    return t.overflows;
 }
 API void block_invert(const double* m, double* inv) {
     sofac::Block6 a, r;
@@ -93,6 +105,8 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     lib.world_stiffness.argtypes = [D, D, ctypes.c_int, D]
     lib.btd_solve.argtypes = [D, i64, D, D]
     lib.btd_solve.restype = ctypes.c_int
+    lib.btd_band.argtypes = [I64, I64, D, i64, i64, ctypes.c_char_p, D]
+    lib.btd_band.restype = i64
     lib.block_invert.argtypes = [D, D]
     lib.map_apply.argtypes = [D, D, I64, D, D, D, i64]
     lib.map_j.argtypes = [D, D, I64, D, D, i64]
@@ -407,6 +421,37 @@ def test_btd_solves_block_tridiagonal_spd_systems(lib: ctypes.CDLL, seed: int, b
     x = np.zeros_like(b)
     assert lib.btd_solve(doubles(np.ascontiguousarray(a)), blocks, doubles(b), doubles(x)) == 1
     np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-10, atol=1e-12 * np.abs(x).max())
+
+
+def test_btd_matrix_add_and_projection_are_sofas(lib: ctypes.CDLL) -> None:
+    """BTDMatrix::add drops an entry right of the band but writes one left of it at block index
+    3 bi + (bj - bi + 1), inside another block of the band (SOFA's penalty contacts with a static
+    partner make such entries); clearRowCol clears a fixed DOF's row and column inside the band only."""
+    entries = [
+        (7, 8, 2.0),  # block (1, 1): in place
+        (1, 19, 3.0),  # block (0, 3), right of the band: dropped
+        (19, 1, 5.0),  # block (3, 0): index 9 - 2 = 7, the diagonal block of row 2
+        (13, 0, 7.0),  # block (2, 0): index 6 - 1 = 5, the upper block of row 1, column 0 of it
+        (2, 9, 11.0),  # block (0, 1), a fixed row: cleared
+        (9, 2, 13.0),  # block (1, 0), a fixed column: cleared
+        (25, 3, 1.0),  # row 25 of a 24 x 24 matrix: counted, not written
+    ]
+    rows = np.array([e[0] for e in entries], dtype=np.int64)
+    cols = np.array([e[1] for e in entries], dtype=np.int64)
+    values = np.array([e[2] for e in entries])
+    band = np.zeros(3 * 4 * 36)
+    fixed = bytes([1] * 6 + [0] * 18)
+    overflows = lib.btd_band(
+        indices(rows), indices(cols), doubles(values), len(entries), 4, fixed, doubles(band)
+    )
+    band = band.reshape(4, 3, 6, 6)  # block row, (lower, diagonal, upper), 6 x 6
+    expected = np.zeros_like(band)
+    expected[0, 1] = np.eye(6)  # the fixed DOF: 1 on its diagonal
+    expected[1, 1, 1, 2] = 2.0
+    expected[2, 1, 1, 1] = 5.0
+    expected[1, 2, 1, 0] = 7.0  # column 0 of block (1, 2) is not in the band's column 0
+    assert overflows == 1
+    np.testing.assert_array_equal(band, expected)
 
 
 def test_btd_with_projected_blocks(lib: ctypes.CDLL) -> None:

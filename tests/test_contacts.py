@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import sofac
 from sofac.diagnostics import SceneError
-from sofac.pipeline import generate, plan_file
+from sofac.pipeline import check_file, generate, plan_checked, plan_file
 from sofac.regress.suite import Status, run_regression
 
 DATA = Path(__file__).parent / "data"
@@ -103,6 +103,27 @@ def test_models_that_cannot_meet_get_no_collision_code(tmp_path: Path) -> None:
     assert "collide(" not in generate(plan) and "penalty.h" not in generate(plan)
 
 
+@pytest.mark.parametrize(("solver", "warned"), [("SparseLDLSolver", True), ("CGLinearSolver", False)])
+def test_assembled_solve_of_static_contacts_is_warned(tmp_path: Path, solver: str, warned: bool) -> None:
+    """SOFA's assembled system receives coupling blocks with the static floor that sofac adds only
+    for BTDLinearSolver (W232 on the solver's line); a matrix-free CG has no matrix to differ."""
+    scene = tmp_path / "assembled.scn"
+    replacement = f'<{solver} template="CompressedRowSparseMatrixd"/>' if warned else "<CGLinearSolver/>"
+    scene.write_text(
+        FLOOR.read_text().replace(
+            '<CGLinearSolver iterations="50" tolerance="1e-12" threshold="1e-20"/>', replacement
+        )
+    )
+    checked, diagnostics = check_file(scene)
+    plan_checked(checked, diagnostics)
+    found = [d for d in diagnostics.sorted() if d.code == "W232"]
+    if warned:
+        assert [d.loc.line for d in found] == [18], found
+        assert "SparseLDLSolver at line 18 assembles the contacts of PointCollisionModel" in found[0].message
+    else:
+        assert not found
+
+
 def test_alarm_distance_below_contact_distance_is_refused(tmp_path: Path) -> None:
     scene = tmp_path / "alarm.scn"
     scene.write_text(FLOOR.read_text().replace('alarmDistance="0.5"', 'alarmDistance="0.1"'))
@@ -123,6 +144,9 @@ SCENES = [
     # lines and points of static tori
     "Component/Collision/Detection/CompositeCollisionPipeline.scn",
     "Demos/collisionMultiple.scn",  # MinProximity; spring grids onto a static floor after ~65 steps
+    # beams under BTDLinearSolver touching a static floor: SOFA's BTDMatrix also receives the
+    # contacts' coupling blocks with the floor at the floor's contact-point indices (penalty.h)
+    pytest.param("Component/SolidMechanics/FEM/BeamFEMForceField.scn", marks=pytest.mark.long),
 ]
 
 

@@ -70,6 +70,7 @@ def _size(buffer: Buffer) -> str:
 # How the step's scope names the values of ir.Env, and the runtime's layout constants.
 _ENV = {
     Env.ASSEMBLER: "A",
+    Env.BAND: "T",
     Env.KFACT: "kfact",
     Env.MFACT: "mfact",
     Env.BFACT: "bfact",

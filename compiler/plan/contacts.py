@@ -375,22 +375,24 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
         )
         if group.assembled and static_partner:  # A += kfact K: blocks between each element's points
             offset = group.assembly_offset(state, planner.checked.of(state.component))
-            group.assemble.append(
-                Op(
-                    where,
-                    [
-                        call(
-                            "contact_assemble",
-                            Env.CONTACTS,
-                            pipeline,
-                            index,
-                            Env.ASSEMBLER,
-                            offset,
-                            Env.KFACT,
-                        )
-                    ],
+            assembly = (Env.CONTACTS, pipeline, index, Env.ASSEMBLER, offset, Env.KFACT)
+            group.assemble.append(Op(where, [call("contact_assemble", *assembly)]))
+            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
+                group.assemble.append(
+                    Op(where, [call("contact_assemble_static_coupling", *assembly, Env.BAND)])
                 )
-            )
+            elif group.linear_solver is not None:
+                solver = group.linear_solver
+                planner.diags.add(
+                    "W232",
+                    solver.loc,
+                    f"{solver.type_name} at line {solver.loc.line} assembles the contacts of "
+                    f"{model.origin} with a static model: SOFA's MatrixLinearSystem also adds their "
+                    "coupling blocks at the static contact points' indices, read as this system's "
+                    "DOFs; sofac leaves them out for this solver, so its solve can differ from SOFA's "
+                    "while they touch",
+                    "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
+                )
         if group.scheme == "implicit" and static_partner and state.dx is not None:
             group.stiffness_dx.append(
                 Op(

@@ -45,6 +45,7 @@ class Env(enum.Enum):
     """Values in scope where a step's calls are placed (their C++ spelling is codegen's)."""
 
     ASSEMBLER = "assembler"  # the system matrix being assembled
+    BAND = "band"  # BTDLinearSolver's block-tridiagonal matrix (runtime/sofac/beam.h)
     KFACT = "kfact"  # the stiffness factor of a product or an assembly
     MFACT = "mfact"  # the mass factor
     BFACT = "bfact"  # the damping factor

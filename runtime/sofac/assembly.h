@@ -68,18 +68,29 @@ public:
 
     // Record (first pass) or add (later passes) one entry of A.
     void add(Index row, Index col, double value) {
+        expand(row, col, value, [this](Index r, Index c, double v) {
+            if (recording_) {
+                rows_.push_back(r);
+                cols_.push_back(c);
+                whole_.push_back(0);
+            } else {
+                values_[slots_[cursor_++]] += v;
+            }
+        });
+    }
+
+    // The entries of the independent DOFs that one entry (row, col) becomes through the mappings'
+    // current Jacobians: `sink(row, col, value)` for each, in the order add() visits them.
+    template <class Sink>
+    void expand(Index row, Index col, double value, Sink&& sink) const {
         if (row >= kMapped) {
             const auto r = static_cast<std::size_t>(row - kMapped);
-            for (Index k = jstart_[r]; k < jstart_[r + 1]; ++k) add(jcols_[k], col, jweights_[k] * value);
+            for (Index k = jstart_[r]; k < jstart_[r + 1]; ++k) expand(jcols_[k], col, jweights_[k] * value, sink);
         } else if (col >= kMapped) {
             const auto c = static_cast<std::size_t>(col - kMapped);
-            for (Index k = jstart_[c]; k < jstart_[c + 1]; ++k) add(row, jcols_[k], value * jweights_[k]);
-        } else if (recording_) {
-            rows_.push_back(row);
-            cols_.push_back(col);
-            whole_.push_back(0);
+            for (Index k = jstart_[c]; k < jstart_[c + 1]; ++k) expand(row, jcols_[k], value * jweights_[k], sink);
         } else {
-            values_[slots_[cursor_++]] += value;
+            sink(row, col, value);
         }
     }
 

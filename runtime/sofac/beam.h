@@ -6,6 +6,7 @@
 // so that the forces come out with SOFA's rounding, not Eigen's.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -479,49 +480,74 @@ inline bool btd_invert(Block6& inv, const Block6& m) {
 
 struct BlockTridiagonal {
     Index blocks = 0;
-    std::vector<Block6> diagonal, lower, upper;  // D_i, B_i = A(i, i-1), C_i = A(i, i+1)
+    // BTDMatrix's storage: block row i holds B_i, D_i and C_i at band[3 i], band[3 i + 1] and
+    // band[3 i + 2].
+    std::vector<Block6> band;
     std::vector<Block6> alpha_inv, lambda;
-    std::vector<double> scratch;
+    // Entries of the last assembly on a row past the matrix: SOFA writes them past its blocks
+    // (undefined behaviour, nothing to reproduce), so the solve fails (NaN) rather than guess.
+    Index overflows = 0;
     bool ok = true;
 
     void resize(Index n) {
         blocks = n;
         const auto size = static_cast<std::size_t>(n);
-        diagonal.assign(size, Block6{});
-        lower.assign(size, Block6{});
-        upper.assign(size, Block6{});
+        band.assign(3 * size, Block6{});
         alpha_inv.assign(size, Block6{});
         lambda.assign(size, Block6{});
-        scratch.assign(6 * size, 0.0);
     }
 
-    // The blocks of a sparse matrix (entries outside the three block diagonals are not read: the
-    // planner admits only beams between consecutive frames).
-    void load(const Eigen::SparseMatrix<double>& matrix) {
-        const Index n = matrix.rows() / 6;
-        if (n != blocks) resize(n);
-        for (Index i = 0; i < n; ++i) diagonal[i] = lower[i] = upper[i] = Block6{};
+    // BTDMatrix::add: an entry right of the band is dropped; one left of it lands at the block
+    // index 3 bi + (bj - bi + 1), which is then another block of the band (SOFA checks only the
+    // right side). Entries inside the band (all that sofac's planner lets beams make) add in place.
+    void add(Index row, Index col, double value) {
+        const Index bi = row / 6, offset = col / 6 - bi + 1;
+        if (offset >= 3) return;
+        if (bi >= blocks) {
+            ++overflows;
+            return;
+        }
+        band[static_cast<std::size_t>(3 * bi + offset)](static_cast<int>(row % 6), static_cast<int>(col % 6)) += value;
+    }
+
+    void clear() {
+        std::fill(band.begin(), band.end(), Block6{});
+        overflows = 0;
+    }
+
+    // A sparse matrix of the same size added, entry by entry through add().
+    void add_matrix(const Eigen::SparseMatrix<double>& matrix) {
         for (int col = 0; col < matrix.outerSize(); ++col)
-            for (Eigen::SparseMatrix<double>::InnerIterator it(matrix, col); it; ++it) {
-                const Index bi = it.row() / 6, bj = it.col() / 6;
-                const int i = static_cast<int>(it.row() % 6), j = static_cast<int>(it.col() % 6);
-                if (bj == bi) diagonal[bi](i, j) = it.value();
-                else if (bj == bi - 1) lower[bi](i, j) = it.value();
-                else if (bj == bi + 1) upper[bi](i, j) = it.value();
-            }
+            for (Eigen::SparseMatrix<double>::InnerIterator it(matrix, col); it; ++it) add(it.row(), it.col(), it.value());
+    }
+
+    // MatrixLinearSystem's projection of each constrained scalar DOF r (Dirichlet::discardRowCol):
+    // BTDMatrix::clearRowCol(r), which clears row r and column r inside the band only, then 1 at (r, r).
+    void project(const std::vector<char>& fixed) {
+        for (Index r = 0; r < 6 * blocks; ++r) {
+            if (!fixed[static_cast<std::size_t>(r)]) continue;
+            const Index b = r / 6;
+            const int i = static_cast<int>(r % 6);
+            for (Index k = 3 * b; k < 3 * b + 3; ++k)
+                for (int j = 0; j < 6; ++j) band[static_cast<std::size_t>(k)](i, j) = 0.0;
+            for (const Index k : {3 * (b - 1) + 2, 3 * b + 1, 3 * (b + 1)})
+                if (k >= 0 && k < 3 * blocks)
+                    for (int j = 0; j < 6; ++j) band[static_cast<std::size_t>(k)](j, i) = 0.0;
+            band[static_cast<std::size_t>(3 * b + 1)](i, i) = 1.0;
+        }
     }
 
     void factor() {
-        ok = true;
+        ok = overflows == 0;
         if (blocks == 0) return;
-        ok = btd_invert(alpha_inv[0], diagonal[0]) && ok;
-        if (blocks > 1) lambda[0] = btd_product(alpha_inv[0], upper[0]);
+        ok = btd_invert(alpha_inv[0], diagonal(0)) && ok;
+        if (blocks > 1) lambda[0] = btd_product(alpha_inv[0], upper(0));
         for (Index i = 1; i < blocks; ++i) {
-            const Block6 t1 = btd_product(lower[i], lambda[i - 1]);
+            const Block6 t1 = btd_product(lower(i), lambda[i - 1]);
             Block6 t2;
-            for (int k = 0; k < 36; ++k) t2.m[k] = diagonal[i].m[k] - t1.m[k];
+            for (int k = 0; k < 36; ++k) t2.m[k] = diagonal(i).m[k] - t1.m[k];
             ok = btd_invert(alpha_inv[i], t2) && ok;
-            if (i < blocks - 1) lambda[i] = btd_product(alpha_inv[i], upper[i]);
+            if (i < blocks - 1) lambda[i] = btd_product(alpha_inv[i], upper(i));
         }
     }
 
@@ -534,7 +560,7 @@ struct BlockTridiagonal {
         btd_multiply(alpha_inv[0], b, x);
         double t[6], u[6];
         for (Index i = 1; i < blocks; ++i) {
-            btd_multiply(lower[i], x + 6 * (i - 1), t);
+            btd_multiply(lower(i), x + 6 * (i - 1), t);
             for (int k = 0; k < 6; ++k) u[k] = b[6 * i + k] - t[k];
             btd_multiply(alpha_inv[i], u, x + 6 * i);
         }
@@ -543,6 +569,10 @@ struct BlockTridiagonal {
             for (int k = 0; k < 6; ++k) x[6 * i + k] -= t[k];
         }
     }
+
+    const Block6& lower(Index i) const { return band[static_cast<std::size_t>(3 * i)]; }
+    const Block6& diagonal(Index i) const { return band[static_cast<std::size_t>(3 * i + 1)]; }
+    const Block6& upper(Index i) const { return band[static_cast<std::size_t>(3 * i + 2)]; }
 };
 
 }  // namespace sofac

@@ -252,28 +252,18 @@ public:
     template <class Assembler>
     void add_k(Index model, Assembler& A, Index offset, double kfact) {
         PenaltyModel& m = models[model];
-        const int width = m.kind == ContactSide::kTriangle ? 3 : (m.kind == ContactSide::kLine ? 2 : 1);
+        const int width = element_width(m);
         const std::size_t per = static_cast<std::size_t>(9 * width * width);
         m.element_k.assign(per * static_cast<std::size_t>(m.elements), 0.0);
-        for (const auto& entry : contacts_map_.map()) {
-            const PenaltyPair& p = pairs[entry.second];
-            if (p.root) continue;
-            const int s = side_of(p, model);
-            if (s < 0) continue;
-            for (const PenaltyContact& c : p.ff.contacts) {
-                if (!(c.pen > 0)) continue;
-                const Index element = s == 0 ? c.element1 : c.element2;
-                double w[3] = {1.0, 0.0, 0.0};
-                if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
-                double* block = m.element_k.data() + per * static_cast<std::size_t>(element);
-                const double k = c.ks * kfact;
-                for (int a = 0; a < width; ++a)
-                    for (int b = 0; b < width; ++b)
-                        for (int i = 0; i < 3; ++i)
-                            for (int j = 0; j < 3; ++j)
-                                block[9 * (width * a + b) + 3 * i + j] -= k * w[a] * w[b] * c.normal[i] * c.normal[j];
-            }
-        }
+        for_each_static_contact(model, [&](const PenaltyContact& c, Index element, const double* w, Index) {
+            double* block = m.element_k.data() + per * static_cast<std::size_t>(element);
+            const double k = c.ks * kfact;
+            for (int a = 0; a < width; ++a)
+                for (int b = 0; b < width; ++b)
+                    for (int i = 0; i < 3; ++i)
+                        for (int j = 0; j < 3; ++j)
+                            block[9 * (width * a + b) + 3 * i + j] -= k * w[a] * w[b] * c.normal[i] * c.normal[j];
+        });
         for (Index e = 0; e < m.elements; ++e) {
             const double* block = m.element_k.data() + per * static_cast<std::size_t>(e);
             for (int a = 0; a < width; ++a) {
@@ -286,6 +276,32 @@ public:
                 }
             }
         }
+    }
+
+    // The coupling blocks of the contacts on `model` with static partners, as SOFA's
+    // MatrixLinearSystem adds them although the static side is no state of the system: that
+    // state is unknown to its mapping graph, so the blocks df_model/dx_static = ks n n^T (J^T K,
+    // on the model's side) and df_static/dx_model (K J) go to the global matrix at the static
+    // contact point's own scalar index 3 m + i, read as a column (resp. a row) of the system.
+    // `A` holds the mappings' current Jacobians; `matrix.add(row, col, value)` receives kfact
+    // times each entry on the system's DOFs.
+    template <class Assembler, class Matrix>
+    void add_k_static_coupling(Index model, const Assembler& A, Index offset, double kfact, Matrix& matrix) {
+        const PenaltyModel& m = models[model];
+        const int width = element_width(m);
+        const auto add = [&matrix](Index row, Index col, double value) { matrix.add(row, col, value); };
+        for_each_static_contact(model, [&](const PenaltyContact& c, Index element, const double* w, Index other) {
+            const double k = c.ks * kfact;
+            for (int a = 0; a < width; ++a) {
+                const Index pa = offset + 3 * (width == 1 ? element : m.cells[width * element + a]);
+                for (int i = 0; i < 3; ++i)
+                    for (int j = 0; j < 3; ++j) {
+                        const double value = k * w[a] * c.normal[i] * c.normal[j];
+                        A.expand(pa + i, 3 * other + j, value, add);
+                        A.expand(3 * other + i, pa + j, value, add);
+                    }
+            }
+        });
     }
 
     // Whether a contact of this step involves the model (else its contact forces are zero).
@@ -327,6 +343,30 @@ public:
     std::vector<Index> pair_of;  // n x n index into pairs, -1: none
 
 private:
+    // Points per element of a model: 3 (triangles), 2 (lines), 1 (points, spheres).
+    static int element_width(const PenaltyModel& m) {
+        return m.kind == ContactSide::kTriangle ? 3 : (m.kind == ContactSide::kLine ? 2 : 1);
+    }
+
+    // Each active contact (pen > 0) of `model` with a static partner, in contact order:
+    // f(contact, the model's element, its contact point's weights on the element's points, the
+    // partner's contact point).
+    template <class F>
+    void for_each_static_contact(Index model, F&& f) const {
+        for (const auto& entry : contacts_map_.map()) {
+            const PenaltyPair& p = pairs[entry.second];
+            if (p.root) continue;
+            const int s = side_of(p, model);
+            if (s < 0) continue;
+            for (const PenaltyContact& c : p.ff.contacts) {
+                if (!(c.pen > 0)) continue;
+                double w[3] = {1.0, 0.0, 0.0};
+                if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
+                f(c, s == 0 ? c.element1 : c.element2, w, s == 0 ? c.m2 : c.m1);
+            }
+        }
+    }
+
     // Which side of a pair a model is (0 or 1), or -1.
     static int side_of(const PenaltyPair& p, Index model) {
         return p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
@@ -453,6 +493,12 @@ template <class Assembler>
 inline void contact_assemble(ContactPipelines& pipelines, Index pipeline, Index model, Assembler& A, Index offset,
                              double kfact) {
     pipelines[pipeline]->add_k(model, A, offset, kfact);
+}
+
+template <class Assembler, class Matrix>
+inline void contact_assemble_static_coupling(ContactPipelines& pipelines, Index pipeline, Index model,
+                                             const Assembler& A, Index offset, double kfact, Matrix& matrix) {
+    pipelines[pipeline]->add_k_static_coupling(model, A, offset, kfact, matrix);
 }
 
 inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
