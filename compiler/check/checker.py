@@ -871,9 +871,20 @@ class _Checker:
         datatype = checked.datatype
         if datatype is None:
             return
-        for name, value in checked.fields.items():
+        for name, value in list(checked.fields.items()):
             field_spec = checked.spec.field(name)
             assert field_spec is not None
+            if isinstance(field_spec.type, MassValue) and isinstance(value, np.ndarray):
+                read = MassValue.read_by_sofa(value, datatype)
+                if read < value.size:
+                    self.diags.add(
+                        "W225",
+                        checked.component.attribute_loc(self._attribute_name(checked, name)),
+                        f"{checked.spec.name} {checked.component.label!r}: {name}: {value.size} numbers; "
+                        f"SOFA reads the first {read} and ignores the rest",
+                        f"remove the last {value.size - read}",
+                    )
+                    value = checked.fields[name] = value[:read]
             problem = field_spec.type.check_count(value, datatype)
             if problem and not (
                 isinstance(field_spec.type, Coords)

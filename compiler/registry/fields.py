@@ -396,10 +396,16 @@ class MassValue(FieldType):
     def check_count(self, value: Any, datatype: DataType | None) -> str | None:
         if datatype is None or not isinstance(value, np.ndarray):
             return None
-        if value.size not in datatype.mass_sizes:
+        if value.size not in datatype.mass_sizes and value.size < max(datatype.mass_sizes):
             sizes = " or ".join(str(s) for s in datatype.mass_sizes)
             return f"a {datatype.name} mass has {sizes} numbers, got {value.size}"
         return None
+
+    @staticmethod
+    def read_by_sofa(value: np.ndarray, datatype: DataType) -> int:
+        """How many of the numbers SOFA's stream reads (``operator>>`` of the mass type stops after
+        the last one it needs; Data::read ignores what follows)."""
+        return min(value.size, max(datatype.mass_sizes))
 
 
 @dataclass(frozen=True)
