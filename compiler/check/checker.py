@@ -25,7 +25,16 @@ from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
-from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, SofaData, Springs
+from sofac.registry.fields import (
+    Coords,
+    FieldValueError,
+    Link,
+    LinkList,
+    MassValue,
+    ReadDifferently,
+    SofaData,
+    Springs,
+)
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -332,6 +341,9 @@ class _Checker:
                 continue
             try:
                 value = field_spec.type.parse(attribute.value)
+            except ReadDifferently as read:
+                self.diags.add("W233", attribute.loc, f"{owner}: {name}: {read}", read.hint)
+                value = read.value
             except FieldValueError as error:
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 continue

@@ -27,6 +27,20 @@ class FieldValueError(ValueError):
         self.hint = hint
 
 
+class ReadDifferently(Exception):  # not an error: the value is used, with a warning
+    """A value SOFA's stream reads as something other than what it says (W233): ``value`` is what
+    SOFA reads, and what sofac uses."""
+
+    def __init__(self, value: Any, message: str, hint: str) -> None:
+        super().__init__(message)
+        self.value = value
+        self.hint = hint
+
+
+# An integer written as a real ("1e4", "2.5"): C++'s integer extraction stops at '.', 'e' or 'E'.
+_INTEGER_THEN_REAL = re.compile(r"\s*([+-]?\d+)([.eE])")
+
+
 def _format_real(x: float) -> str:
     return repr(float(x)) if not float(x).is_integer() or abs(x) >= 1e16 else str(int(x))
 
@@ -187,10 +201,30 @@ class Int(FieldType):
     nonnegative: bool = False
 
     def parse(self, text: str) -> int:
-        values = parse_ints(text, nonnegative=self.nonnegative)
+        try:
+            values = parse_ints(text, nonnegative=self.nonnegative)
+        except FieldValueError:
+            self._read_as_sofa(text)
+            raise
         if values.size != 1:
             raise FieldValueError(f"expected one integer, got {values.size}", code="E205")
         return int(values[0])
+
+    def _read_as_sofa(self, text: str) -> None:
+        """One real where an integer is expected: SOFA reads its leading digits, and nothing tells."""
+        found = _INTEGER_THEN_REAL.match(text)
+        try:
+            meant = float(text)
+        except ValueError:
+            return
+        if found is None or not math.isfinite(meant) or (self.nonnegative and int(found[1]) < 0):
+            return
+        hint = f"write {int(meant)}" if meant.is_integer() else "write an integer"
+        raise ReadDifferently(
+            int(found[1]),
+            f"{text.strip()!r} is read by SOFA as {int(found[1])} (an integer stops at {found[2]!r})",
+            hint,
+        )
 
 
 _TRUE = {"1", "true", "yes", "on"}
