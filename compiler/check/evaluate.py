@@ -609,10 +609,18 @@ def _surface(ctx: Context, volume: str, corners: int, faces: Any, surface: str) 
 
 
 def tetra_to_triangle(ctx: Context) -> Outputs:
-    """Tetra2TriangleTopologicalMapping: the boundary triangles of the input tetrahedra, outward."""
-    from sofac.geometry.fem_topology import TETRA_FACES
+    """Tetra2TriangleTopologicalMapping: the input container's triangles that bound one
+    tetrahedron only, in SOFA's order (see tetrahedron_surface_triangles)."""
+    from sofac.geometry.fem_topology import tetrahedron_surface_triangles
 
-    return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
+    tetrahedra = ctx.linked("input", "tetrahedra")
+    if tetrahedra is None or not np.size(tetrahedra):
+        raise UnknownInput("the input topology's tetrahedra are not known at compile time")
+    if ctx.value("noInitialTriangles"):
+        return {"triangles": np.zeros(0, dtype=np.int64)}
+    given = ctx.linked("input", "triangles")
+    surface = tetrahedron_surface_triangles(tetrahedra, given, bool(ctx.value("flipNormals")))
+    return {"triangles": surface.reshape(-1)}
 
 
 def quad_to_triangle(ctx: Context) -> Outputs:
