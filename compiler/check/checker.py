@@ -25,7 +25,16 @@ from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
-from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, SofaData, Springs
+from sofac.registry.fields import (
+    Coords,
+    FieldValueError,
+    JointSprings,
+    Link,
+    LinkList,
+    MassValue,
+    SofaData,
+    Springs,
+)
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -381,7 +390,7 @@ class _Checker:
             self.diags.add(
                 "W225",
                 checked.component.attribute_loc("src"),
-                f"{checked.spec.name} {checked.component.label!r}: src=\"@\" names no object: "
+                f'{checked.spec.name} {checked.component.label!r}: src="@" names no object: '
                 "SOFA warns that it does nothing",
                 'remove src="@", or name the loader: src="@loader"',
             )
@@ -1182,7 +1191,7 @@ class _Checker:
         spec = checked.spec
         assert spec is not None
         for field_spec in spec.fields:
-            if field_spec.indexes is None and not isinstance(field_spec.type, Springs):
+            if field_spec.indexes is None and not isinstance(field_spec.type, (Springs, JointSprings)):
                 continue
             if field_spec.name not in checked.fields and field_spec.name not in checked.data_links:
                 continue
@@ -1194,8 +1203,8 @@ class _Checker:
             attribute = self._attribute_name(checked, field_spec.name)
             loc = checked.component.attribute_loc(attribute)
             owner = f"{spec.name} {checked.component.label!r}"
-            if isinstance(field_spec.type, Springs):
-                springs = np.asarray(value).reshape(-1, 5)
+            if isinstance(field_spec.type, (Springs, JointSprings)):
+                springs = field_spec.type.ends(value)
                 for column, role in ((0, "object1"), (1, "object2")):
                     state = self._indexed_state(checked, role)
                     self._report_range(
