@@ -688,7 +688,7 @@ class _Checker:
         field_spec = checked.spec.field(name)
         if field_spec is not None and isinstance(field_spec.type, SofaData):
             return None  # a Data known only from SOFA's source: sofac cannot say what it holds
-        if name in checked.fields:
+        if name in checked.fields and (raw or name not in checked.spec.rewrites):
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
             name = "position"  # both start as a copy of the transformed positions
@@ -1388,6 +1388,10 @@ class _EvalContext:
 
     def value(self, name: str) -> Any:
         return self.checker.value(self.checked, name)
+
+    def given(self, name: str) -> Any:
+        """The value as the scene gives it, before the evaluator rewrites it (spec.rewrites)."""
+        return self.checker.value(self.checked, name, raw=True)
 
     def is_set(self, name: str) -> bool:
         return name in self.checked.fields or name in self.checked.data_links
