@@ -28,6 +28,7 @@ from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_templa
 from sofac.registry.fields import (
     Coords,
     FieldValueError,
+    JointSprings,
     Link,
     LinkList,
     MassValue,
@@ -393,7 +394,7 @@ class _Checker:
             self.diags.add(
                 "W225",
                 checked.component.attribute_loc("src"),
-                f"{checked.spec.name} {checked.component.label!r}: src=\"@\" names no object: "
+                f'{checked.spec.name} {checked.component.label!r}: src="@" names no object: '
                 "SOFA warns that it does nothing",
                 'remove src="@", or name the loader: src="@loader"',
             )
@@ -691,7 +692,7 @@ class _Checker:
         field_spec = checked.spec.field(name)
         if field_spec is not None and isinstance(field_spec.type, SofaData):
             return None  # a Data known only from SOFA's source: sofac cannot say what it holds
-        if name in checked.fields:
+        if name in checked.fields and (raw or name not in checked.spec.rewrites):
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
             name = "position"  # both start as a copy of the transformed positions
@@ -1228,7 +1229,7 @@ class _Checker:
         spec = checked.spec
         assert spec is not None
         for field_spec in spec.fields:
-            if field_spec.indexes is None and not isinstance(field_spec.type, Springs):
+            if field_spec.indexes is None and not isinstance(field_spec.type, (Springs, JointSprings)):
                 continue
             if field_spec.name not in checked.fields and field_spec.name not in checked.data_links:
                 continue
@@ -1240,8 +1241,8 @@ class _Checker:
             attribute = self._attribute_name(checked, field_spec.name)
             loc = checked.component.attribute_loc(attribute)
             owner = f"{spec.name} {checked.component.label!r}"
-            if isinstance(field_spec.type, Springs):
-                springs = np.asarray(value).reshape(-1, 5)
+            if isinstance(field_spec.type, (Springs, JointSprings)):
+                springs = field_spec.type.ends(value)
                 for column, role in ((0, "object1"), (1, "object2")):
                     state = self._indexed_state(checked, role)
                     self._report_range(
@@ -1425,6 +1426,10 @@ class _EvalContext:
 
     def value(self, name: str) -> Any:
         return self.checker.value(self.checked, name)
+
+    def given(self, name: str) -> Any:
+        """The value as the scene gives it, before the evaluator rewrites it (spec.rewrites)."""
+        return self.checker.value(self.checked, name, raw=True)
 
     def is_set(self, name: str) -> bool:
         return name in self.checked.fields or name in self.checked.data_links
