@@ -188,7 +188,8 @@ LOCAL_MIN_DISTANCE = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests filtered by local minimum distance cones (used with constraint-based contacts).",
-    unsupported_reason="LocalMinDistance (for Lagrangian contact) is not supported yet",
+    role="local_min_distance",
+    supported=True,
     effects=_COLLISION,
     fields=(
         *_PROXIMITY,
