@@ -432,4 +432,47 @@ inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, doubl
     }
 }
 
+// An unbuilt correction and the body its contact rows go to.
+template <class DT>
+struct LagrangianUnbuilt {
+    Index body;
+    UnbuiltUncoupled<DT> item;
+};
+
+// UnbuiltGaussSeidelConstraintSolver on the static blocks and this step's contact blocks, the
+// corrections' rows those of this step (see solve_unbuilt).
+template <class DT, int K, class... Items>
+inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
+                                     double* scratch, Index /*capacity*/, const Index* first, const Index* kind,
+                                     const double* parameter, const Index* kept, double* previous,
+                                     double max_iterations, double tolerance, double sor, double scale_tolerance,
+                                     double all_verified, double* report, double time, const Items&... items) {
+    UnbuiltSet<DT, int(sizeof...(Items))> set{{items.item...}};
+    const Index bodies[] = {items.body...};
+    for (int c = 0; c < int(sizeof...(Items)); ++c)
+        set.items[c].J = L->template jacobian<DT>(bodies[c], set.items[c].J).view();
+    const Index n = L->rows();
+    RowBlock* blocks = L->blocks(first, kind, parameter, kept, previous, K);
+    const Index count = L->block_count();
+    for (const auto& item : set.items) item.reset();
+    for (Index k = 0; k < count; ++k) {
+        const Index last = blocks[k].first + resolution_lines(blocks[k].kind) - 1;
+        for (const auto& item : set.items)
+            if (item.row_of(blocks[k].first) >= 0) item.block_compliance(W, n, blocks[k].first, last);
+    }
+    ConstraintProblem p{n, W, dfree, f, d, blocks, count, scratch};
+    const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
+                                      all_verified != 0.0};
+    const ConstraintResult result = unbuilt_gauss_seidel(p, settings, set);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (!result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
 }  // namespace sofac

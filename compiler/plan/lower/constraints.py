@@ -305,7 +305,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         phase.capacity = n
         if phase.kept is None:
             phase.kept = planner.buffer(planner.checked.scene.root.path, "constraint_kept_forces", [], role="state")
-    if lagrangian is not None and phase.method not in ("block_gauss_seidel", "nncg"):
+    if lagrangian is not None and phase.method not in _ROW_SOLVERS:
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
         return
@@ -334,7 +334,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
     _carry_through_rigid_mappings(planner, phase)
     bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
-    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]] = []
+    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
     for body, correction in enumerate(phase.corrections):
         entries = phase.entries.get(correction.state.ident)
         if entries is None and body in bodies:
@@ -380,7 +380,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
         velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
         t = state.datatype.name
-        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp)))
+        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp), body))
         comp_args = (comp0, comp_buffer, len(comp))
         if lagrangian is not None:
             add = call(kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled)
@@ -519,7 +519,7 @@ def _contact_bodies(
 def _unbuilt_solve(
     planner: Planner,
     phase: ConstraintPhase,
-    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]],
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
     problem: tuple,
     blocks: tuple,
 ) -> None:
@@ -538,8 +538,9 @@ def _unbuilt_solve(
             )
         return
     (t,) = types
+    lagrangian = _lagrangian_collision(planner) is not None
     aggregates = []
-    for _, J, state, comp0, comp, size in items:
+    for _, J, state, comp0, comp, size, body in items:
         zeros = np.zeros_like(state.v.initial)
         force = planner.buffer(
             state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
@@ -547,31 +548,19 @@ def _unbuilt_solve(
         disp = planner.buffer(
             state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
         )
-        aggregates.append(
-            Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
-        )
+        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)) if lagrangian else item)
     settings = [
         Element(phase.settings[name])
         for name in ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified")
     ]
     assert phase.kept is not None
-    phase.solve.append(
-        Op(
-            phase.solver,
-            [
-                call(
-                    kernel("solve_unbuilt", t, len(phase.blocks)),
-                    *problem,
-                    *blocks,
-                    phase.kept,
-                    *settings,
-                    phase.report,
-                    Env.TIME,
-                    *aggregates,
-                )
-            ],
-        )
-    )
+    arguments = (*problem, *blocks, phase.kept, *settings, phase.report, Env.TIME, *aggregates)
+    if lagrangian:
+        solve = call(kernel("lagrangian_solve_unbuilt", t, len(phase.blocks)), Env.LAGRANGIAN, *arguments)
+    else:
+        solve = call(kernel("solve_unbuilt", t, len(phase.blocks)), *arguments)
+    phase.solve.append(Op(phase.solver, [solve]))
 
 
 def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
