@@ -475,4 +475,27 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
     }
 }
 
+// LCPConstraintSolver, built, on this step's contact rows (3 per contact): nlcp_gaussseidel with
+// the solver's own mu (see lcp_gauss_seidel); W already holds the corrections' compliance.
+inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
+                                 double* scratch, Index /*capacity*/, double max_iterations, double tolerance,
+                                 double mu, double min_w, double max_f, double regularization, double initial_guess,
+                                 double* report, double time) {
+    const Index n = L->rows();
+    if (regularization > std::numeric_limits<double>::epsilon())
+        for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
+    ConstraintProblem p{n, W, dfree, f, d, nullptr, 0, scratch};
+    const LcpSettings settings{Index(max_iterations), tolerance, mu, min_w, max_f, initial_guess != 0.0};
+    const ConstraintResult result = lcp_gauss_seidel(p, settings);
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (n > 0 && !result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
 }  // namespace sofac

@@ -305,11 +305,16 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         phase.capacity = n
         if phase.kept is None:
             phase.kept = planner.buffer(planner.checked.scene.root.path, "constraint_kept_forces", [], role="state")
-    if lagrangian is not None and phase.method not in _ROW_SOLVERS:
+    if lagrangian is not None and phase.method == "lcp" and solver is not None:
+        why = _lcp_refusal(planner, solver, phase, lagrangian)
+        if why:
+            planner.unsupported(solver, why)
+            return
+    elif lagrangian is not None and phase.method not in _ROW_SOLVERS:
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
         return
-    if phase.method not in _ROW_SOLVERS:
+    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == "lcp"):
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
         return
@@ -416,6 +421,12 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                 kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
             )
         phase.correction.append(Op(correction.origin, [correct]))
+    if phase.method == "lcp":  # LCPConstraintSolver, built, on the contacts' rows
+        names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
+        lcp_settings = [Element(phase.settings[name]) for name in names]
+        lcp = call("lagrangian_solve_lcp", Env.LAGRANGIAN, W, dfree, f, d, scratch, n, *lcp_settings)
+        phase.solve.append(Op(phase.solver, [call(lcp.kernel, *lcp.args, phase.report, Env.TIME)]))
+        return
     firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
     kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
     parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
@@ -473,6 +484,22 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             ],
         )
     )
+
+
+def _lcp_refusal(
+    planner: Planner, solver: CheckedComponent, phase: ConstraintPhase, collision: Collision
+) -> str:
+    """Why an LCPConstraintSolver on Lagrangian contacts is not compiled ("" when it is)."""
+    value = planner.value
+    if not value(solver.component, "build_lcp"):
+        return "LCPConstraintSolver with build_lcp=0 (unbuilt) is not compiled yet"
+    if value(solver.component, "initial_guess"):
+        return "LCPConstraintSolver's initial_guess (warm start by persistent contact ids) is not compiled yet"
+    if collision.static_rows:
+        return "LCPConstraintSolver on rows other than contacts' is not compiled yet"
+    if float(value(solver.component, "mu")) <= 0 or collision.mu <= 0:
+        return "LCPConstraintSolver is compiled for contacts of three rows solved with mu > 0"
+    return ""
 
 
 def _lagrangian_collision(planner: Planner) -> Collision | None:
