@@ -161,7 +161,14 @@ def contact_setup_refusal(planner: Planner) -> str:
             spec = checked.spec
             if spec is None or not spec.supported or (role == "intersection" and spec.role not in _TESTS):
                 return f"{checked.component.type_name} is not compiled yet"
-        response = str(planner.value(setup.parts["contact_manager"].component, "response") or "")
+        manager = setup.parts["contact_manager"]
+        if manager.spec is not None and manager.spec.name == "RuleBasedContactManager":
+            # its rules are triplets "name1 name2 response"; SOFA's parser stops at the first
+            # incomplete one, so rules="default" gives no rule: CollisionResponse's behaviour
+            words = str(planner.value(manager.component, "rules") or "").split()
+            if len(words) >= 3:
+                return "RuleBasedContactManager's rules (a response per pair of groups) are not compiled yet"
+        response = str(planner.value(manager.component, "response") or "")
         kind = _RESPONSES.get(response)
         if kind is None:
             return (
