@@ -50,6 +50,7 @@ struct LagrangianContact {
     V3 normal, t, s, P, Q;  // P on side 2 (mstate2), Q on side 1
     double distance = 0.0;
     Index row = 0;
+    Index output_id = 0;  // the detection output's id (the persistent id's first half)
 };
 
 // A state's constraint rows built each step (SOFA's MatrixDeriv after the mappings' applyJT).
@@ -77,6 +78,10 @@ public:
         static_rows_ = static_rows;
         lagrangian.resize(models.size());
         rank.assign(pairs.size(), 0);
+        object_.resize(pairs.size());
+        for (auto& o : object_) o.previous.reserve(64);
+        previous_forces_.reserve(static_cast<std::size_t>(capacity));
+        ids_.reserve(static_cast<std::size_t>(capacity));
         kept_.resize(pairs.size());
         for (auto& k : kept_) k.reserve(64);
         contacts_.reserve(static_cast<std::size_t>(capacity));
@@ -97,7 +102,13 @@ public:
     // The response at the start of the step: SOFA's contact order, de-duplication, contact points
     // and the contacts' P, Q from the models' positions `x`.
     void respond(const double* const* x) {
-        order_contacts([](Index) {}, [](Index) {}, [](Index) {});
+        order_contacts(
+            [&](Index pair) {  // a new contact object: ContactIdentifier's next id, no history yet
+                object_[pair].response_id = next_response_id_++;
+                object_[pair].yet_integrated = false;
+                object_[pair].previous.clear();
+            },
+            [](Index) {}, [](Index) {});
         contacts_.clear();
         order_.clear();
         for_each_contact([&](Index pair) { order_.push_back(pair); });
@@ -130,6 +141,7 @@ public:
                 const DetectionOutput& o = p.outputs[i];
                 LagrangianContact c;
                 c.pair = index;
+                c.output_id = o.id;
                 for (int s = 0; s < 2; ++s) place(c, s, p.model[s], s == 0 ? o.elem1 : o.elem2, o.point[s], x);
                 c.distance = d0;
                 c.Q = position(c, 0, x[p.model[0]]);
@@ -250,6 +262,47 @@ public:
         }
         return blocks_.data();
     }
+    // LCPConstraintSolver::getConstraintInfo + computeInitialGuess: each contact's persistent id
+    // (cantor(output id, response id), negated until its constraint object's first solve is
+    // over: BaseContactLagrangianConstraint's yetIntegrated), and the previous forces of the
+    // contacts found by it in their object's history (the last entry of an id wins).
+    void initial_guess(double* f) {
+        const Index n = rows_total_;
+        for (Index i = 0; i < n; ++i) f[i] = 0.0;
+        ids_.clear();
+        const Index lines = mu_ > 0.0 ? 3 : 1;
+        for (const LagrangianContact& c : contacts_) {
+            const Object& o = object_[static_cast<std::size_t>(c.pair)];
+            const std::int64_t x = c.output_id, y = o.response_id;
+            const long id = long(((x + y) * (x + y) + 3 * x + y) / 2);
+            ids_.push_back(o.yet_integrated ? id : -id);
+        }
+        for (std::size_t k = 0; k < contacts_.size(); ++k) {
+            const LagrangianContact& c = contacts_[k];
+            const Object& o = object_[static_cast<std::size_t>(c.pair)];
+            if (o.previous.empty()) continue;
+            const Index nbl = std::min(lines, o.lines);
+            Index previous = -1;
+            for (const auto& entry : o.previous)
+                if (entry.first == ids_[k]) previous = entry.second;
+            if (previous >= 0 && previous + nbl <= Index(previous_forces_.size()))
+                for (Index l = 0; l < nbl; ++l) f[c.row + l] = previous_forces_[static_cast<std::size_t>(previous + l)];
+        }
+        for (const LagrangianContact& c : contacts_) object_[static_cast<std::size_t>(c.pair)].yet_integrated = true;
+    }
+
+    // keepContactForcesValue: this solve's forces and, per constraint object, id -> first row.
+    void keep_forces(const double* f) {
+        previous_forces_.assign(f, f + rows_total_);
+        for (Object& o : object_) o.previous.clear();
+        const Index lines = mu_ > 0.0 ? 3 : 1;
+        for (std::size_t k = 0; k < contacts_.size() && k < ids_.size(); ++k) {
+            Object& o = object_[static_cast<std::size_t>(contacts_[k].pair)];
+            o.previous.emplace_back(ids_[k], contacts_[k].row);
+            o.lines = lines;
+        }
+    }
+
     Index block_count() const { return Index(blocks_.size()); }
     Index rows() const { return n_; }
     Index contact_count() const { return Index(contacts_.size()); }
@@ -364,6 +417,16 @@ private:
         }
     }
 
+    struct Object {  // a pair's constraint object (alive while the pair has outputs)
+        std::int64_t response_id = 0;
+        bool yet_integrated = false;
+        Index lines = 1;
+        std::vector<std::pair<long, Index>> previous;  // persistent id -> first row, last solve
+    };
+    std::vector<Object> object_;
+    std::int64_t next_response_id_ = 0;
+    std::vector<double> previous_forces_;
+    std::vector<long> ids_;
     double mu_ = 0.8;
     Index capacity_ = 0, static_rows_ = 0, rows_total_ = 0, n_ = 0, overflow_ = 0;
     std::vector<std::vector<std::size_t>> kept_;
@@ -484,9 +547,11 @@ inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree
     const Index n = L->rows();
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
+    if (initial_guess != 0.0 && n != 0) L->initial_guess(f);
     ConstraintProblem p{n, W, dfree, f, d, nullptr, 0, scratch};
     const LcpSettings settings{Index(max_iterations), tolerance, mu, min_w, max_f, initial_guess != 0.0};
     const ConstraintResult result = lcp_gauss_seidel(p, settings);
+    if (initial_guess != 0.0) L->keep_forces(f);
     report[0] += 1.0;
     report[1] = double(result.iterations);
     report[2] = result.error;
@@ -496,6 +561,91 @@ inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree
         report[5] = result.error;
         report[6] = double(result.iterations);
     }
+}
+
+// LCPConstraintSolver, unbuilt, frictionless (lcp_gaussseidel_unbuilt): one row per contact, each
+// row's 1x1 compliance from the (at most two) corrections holding it, the displacements through the
+// corrections; the initial guess from the previous solve by persistent id; then the forces kept.
+template <class DT, class... Items>
+inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
+                                         double* /*scratch*/, Index /*capacity*/, double max_iterations,
+                                         double tolerance, double /*mu*/, double /*min_w*/, double /*max_f*/,
+                                         double regularization, double initial_guess, double* report, double time,
+                                         const Items&... items) {
+    UnbuiltSet<DT, int(sizeof...(Items))> set{{items.item...}};
+    const Index bodies[] = {items.body...};
+    constexpr int C = int(sizeof...(Items));
+    for (int c = 0; c < C; ++c) set.items[c].J = L->template jacobian<DT>(bodies[c], set.items[c].J).view();
+    const Index n = L->rows();
+    if (initial_guess != 0.0 && n != 0) L->initial_guess(f);
+    report[0] += 1.0;
+    if (n == 0) {
+        report[1] = 0.0;
+        report[2] = 0.0;
+        if (initial_guess != 0.0) L->keep_forces(f);
+        return;
+    }
+    // resetForUnbuiltResolution: constraint_force = J^T f over the rows with a force, disp = 0
+    for (auto& item : set.items) {
+        item.reset();
+        for (Index r = 0; r < item.J.rows; ++r) {
+            const double fc = f[item.J.row_index[r]];
+            if (fc == 0.0) continue;
+            for (Index e = item.J.start[r]; e < item.J.start[r + 1]; ++e)
+                for (int k = 0; k < DT::deriv; ++k)
+                    item.force[DT::deriv * item.J.dof[e] + k] += item.J.values[DT::deriv * e + k] * fc;
+        }
+    }
+    // the contacts' corrections (first and second holding the row) and their 1x1 compliances
+    for (Index c = 0; c < n; ++c) {
+        for (int k = 0; k < C; ++k)
+            if (set.items[k].row_of(c) >= 0) set.items[k].block_compliance(W, n, c, c);
+        if (regularization > std::numeric_limits<double>::epsilon()) W[n * c + c] += regularization;
+    }
+    const auto holders = [&](Index c, int which) {  // _cclist_elem1 / _cclist_elem2
+        int seen = 0;
+        for (int k = 0; k < C; ++k)
+            if (set.items[k].row_of(c) >= 0 && seen++ == which) return k;
+        return -1;
+    };
+    double error = 0.0;
+    Index it = 0;
+    bool converged = false;
+    for (it = 0; it < Index(max_iterations); ++it) {
+        error = 0.0;
+        for (Index c = 0; c < n; ++c) {
+            d[c] = dfree[c];
+            const double fn0 = f[c];
+            double fn = fn0;
+            const int e1 = holders(c, 0), e2 = holders(c, 1);
+            if (e1 >= 0) set.items[e1].add_displacement(d, c, c);
+            if (e2 >= 0) set.items[e2].add_displacement(d, c, c);
+            const double dn = d[c];
+            const double w11 = W[n * c + c];
+            fn -= dn / w11;
+            if (fn < 0) fn = 0;
+            error += std::fabs(w11 * (fn - fn0));
+            if (fn0 != 0.0 || fn != 0.0) {
+                f[c] = fn - fn0;
+                if (e1 >= 0) set.items[e1].set_force_change(f, c, c);
+                if (e2 >= 0) set.items[e2].set_force_change(f, c, c);
+            }
+            f[c] = fn;
+        }
+        if (error < tolerance * double(n + 1)) {
+            converged = true;
+            break;
+        }
+    }
+    report[1] = double(converged ? it + 1 : it);
+    report[2] = error;
+    if (!converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = error;
+        report[6] = double(it);
+    }
+    if (initial_guess != 0.0) L->keep_forces(f);
 }
 
 }  // namespace sofac

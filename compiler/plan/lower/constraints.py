@@ -421,9 +421,12 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                 kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
             )
         phase.correction.append(Op(correction.origin, [correct]))
-    if phase.method == "lcp":  # LCPConstraintSolver, built, on the contacts' rows
+    if phase.method == "lcp":  # LCPConstraintSolver on the contacts' rows
         names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
         lcp_settings = [Element(phase.settings[name]) for name in names]
+        if solver is not None and not planner.value(solver.component, "build_lcp"):
+            _lcp_unbuilt(planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), lcp_settings)
+            return
         lcp = call("lagrangian_solve_lcp", Env.LAGRANGIAN, W, dfree, f, d, scratch, n, *lcp_settings)
         phase.solve.append(Op(phase.solver, [call(lcp.kernel, *lcp.args, phase.report, Env.TIME)]))
         return
@@ -486,19 +489,60 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     )
 
 
+def _lcp_unbuilt(
+    planner: Planner,
+    phase: ConstraintPhase,
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
+    problem: tuple,
+    settings: list[Element],
+) -> None:
+    """LCPConstraintSolver with build_lcp=0 and mu=0 (lcp_gaussseidel_unbuilt): no W built (the
+    compliance calls are dropped), the 1x1 blocks and displacements through the corrections."""
+    phase.compliance.clear()
+    types = {t for t, *_ in items}
+    solver = getattr(planner, "constraint_solver", None)
+    if len(types) != 1:
+        if solver is not None:
+            planner.unsupported(solver, "unbuilt, it is compiled for corrections of one DataType")
+        return
+    (t,) = types
+    aggregates = []
+    for _, J, state, comp0, comp, size, body in items:
+        zeros = np.zeros_like(state.v.initial)
+        force = planner.buffer(
+            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
+        )
+        disp = planner.buffer(
+            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
+        )
+        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)))
+    solve = call(
+        kernel("lagrangian_solve_lcp_unbuilt", t),
+        Env.LAGRANGIAN,
+        *problem,
+        *settings,
+        phase.report,
+        Env.TIME,
+        *aggregates,
+    )
+    phase.solve.append(Op(phase.solver, [solve]))
+
+
 def _lcp_refusal(
     planner: Planner, solver: CheckedComponent, phase: ConstraintPhase, collision: Collision
 ) -> str:
     """Why an LCPConstraintSolver on Lagrangian contacts is not compiled ("" when it is)."""
     value = planner.value
-    if not value(solver.component, "build_lcp"):
-        return "LCPConstraintSolver with build_lcp=0 (unbuilt) is not compiled yet"
-    if value(solver.component, "initial_guess"):
-        return "LCPConstraintSolver's initial_guess (warm start by persistent contact ids) is not compiled yet"
     if collision.static_rows:
         return "LCPConstraintSolver on rows other than contacts' is not compiled yet"
-    if float(value(solver.component, "mu")) <= 0 or collision.mu <= 0:
-        return "LCPConstraintSolver is compiled for contacts of three rows solved with mu > 0"
+    mu = float(value(solver.component, "mu"))
+    if not value(solver.component, "build_lcp"):
+        if mu > 0 or collision.mu > 0:
+            return "LCPConstraintSolver unbuilt with friction (nlcp_gaussseidel_unbuilt) is not compiled yet"
+        return ""
+    if mu <= 0 or collision.mu <= 0:
+        return "LCPConstraintSolver built is compiled for contacts of three rows solved with mu > 0"
     return ""
 
 
