@@ -493,8 +493,9 @@ _LMD_ARGUMENTS = {
 
 
 def _lmd_case(name: str) -> str:
-    arguments = _LMD_ARGUMENTS[name.split("::")[1]]
-    body = f"const Index v0 = p.view[0], v1 = p.view[1]; {_LMD}::{name.split('::')[1]}(method, lmd, {arguments}, out);"
+    test = name.split("::")[1]
+    views = "const Index v0 = p.view[0], v1 = p.view[1];"
+    body = f"{views} {_LMD}::{test}(method, lmd, {_LMD_ARGUMENTS[test]}, out);"
     return f"C.narrow_phase(p, [&](Index e1, Index e2, sofac::collide::OutputList& out) {{ {body} }});"
 
 

@@ -178,7 +178,9 @@ def contact_setup_refusal(planner: Planner) -> str:
         if kind == "penalty" and loop != "DefaultAnimationLoop":
             return f"penalty contact under {loop} is not compiled yet (DefaultAnimationLoop is)"
         if kind == "friction_contact" and loop != "FreeMotionAnimationLoop":
-            return f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
+            return (
+                f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
+            )
         if kind == "friction_contact" and len(setups) > 1:
             return "Lagrangian contact from several collision pipelines is not compiled yet"
         for checked in setup.models:
@@ -255,11 +257,12 @@ def _plan_collision(
         params = _response_params(str(value(manager, "responseParams") or ""))
         collision.mu = float(params.get("mu", 0.8))
         if collision.mu < 0:
+            attribute = manager.attributes.get("responseParams")
             planner.diags.add(
                 "E207",
-                manager.loc,
+                attribute.loc if attribute is not None else manager.loc,
                 f"{manager.type_name}: mu={collision.mu!r} must be >= 0 (Coulomb's friction coefficient)",
-                "give responseParams=\"mu=0.8\" or another non-negative value",
+                'give responseParams="mu=0.8" or another non-negative value',
             )
             return None
     if collision.alarm_distance < collision.contact_distance:
@@ -364,7 +367,9 @@ def _csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
     return offsets, items
 
 
-def _add_cone(planner: Planner, collision: Collision, model: CollisionModel, checked: CheckedComponent) -> None:
+def _add_cone(
+    planner: Planner, collision: Collision, model: CollisionModel, checked: CheckedComponent
+) -> None:
     """LocalMinDistance's testValidity data for a point or line model: its topology's triangles,
     edges and adjacency lists (ascending, as MeshTopology builds them). A point model of a node
     without a LineCollisionModel is always valid (no cone)."""
@@ -377,7 +382,8 @@ def _add_cone(planner: Planner, collision: Collision, model: CollisionModel, che
         return
     node = checked.component.node
     if model.kind == "point" and not any(
-        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.role == "line" for c in node.objects
+        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.role == "line"
+        for c in node.objects
     ):
         return
     cells = _topology_cells(planner, checked) or {}

@@ -304,7 +304,9 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         lagrangian.static_rows = phase.capacity
         phase.capacity = n
         if phase.kept is None:
-            phase.kept = planner.buffer(planner.checked.scene.root.path, "constraint_kept_forces", [], role="state")
+            phase.kept = planner.buffer(
+                planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
+            )
     if lagrangian is not None and phase.method == "lcp" and solver is not None:
         why = _lcp_refusal(planner, solver, phase, lagrangian)
         if why:
@@ -320,7 +322,10 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         return
     W = planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch")
     dfree = planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch")
-    f = planner.buffer("/", "constraint_f", np.zeros(n), role="scratch")
+    # with contacts, the last solve's forces are an output (`/.constraint_f`: impulses, rows in order)
+    f = planner.buffer(
+        "/", "constraint_f", np.zeros(n), role="state" if lagrangian is not None else "scratch"
+    )
     d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
     scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
     if lagrangian is not None:
@@ -388,7 +393,9 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp), body))
         comp_args = (comp0, comp_buffer, len(comp))
         if lagrangian is not None:
-            add = call(kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled)
+            add = call(
+                kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled
+            )
         else:
             add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
         phase.compliance.append(Op(correction.origin, [add]))
@@ -548,9 +555,7 @@ def _lcp_refusal(
 
 def _lagrangian_collision(planner: Planner) -> Collision | None:
     """The scene's FrictionContactConstraint contacts (their rows join the phase), if compiled."""
-    return next(
-        (c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None
-    )
+    return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
 
 
 def _contact_bodies(
