@@ -306,6 +306,8 @@ public:
     Index block_count() const { return Index(blocks_.size()); }
     Index rows() const { return n_; }
     Index contact_count() const { return Index(contacts_.size()); }
+    // The detection's growths, and the contacts dropped past the reserved rows.
+    Index growths() const { return PenaltyContacts::growths() + overflow_; }
     Index overflow() const { return overflow_; }
     const std::vector<LagrangianContact>& contacts() const { return contacts_; }
     double mu() const { return mu_; }
