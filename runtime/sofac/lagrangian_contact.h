@@ -571,7 +571,7 @@ inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree
 template <class DT, class... Items>
 inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
                                          double* /*scratch*/, Index /*capacity*/, double max_iterations,
-                                         double tolerance, double /*mu*/, double /*min_w*/, double /*max_f*/,
+                                         double tolerance, double mu, double /*min_w*/, double /*max_f*/,
                                          double regularization, double initial_guess, double* report, double time,
                                          const Items&... items) {
     UnbuiltSet<DT, int(sizeof...(Items))> set{{items.item...}};
@@ -599,11 +599,12 @@ inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, doubl
         }
     }
     // the contacts' corrections (first and second holding the row) and their 1x1 compliances
-    for (Index c = 0; c < n; ++c) {
+    const Index lines = mu > 0.0 ? 3 : 1;
+    for (Index c = 0; c + lines <= n; c += lines)
         for (int k = 0; k < C; ++k)
-            if (set.items[k].row_of(c) >= 0) set.items[k].block_compliance(W, n, c, c);
-        if (regularization > std::numeric_limits<double>::epsilon()) W[n * c + c] += regularization;
-    }
+            if (set.items[k].row_of(c) >= 0) set.items[k].block_compliance(W, n, c, c + lines - 1);
+    if (regularization > std::numeric_limits<double>::epsilon())
+        for (Index c = 0; c < n; ++c) W[n * c + c] += regularization;
     const auto holders = [&](Index c, int which) {  // _cclist_elem1 / _cclist_elem2
         int seen = 0;
         for (int k = 0; k < C; ++k)
@@ -613,7 +614,63 @@ inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, doubl
     double error = 0.0;
     Index it = 0;
     bool converged = false;
-    for (it = 0; it < Index(max_iterations); ++it) {
+    if (mu > 0.0) {  // nlcp_gaussseidel_unbuilt: 3 rows per contact, LocalBlock33::New_GS_State
+        const Index contacts = n / 3;
+        for (it = 0; it < Index(max_iterations); ++it) {
+            error = 0.0;
+            for (Index c = 0; c < contacts; ++c) {
+                const Index r = 3 * c;
+                for (int l = 0; l < 3; ++l) d[r + l] = dfree[r + l];
+                const double fn0 = f[r];
+                double fn = f[r], ft = f[r + 1], fs = f[r + 2];
+                const int e1 = holders(r, 0), e2 = holders(r, 1);
+                if (e1 >= 0) set.items[e1].add_displacement(d, r, r + 2);
+                if (e2 >= 0) set.items[e2].add_displacement(d, r, r + 2);
+                double dn = d[r], dt = d[r + 1], ds = d[r + 2];
+                const double w[6] = {W[n * r + r],           W[n * r + r + 1],       W[n * r + r + 2],
+                                     W[n * (r + 1) + r + 1], W[n * (r + 1) + r + 2], W[n * (r + 2) + r + 2]};
+                const double f1[3] = {fn, ft, fs};
+                fn -= dn / w[0];
+                bool moved = true;
+                if (fn <= 0) {
+                    fn = ft = fs = 0.0;
+                    moved = f1[0] > 0;
+                } else {
+                    const double d1 = w[1] * (fn - f1[0]) + dt;
+                    const double d2 = w[2] * (fn - f1[0]) + ds;
+                    ft -= 2 * d1 / (w[3] + w[5]);
+                    fs -= 2 * d2 / (w[3] + w[5]);
+                    const double norm = std::sqrt(ft * ft + fs * fs);
+                    if (norm > mu * fn) {
+                        ft *= mu * fn / norm;
+                        fs *= mu * fn / norm;
+                    }
+                }
+                if (moved) {
+                    const double df[3] = {fn - f1[0], ft - f1[1], fs - f1[2]};
+                    dn += w[0] * df[0] + w[1] * df[1] + w[2] * df[2];
+                    dt += w[1] * df[0] + w[3] * df[1] + w[4] * df[2];
+                    ds += w[2] * df[0] + w[4] * df[1] + w[5] * df[2];
+                }
+                error += std::sqrt((d[r] - dn) * (d[r] - dn) + (d[r + 1] - dt) * (d[r + 1] - dt) +
+                                   (d[r + 2] - ds) * (d[r + 2] - ds));
+                const bool update = !(fn0 == 0.0 && fn == 0.0);
+                f[r] = fn - f[r];
+                f[r + 1] = ft - f[r + 1];
+                f[r + 2] = fs - f[r + 2];
+                if (update) {
+                    if (e1 >= 0) set.items[e1].set_force_change(f, r, r + 2);
+                    if (e2 >= 0) set.items[e2].set_force_change(f, r, r + 2);
+                }
+                f[r] = fn, f[r + 1] = ft, f[r + 2] = fs;
+            }
+            if (error < tolerance * double(contacts + 1)) {
+                converged = true;
+                break;
+            }
+        }
+    }
+    for (; mu <= 0.0 && it < Index(max_iterations); ++it) {  // lcp_gaussseidel_unbuilt (it is 0 here)
         error = 0.0;
         for (Index c = 0; c < n; ++c) {
             d[c] = dfree[c];

@@ -545,8 +545,8 @@ def _lcp_refusal(
         return "LCPConstraintSolver on rows other than contacts' is not compiled yet"
     mu = float(value(solver.component, "mu"))
     if not value(solver.component, "build_lcp"):
-        if mu > 0 or collision.mu > 0:
-            return "LCPConstraintSolver unbuilt with friction (nlcp_gaussseidel_unbuilt) is not compiled yet"
+        if (mu > 0) != (collision.mu > 0):
+            return "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 or both > 0"
         return ""
     if mu <= 0 or collision.mu <= 0:
         return "LCPConstraintSolver built is compiled for contacts of three rows solved with mu > 0"
