@@ -82,6 +82,7 @@ _ENV = {
     Env.POTENTIAL_OUT: "&potential",
     Env.NONE: "nullptr",
     Env.CONTACTS: "S.contacts",
+    Env.LAGRANGIAN: "S.lagrangian",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
 
@@ -418,8 +419,15 @@ class _CollisionView:
             self.updates.append(
                 f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, {view}{normals});"
             )
+        self.lagrangian = collision.response == "friction_contact"
+        self.handle = "*S.lagrangian" if self.lagrangian else f"*S.contacts[{index}]"
+        if collision.lmd is not None:
+            self.views += _cone_views(collision, used)
         self.cases = []
         for number, test in enumerate(collision.tests):
+            if test.name.startswith("local_min_distance::"):
+                self.cases.append((number, test.name, _lmd_case(test.name)))
+                continue
             first, second = test.kinds
             flags = "".join(f", {'true' if o else 'false'}" for o in test.options)
             views = f"{first}s[p.view[0]], e1, {second}s[p.view[1]], e2"
@@ -458,12 +466,71 @@ class _CollisionView:
         self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
         self.setup.append("}")
         self.setup.append("C.finish_setup();")
+        if self.lagrangian:
+            rows, static = collision.row_capacity + collision.static_rows, collision.static_rows
+            bodies = max((b for b, *_ in collision.bodies), default=-1) + 1
+            self.setup.append(f"C.setup_lagrangian({collision.mu!r}, {rows}, {static}, {bodies});")
+            for i, (body, free, frames, offsets) in enumerate(collision.bodies):
+                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets)]
+                self.setup.append(f"C.lagrangian[{i}] = {{{body}, {', '.join(pointers)}}};")
+            self.setup.append(f"C.rank = {{{', '.join(str(r) for r in collision.ranks)}}};")
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
         assert collision.report is not None
         self.report = _ptr(collision.report)
 
 
 _VIEW_COLUMNS = "first, second, root, id bound, test, views"
+
+_LMD = "sofac::collide::local_min_distance"
+
+# LocalMinDistance's element tests, with each model's cone (by its view among its kind).
+_LMD_ARGUMENTS = {
+    "point_point": "points[v0], e1, point_cones[v0], points[v1], e2, point_cones[v1]",
+    "line_point": "lines[v0], e1, line_cones[v0], points[v1], e2, point_cones[v1]",
+    "line_line": "lines[v0], e1, line_cones[v0], lines[v1], e2, line_cones[v1]",
+    "triangle_point": "triangles[v0], e1, triangle_both[v0], points[v1], e2, point_cones[v1]",
+}
+
+
+def _lmd_case(name: str) -> str:
+    test = name.split("::")[1]
+    views = "const Index v0 = p.view[0], v1 = p.view[1];"
+    body = f"{views} {_LMD}::{test}(method, lmd, {_LMD_ARGUMENTS[test]}, out);"
+    return f"C.narrow_phase(p, [&](Index e1, Index e2, sofac::collide::OutputList& out) {{ {body} }});"
+
+
+def _cone_views(collision: Collision, used: list[int]) -> list[str]:
+    """LocalMinDistance's options and the cones of the paired models, by view (runtime PointCone,
+    LineCone; null where SOFA accepts without reading a topology)."""
+    assert collision.lmd is not None
+    filter_, angle, factor, filters = collision.lmd
+    b = lambda v: "true" if v else "false"  # noqa: E731
+    lines = [f"const {_LMD}::Options lmd{{{b(filter_)}, {angle!r}, {factor!r}, {b(filters)}}};"]
+    models = collision.models
+    for kind, cone in (("point", "PointCone"), ("line", "LineCone")):
+        members = sorted((i for i in used if models[i].kind == kind), key=lambda i: models[i].view)
+        names = []
+        for i in members:
+            model = models[i]
+            if model.cone is None:
+                names.append("nullptr")
+                continue
+            x = _ptr(model.state.x)
+            parts = [_ptr(c) for c in model.cone]
+            if kind == "point":
+                tri, edges, tav_o, tav, eav_o, eav = parts
+                fields = f"{x}, {tri}, {edges}, {{{tav_o}, {tav}}}, {{{eav_o}, {eav}}}, false"
+            else:
+                tri, tae_o, tae = parts
+                fields = f"{x}, {tri}, {{{tae_o}, {tae}}}, false"
+            lines.append(f"const {_LMD}::{cone} {kind}_cone_{i}{{{fields}}};")
+            names.append(f"&{kind}_cone_{i}")
+        items = ", ".join(names) if names else "nullptr"
+        lines.append(f"[[maybe_unused]] const {_LMD}::{cone}* const {kind}_cones[] = {{{items}}};")
+    triangles = sorted((i for i in used if models[i].kind == "triangle"), key=lambda i: models[i].view)
+    both = ", ".join(b(models[i].both_side) for i in triangles) or "false"
+    lines.append(f"[[maybe_unused]] const bool triangle_both[] = {{{both}}};")
+    return lines
 
 
 def generate_source(plan: Plan) -> str:
@@ -493,6 +560,7 @@ def generate_source(plan: Plan) -> str:
         threads=plan.threads,
         guard=plan.contact_guard,
         collisions=[_CollisionView(c, k) for k, c in enumerate(plan.collisions) if c.pairs],
+        lagrangian=any(c.response == "friction_contact" and c.pairs for c in plan.collisions),
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,

@@ -52,6 +52,18 @@ _TESTS = {
         ("line", "sphere"),
     },
 }
+# LocalMinDistance registers MinProximity's pairs (Triangle-Line and Triangle-Triangle ignored);
+# sofac compiles its triangle, line and point tests (runtime local_min_distance::).
+_TESTS["local_min_distance"] = {
+    ("point", "point"),
+    ("line", "point"),
+    ("line", "line"),
+    ("triangle", "point"),
+}
+# Lagrangian contacts a step can hold (their rows are reserved in the constraint problem); past
+# it, contacts are dropped and counted in the pipeline's report.
+_CONTACT_CAPACITY = 128
+_RESPONSES = {"PenalityContactForceField": "penalty", "FrictionContactConstraint": "friction_contact"}
 # MinProximityIntersection's switches: the pairs each one removes.
 _MIN_PROXIMITY_SWITCHES = {
     "usePointPoint": {("point", "point")},
@@ -81,7 +93,7 @@ _PARTS = {
 
 def _role(checked: CheckedComponent) -> str:
     role = checked.spec.role if checked.spec else ""
-    return "intersection" if role in ("min_proximity", "new_proximity") else role
+    return "intersection" if role in ("min_proximity", "new_proximity", "local_min_distance") else role
 
 
 def _setups(planner: Planner) -> list[_Setup] | str:
@@ -140,26 +152,48 @@ def contact_setup_refusal(planner: Planner) -> str:
             f"penalty contact is compiled for {setups}: BruteForceBroadPhase, BVHNarrowPhase, "
             "MinProximityIntersection or NewProximityIntersection and a CollisionResponse"
         )
-    for checked in planner.checked:
-        if (
-            checked.category is Category.ANIMATION_LOOP
-            and checked.spec
-            and checked.spec.name != "DefaultAnimationLoop"
-        ):
-            return f"contact response under {checked.spec.name} is not compiled yet (DefaultAnimationLoop is)"
+    loops = [
+        c.spec.name for c in planner.checked if c.category is Category.ANIMATION_LOOP and c.spec is not None
+    ]
+    loop = loops[0] if loops else "DefaultAnimationLoop"
     for setup in setups:
         for role, checked in setup.parts.items():
             spec = checked.spec
             if spec is None or not spec.supported or (role == "intersection" and spec.role not in _TESTS):
                 return f"{checked.component.type_name} is not compiled yet"
-        response = str(planner.value(setup.parts["contact_manager"].component, "response") or "")
-        if response != "PenalityContactForceField":
-            return f"the contact response {response!r} is not compiled yet (PenalityContactForceField is)"
+        manager = setup.parts["contact_manager"]
+        if manager.spec is not None and manager.spec.name == "RuleBasedContactManager":
+            # its rules are triplets "name1 name2 response"; SOFA's parser stops at the first
+            # incomplete one, so rules="default" gives no rule: CollisionResponse's behaviour
+            words = str(planner.value(manager.component, "rules") or "").split()
+            if len(words) >= 3:
+                return "RuleBasedContactManager's rules (a response per pair of groups) are not compiled yet"
+        response = str(planner.value(manager.component, "response") or "")
+        kind = _RESPONSES.get(response)
+        if kind is None:
+            return (
+                f"the contact response {response!r} is not compiled yet (PenalityContactForceField and "
+                "FrictionContactConstraint are)"
+            )
+        if kind == "penalty" and loop != "DefaultAnimationLoop":
+            return f"penalty contact under {loop} is not compiled yet (DefaultAnimationLoop is)"
+        if kind == "friction_contact" and loop != "FreeMotionAnimationLoop":
+            return (
+                f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
+            )
+        if kind == "friction_contact" and any(
+            c.spec is not None and c.spec.name == "LinearSolverConstraintCorrection" for c in planner.checked
+        ):
+            return "Lagrangian contact with a LinearSolverConstraintCorrection is not compiled yet"
+        if kind == "friction_contact" and len(setups) > 1:
+            return "Lagrangian contact from several collision pipelines is not compiled yet"
         for checked in setup.models:
             spec = checked.spec
             assert spec is not None
             if spec.role not in _RANK:
                 return f"{spec.name} takes no part in compiled contacts"
+            if kind == "friction_contact" and spec.role == "sphere":
+                return "Lagrangian contact on spheres is not compiled yet"
             if checked.datatype is not None and checked.datatype.name != "Vec3d":
                 return (
                     f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
@@ -202,7 +236,10 @@ def _plan_collision(
         if model is None:
             return None
         models.append(model)
+    manager = setup.parts["contact_manager"].component
+    response = _RESPONSES[str(value(manager, "response"))]
     collision = Collision(
+        response=response,
         origin=origin_of(pipeline.component),
         method=method,
         alarm_distance=float(value(intersection.component, "alarmDistance")),
@@ -212,6 +249,26 @@ def _plan_collision(
         tests=[],
         pairs=[],
     )
+    if method == "local_min_distance":
+        i = intersection.component
+        collision.lmd = (
+            value(i, "filterIntersection") is not False,
+            float(value(i, "angleCone")),
+            float(value(i, "coneFactor")),
+            bool(value(i, "useLMDFilters")),
+        )
+    if response == "friction_contact":
+        params = _response_params(str(value(manager, "responseParams") or ""))
+        collision.mu = float(params.get("mu", 0.8))
+        if collision.mu < 0:
+            attribute = manager.attributes.get("responseParams")
+            planner.diags.add(
+                "E207",
+                attribute.loc if attribute is not None else manager.loc,
+                f"{manager.type_name}: mu={collision.mu!r} must be >= 0 (Coulomb's friction coefficient)",
+                'give responseParams="mu=0.8" or another non-negative value',
+            )
+            return None
     if collision.alarm_distance < collision.contact_distance:
         component = intersection.component
         attribute = component.attributes.get("alarmDistance") or component.attributes.get("contactDistance")
@@ -268,8 +325,118 @@ def _plan_collision(
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
     collision.report = planner.buffer(pipeline.component, "contactReport", np.zeros(6), role="state")
+    if response == "friction_contact":
+        ranks = _node_ranks(planner.checked.scene.root)
+        nodes = [c.component.node for c in checked_models]
+        for model, node in zip(models, nodes, strict=True):
+            model.node_rank = ranks[id(node)]
+        here = ranks[id(pipeline.component.node)]
+        for pair in collision.pairs:
+            a, b = models[pair.first], models[pair.second]
+            collision.ranks.append(here if pair.root else (a.node_rank if a.simulated else b.node_rank))
+        collision.row_capacity = (3 if collision.mu > 0 else 1) * _CONTACT_CAPACITY
+        if method == "local_min_distance":
+            for model, checked in zip(models, checked_models, strict=True):
+                _add_cone(planner, collision, model, checked)
+        return collision
     _place(planner, collision, number, owner)
     return collision
+
+
+def _response_params(text: str) -> dict[str, str]:
+    """CollisionResponse's responseParams, 'name=value&name=value'."""
+    params = {}
+    for item in text.split("&"):
+        name, _, given = item.partition("=")
+        if name.strip():
+            params[name.strip()] = given.strip()
+    return params
+
+
+def _node_ranks(root: Node) -> dict[int, int]:
+    """Each node's index in a depth-first pre-order walk (SOFA's top-down visitors)."""
+    ranks: dict[int, int] = {}
+    pending = [root]
+    while pending:
+        node = pending.pop()
+        ranks[id(node)] = len(ranks)
+        pending.extend(reversed(node.children))
+    return ranks
+
+
+def _csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    offsets = np.zeros(len(lists) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(items) for items in lists])
+    items = np.array([i for items in lists for i in items], dtype=np.int64)
+    return offsets, items
+
+
+def _add_cone(
+    planner: Planner, collision: Collision, model: CollisionModel, checked: CheckedComponent
+) -> None:
+    """LocalMinDistance's testValidity data for a point or line model: its topology's triangles,
+    edges and adjacency lists (ascending, as MeshTopology builds them). A point model of a node
+    without a LineCollisionModel is always valid (no cone)."""
+    from sofac.geometry import masses
+
+    from .lower.common import _topology_cells
+
+    assert collision.lmd is not None
+    if model.kind not in ("point", "line") or not collision.lmd[0]:
+        return
+    node = checked.component.node
+    if model.kind == "point" and not any(
+        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.role == "line"
+        for c in node.objects
+    ):
+        return
+    cells = _topology_cells(planner, checked) or {}
+    n = model.state.size
+    triangles = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
+    edges = cells.get("edges")
+    if edges is None or not np.size(edges):
+        edges = masses.topology_edges(n, triangles=cells.get("triangles"), quads=cells.get("quads"))
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    owner = checked.component
+    tri_buffer = planner.buffer(owner, "cone_triangles", triangles, "i64", columns=3)
+    if model.kind == "point":
+        around_vertex: list[list[int]] = [[] for _ in range(n)]
+        for t, tri in enumerate(triangles):
+            for v in tri:
+                around_vertex[int(v)].append(t)
+        edges_around: list[list[int]] = [[] for _ in range(n)]
+        for e, edge in enumerate(edges):
+            for v in edge:
+                edges_around[int(v)].append(e)
+        tav, eav = _csr(around_vertex), _csr(edges_around)
+        model.cone = (
+            tri_buffer,
+            planner.buffer(owner, "cone_edges", edges, "i64", columns=2),
+            planner.buffer(owner, "triangles_around_vertex_offsets", tav[0], "i64"),
+            planner.buffer(owner, "triangles_around_vertex", tav[1], "i64"),
+            planner.buffer(owner, "edges_around_vertex_offsets", eav[0], "i64"),
+            planner.buffer(owner, "edges_around_vertex", eav[1], "i64"),
+        )
+    else:
+        index = {tuple(sorted((int(a), int(b)))): e for e, (a, b) in enumerate(model_edges(planner, model))}
+        around_edge: list[list[int]] = [[] for _ in range(model.elements)]
+        for t, tri in enumerate(triangles):
+            for j in range(3):
+                key = tuple(sorted((int(tri[(j + 1) % 3]), int(tri[(j + 2) % 3]))))
+                if key in index:
+                    around_edge[index[key]].append(t)
+        tae = _csr([sorted(set(items)) for items in around_edge])
+        model.cone = (
+            tri_buffer,
+            planner.buffer(owner, "triangles_around_edge_offsets", tae[0], "i64"),
+            planner.buffer(owner, "triangles_around_edge", tae[1], "i64"),
+        )
+
+
+def model_edges(planner: Planner, model: CollisionModel) -> np.ndarray:
+    """A line model's edges (its cells)."""
+    assert model.cells is not None
+    return model.cells.initial.reshape(-1, 2)
 
 
 def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None:
@@ -328,6 +495,7 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         radii=radii,
         radius=float(value(checked.component, "radius")) if kind == "sphere" else 0.0,
         flagged=flagged if kind == "triangle" else 0,
+        both_side=bool(value(checked.component, "bothSide")) if kind == "triangle" else False,
     )
 
 
@@ -417,6 +585,7 @@ def map_contact_states_while_touching(planner: Planner, groups: list[Group]) -> 
         id(model.state): (number, index)
         for number, collision in enumerate(planner.collisions)
         for index, model in enumerate(collision.models)
+        if collision.response == "penalty"
     }
     for group in groups:
         others = [c for c in group.calls() if not (isinstance(c, Call) and c.kernel.startswith("contact_"))]

@@ -57,6 +57,7 @@ class Env(enum.Enum):
     POTENTIAL_OUT = "potential_out"
     NONE = "none"  # an absent pointer
     CONTACTS = "contacts"  # the scene's penalty contacts, one per pipeline (runtime/sofac/penalty.h)
+    LAGRANGIAN = "lagrangian"  # the scene's Lagrangian contacts (runtime/sofac/lagrangian_contact.h)
 
 
 class FemMethod(enum.IntEnum):
@@ -543,6 +544,13 @@ class CollisionModel:
     radii: Buffer | None = None  # sphere models: listRadius (spheres past it take `radius`)
     radius: float = 0.0
     flagged: int = 0  # triangle models: the leading triangles that get SOFA's flags (not quads')
+    # LocalMinDistance's cones (runtime local_min_distance::PointCone / LineCone): i64 CSR
+    # adjacency of the model's topology: points (triangles, edges, trianglesAroundVertex offsets
+    # and items, edgesAroundVertex offsets and items), lines (triangles, trianglesAroundEdge
+    # offsets and items); None: SOFA accepts without reading them.
+    cone: tuple[Buffer, ...] | None = None
+    both_side: bool = False  # triangle models' bothSide
+    node_rank: int = 0  # depth-first index of its node (where a Lagrangian contact is placed)
 
 
 @dataclass(frozen=True)
@@ -594,6 +602,18 @@ class Collision:
     report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
+    # "penalty" (DefaultAnimationLoop) or "friction_contact" (FrictionContactConstraint under
+    # FreeMotionAnimationLoop: its contacts are rows of the constraint phase, lagrangian_contact.h)
+    response: str = "penalty"
+    mu: float = 0.0  # FrictionContact's mu (0: one row per contact)
+    # LocalMinDistance: filterIntersection, angleCone, coneFactor, useLMDFilters
+    lmd: tuple[bool, float, float, bool] | None = None
+    # friction_contact: the rank of each pair's placement node, and the constraint rows reserved
+    ranks: list[int] = field(default_factory=list)
+    row_capacity: int = 0
+    static_rows: int = 0  # the scene's own constraint rows, before the contacts'
+    # friction_contact, per model: (correction index or -1, free positions, frames, offsets)
+    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None]] = field(default_factory=list)
 
 
 @dataclass

@@ -114,6 +114,11 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
                 else "in the group of the simulated model (a static partner): forces and K dx"
             )
             test = collision.tests[pair.test].name
+            if collision.response == "friction_contact":
+                rows = 3 if collision.mu > 0 else 1
+                where = f"FrictionContactConstraint mu={collision.mu!r}: {rows} constraint row(s) per contact"
+                effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, {where}"))
+                continue
             effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, penalty {where}"))
         reasons: dict[str, list[str]] = {}
         for first, second, why in collision.left_out:

@@ -369,9 +369,9 @@ class Planner:
                 continue
             lowering(self, checked, owner)
             self.lowered.append(checked.component)
-        self.constraints = finish_constraint_phase(self, list(groups.values()))
         if self.colliding:  # before J is routed: contacts add blocks on mapped collision states
             self.collisions = plan_collisions(self, owner)
+        self.constraints = finish_constraint_phase(self, list(groups.values()))  # Lagrangian contacts' rows
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)
@@ -384,7 +384,7 @@ class Planner:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:
             add_point_forces(self, list(groups.values()))
-        if self.collisions:  # after the point forces: a state they pull is not contact-only
+        if any(c.response == "penalty" for c in self.collisions):  # after the point forces
             map_contact_states_while_touching(self, list(groups.values()))
         drop_unread_rest_positions(self, list(groups.values()))
         return list(groups.values())

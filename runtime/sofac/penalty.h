@@ -187,6 +187,31 @@ public:
         }
     }
 
+    // SOFA's contact map after a detection (CollisionResponse::createContacts): `created(pair)` for
+    // the pairs that start touching, `updated(pair)` for every pair with outputs in map order,
+    // `removed(pair)` for those that stopped.
+    template <class Created, class Updated, class Removed>
+    void order_contacts(Created&& created, Updated&& updated, Removed&& removed) {
+        auto& contacts = contacts_map_.map();
+        for (const auto& entry : outputs_map_.map()) {
+            auto [it, fresh] = contact_slot(contacts, entry.first);
+            if (fresh) {
+                it->second = entry.second;
+                created(entry.second);
+            }
+            updated(entry.second);
+        }
+        remove_inactive(contacts, outputs_map_.map(), removed);
+    }
+
+    // f(pair) for the live contacts, in SOFA's `contacts` order.
+    template <class F>
+    void for_each_contact(F&& f) const {
+        for (const auto& entry : contacts_map_.map()) f(entry.second);
+    }
+
+    double contact_distance() const { return contact_distance_; }
+
     // f(model) += its contact forces (a force evaluation of the group integrating `model`).
     void add_force(Index model, double* f, const double* x) {
         PenaltyModel& m = models[model];

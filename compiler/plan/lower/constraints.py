@@ -23,6 +23,7 @@ from sofac.plan.ir import (
     Aggregate,
     Buffer,
     Call,
+    Collision,
     ConstraintPhase,
     Correction,
     Element,
@@ -297,27 +298,57 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     """The calls of a phase that has rows: violations, W from the corrections, the solve, the
     corrections, on buffers sized by the rows."""
     solver = getattr(planner, "constraint_solver", None)
-    n = phase.capacity
-    if phase.method not in _ROW_SOLVERS:
+    lagrangian = _lagrangian_collision(planner)
+    n = phase.capacity + (lagrangian.row_capacity if lagrangian is not None else 0)
+    if lagrangian is not None:
+        lagrangian.static_rows = phase.capacity
+        phase.capacity = n
+        if phase.kept is None:
+            phase.kept = planner.buffer(
+                planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
+            )
+    if lagrangian is not None and phase.method == "lcp" and solver is not None:
+        why = _lcp_refusal(planner, solver, phase, lagrangian)
+        if why:
+            planner.unsupported(solver, why)
+            return
+    elif lagrangian is not None and phase.method not in _ROW_SOLVERS:
+        if solver is not None:
+            planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
+        return
+    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == "lcp"):
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
         return
     W = planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch")
     dfree = planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch")
-    f = planner.buffer("/", "constraint_f", np.zeros(n), role="scratch")
+    # with contacts, the last solve's forces are an output (`/.constraint_f`: impulses, rows in order)
+    f = planner.buffer(
+        "/", "constraint_f", np.zeros(n), role="state" if lagrangian is not None else "scratch"
+    )
     d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
     scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
-    phase.rows.append(Op(phase.loop, [call("constraint_clear", W, dfree, f, d, n)]))
-    free_x = _mapped_free_motion(planner, phase)
+    if lagrangian is not None:
+        clear = call("lagrangian_begin", Env.LAGRANGIAN, W, dfree, f, d)
+    else:
+        clear = call("constraint_clear", W, dfree, f, d, n)
+    phase.rows.append(Op(phase.loop, [clear]))
+    contact_states = {m.state.ident for m in lagrangian.models} if lagrangian is not None else set()
+    free_x = _mapped_free_motion(planner, phase, contact_states)
     for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
         x1, x2 = free_x.get(s1.ident, s1.x), free_x.get(s2.ident, s2.x)
         phase.violation.append(
             Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
         )
+    if lagrangian is not None:
+        phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
     _carry_through_rigid_mappings(planner, phase)
-    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]] = []
-    for correction in phase.corrections:
+    bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
+    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
+    for body, correction in enumerate(phase.corrections):
         entries = phase.entries.get(correction.state.ident)
+        if entries is None and body in bodies:
+            entries = []
         if entries is None:
             continue
         checked = correction.checked
@@ -359,25 +390,15 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
         velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
         t = state.datatype.name
-        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp)))
-        phase.compliance.append(
-            Op(
-                correction.origin,
-                [
-                    call(
-                        kernel("uncoupled_add_compliance", t),
-                        W,
-                        n,
-                        J,
-                        comp0,
-                        comp_buffer,
-                        len(comp),
-                        factor,
-                        scaled,
-                    )
-                ],
+        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp), body))
+        comp_args = (comp0, comp_buffer, len(comp))
+        if lagrangian is not None:
+            add = call(
+                kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled
             )
-        )
+        else:
+            add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
+        phase.compliance.append(Op(correction.origin, [add]))
         lam = planner.buffer(
             component, "lambda", np.zeros_like(state.v.initial), columns=state.v.columns, role="scratch"
         )
@@ -388,28 +409,34 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             columns=state.v.columns,
             role="scratch",
         )
-        phase.correction.append(
-            Op(
-                correction.origin,
-                [
-                    call(
-                        kernel("uncoupled_correct", t),
-                        state.x,
-                        state.v,
-                        lam,
-                        dx,
-                        J,
-                        f,
-                        state.size,
-                        comp0,
-                        comp_buffer,
-                        len(comp),
-                        position,
-                        velocity,
-                    )
-                ],
+        moved = (state.x, state.v, lam, dx)
+        if lagrangian is not None:
+            correct = call(
+                kernel("lagrangian_correct", t),
+                Env.LAGRANGIAN,
+                body,
+                *moved,
+                J,
+                f,
+                state.size,
+                *comp_args,
+                position,
+                velocity,
             )
-        )
+        else:
+            correct = call(
+                kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
+            )
+        phase.correction.append(Op(correction.origin, [correct]))
+    if phase.method == "lcp":  # LCPConstraintSolver on the contacts' rows
+        names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
+        lcp_settings = [Element(phase.settings[name]) for name in names]
+        if solver is not None and not planner.value(solver.component, "build_lcp"):
+            _lcp_unbuilt(planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), lcp_settings)
+            return
+        lcp = call("lagrangian_solve_lcp", Env.LAGRANGIAN, W, dfree, f, d, scratch, n, *lcp_settings)
+        phase.solve.append(Op(phase.solver, [call(lcp.kernel, *lcp.args, phase.report, Env.TIME)]))
+        return
     firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
     kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
     parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
@@ -437,13 +464,18 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
         )
         return
+    solve = (
+        call(kernel("lagrangian_solve", len(phase.blocks)), Env.LAGRANGIAN, _ROW_SOLVERS[phase.method])
+        if lagrangian is not None
+        else call(kernel("solve_constraints", len(phase.blocks)), _ROW_SOLVERS[phase.method])
+    )
     phase.solve.append(
         Op(
             phase.solver or phase.loop,
             [
                 call(
-                    kernel("solve_constraints", len(phase.blocks)),
-                    _ROW_SOLVERS[phase.method],
+                    (solve.kernel, solve.templates),
+                    *solve.args,
                     W,
                     dfree,
                     f,
@@ -464,10 +496,106 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     )
 
 
+def _lcp_unbuilt(
+    planner: Planner,
+    phase: ConstraintPhase,
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
+    problem: tuple,
+    settings: list[Element],
+) -> None:
+    """LCPConstraintSolver with build_lcp=0 and mu=0 (lcp_gaussseidel_unbuilt): no W built (the
+    compliance calls are dropped), the 1x1 blocks and displacements through the corrections."""
+    phase.compliance.clear()
+    types = {t for t, *_ in items}
+    solver = getattr(planner, "constraint_solver", None)
+    if len(types) != 1:
+        if solver is not None:
+            planner.unsupported(solver, "unbuilt, it is compiled for corrections of one DataType")
+        return
+    (t,) = types
+    aggregates = []
+    for _, J, state, comp0, comp, size, body in items:
+        zeros = np.zeros_like(state.v.initial)
+        force = planner.buffer(
+            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
+        )
+        disp = planner.buffer(
+            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
+        )
+        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)))
+    solve = call(
+        kernel("lagrangian_solve_lcp_unbuilt", t),
+        Env.LAGRANGIAN,
+        *problem,
+        *settings,
+        phase.report,
+        Env.TIME,
+        *aggregates,
+    )
+    phase.solve.append(Op(phase.solver, [solve]))
+
+
+def _lcp_refusal(
+    planner: Planner, solver: CheckedComponent, phase: ConstraintPhase, collision: Collision
+) -> str:
+    """Why an LCPConstraintSolver on Lagrangian contacts is not compiled ("" when it is)."""
+    value = planner.value
+    if collision.static_rows:
+        return "LCPConstraintSolver on rows other than contacts' is not compiled yet"
+    mu = float(value(solver.component, "mu"))
+    if not value(solver.component, "build_lcp"):
+        if (mu > 0) != (collision.mu > 0):
+            return "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 or both > 0"
+        return ""
+    if mu <= 0 or collision.mu <= 0:
+        return "LCPConstraintSolver built is compiled for contacts of three rows solved with mu > 0"
+    return ""
+
+
+def _lagrangian_collision(planner: Planner) -> Collision | None:
+    """The scene's FrictionContactConstraint contacts (their rows join the phase), if compiled."""
+    return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
+
+
+def _contact_bodies(
+    planner: Planner, phase: ConstraintPhase, collision: Collision, free_x: dict[str, Buffer]
+) -> set[int]:
+    """Where each collision model's contact rows land: the correction of its own state, or of
+    the Rigid3d state its RigidMapping follows (the rows carried through applyJT), or none (a
+    static obstacle); with the free positions the violation reads. Returns the bodies reached."""
+    index = {id(c.state): k for k, c in enumerate(phase.corrections)}
+    reached: set[int] = set()
+    for model in collision.models:
+        state = model.state
+        if not state.mapped:
+            body = index.get(id(state), -1)
+            collision.bodies.append((body, state.x, None, None))
+            if body >= 0:
+                reached.add(body)
+            continue
+        mapping = _mapping_of_state(planner, state)
+        body = index.get(id(mapping.parent), -1) if mapping is not None else -1
+        if mapping is None or not _rigidly_mapped(planner, state) or state.ident not in free_x:
+            planner.unsupported(
+                planner.checked.of(state.component),
+                "Lagrangian contact on a collision state mapped other than by one RigidMapping is not "
+                "compiled yet",
+            )
+            collision.bodies.append((-1, state.x, None, None))
+            continue
+        frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
+        assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
+        collision.bodies.append((body, free_x[state.ident], frames, offsets))
+        if body >= 0:
+            reached.add(body)
+    return reached
+
+
 def _unbuilt_solve(
     planner: Planner,
     phase: ConstraintPhase,
-    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int]],
+    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
     problem: tuple,
     blocks: tuple,
 ) -> None:
@@ -486,8 +614,9 @@ def _unbuilt_solve(
             )
         return
     (t,) = types
+    lagrangian = _lagrangian_collision(planner) is not None
     aggregates = []
-    for _, J, state, comp0, comp, size in items:
+    for _, J, state, comp0, comp, size, body in items:
         zeros = np.zeros_like(state.v.initial)
         force = planner.buffer(
             state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
@@ -495,31 +624,19 @@ def _unbuilt_solve(
         disp = planner.buffer(
             state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
         )
-        aggregates.append(
-            Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
-        )
+        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
+        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)) if lagrangian else item)
     settings = [
         Element(phase.settings[name])
         for name in ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified")
     ]
     assert phase.kept is not None
-    phase.solve.append(
-        Op(
-            phase.solver,
-            [
-                call(
-                    kernel("solve_unbuilt", t, len(phase.blocks)),
-                    *problem,
-                    *blocks,
-                    phase.kept,
-                    *settings,
-                    phase.report,
-                    Env.TIME,
-                    *aggregates,
-                )
-            ],
-        )
-    )
+    arguments = (*problem, *blocks, phase.kept, *settings, phase.report, Env.TIME, *aggregates)
+    if lagrangian:
+        solve = call(kernel("lagrangian_solve_unbuilt", t, len(phase.blocks)), Env.LAGRANGIAN, *arguments)
+    else:
+        solve = call(kernel("solve_unbuilt", t, len(phase.blocks)), *arguments)
+    phase.solve.append(Op(phase.solver, [solve]))
 
 
 def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
@@ -545,13 +662,15 @@ def _mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
     return None
 
 
-def _mapped_free_motion(planner: Planner, phase: ConstraintPhase) -> dict[str, Buffer]:
+def _mapped_free_motion(
+    planner: Planner, phase: ConstraintPhase, also: set[str] | None = None
+) -> dict[str, Buffer]:
     """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
     the parent (propagateDx, with the mapping's rotated points of the last apply), then
     x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
     free: dict[str, Buffer] = {}
     for state in planner.states.values():
-        if not state.mapped or state.ident not in phase.entries:
+        if not state.mapped or (state.ident not in phase.entries and state.ident not in (also or set())):
             continue
         mapping = _mapping_of_state(planner, state)
         if mapping is None:
@@ -727,7 +846,7 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
                 "writes its free motion back, so it does not move",
                 "add an UncoupledConstraintCorrection or a LinearSolverConstraintCorrection next to it",
             )
-    if phase.capacity:
+    if phase.capacity or _lagrangian_collision(planner) is not None:
         planner.constraint_groups = groups  # type: ignore[attr-defined]
         _phase_with_rows(planner, phase)
     return phase

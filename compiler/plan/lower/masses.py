@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
@@ -46,6 +47,26 @@ def lower_uniform_mass(planner: Planner, checked: CheckedComponent, owner: dict[
         values = np.asarray(vertex if vertex is not None else [1.0], dtype=float).ravel()
         mass = values[0] if total is None else float(total) / max(state.size, 1)
         inertia = values[2:11].reshape(3, 3) if values.size >= 11 else np.eye(3)
+        from sofac.front import parse
+
+        given = planner.value(component, "filename")
+        rigid_file = (
+            parse.resolve_data_file(str(given), Path(component.loc.file).parent, planner.checked.scene)
+            if given and str(given) != "unused"
+            else None
+        )
+        if given and str(given) != "unused" and rigid_file is None:
+            planner.unsupported(checked, f"its rigid file {given!r} is not found")
+            return
+        if rigid_file is not None:
+            read = _rigid_file(rigid_file)
+            if isinstance(read, str):
+                planner.unsupported(checked, read)
+                return
+            if "inertia" in read:
+                inertia = read["inertia"]
+            if "mass" in read:  # the file's vertexMass wins over totalMass (SOFA unsets it)
+                mass = float(read["mass"])
         data = np.concatenate([[mass], (inertia * mass).ravel()])
         stride = 10
     elif datatype.rigid:
@@ -61,6 +82,40 @@ def lower_uniform_mass(planner: Planner, checked: CheckedComponent, owner: dict[
         data, stride = np.array([mass]), 1
     buffer = planner.buffer(component, "vertexMass", data, columns=stride, role="param")
     _add_mass(planner, checked, state, group, buffer, 0)
+
+
+def _rigid_file(path: Path) -> dict[str, Any] | str:
+    """UniformMass<Rigid3d>::loadRigidMass: the first line skipped, then keywords: inrt (the 3x3
+    inertia), vertexMass, and others read and unused here (volm, center/cntr, frme, grav, visc,
+    stck, step, prec, # comments)."""
+    try:
+        lines = path.read_text(errors="replace").splitlines()[1:]
+    except OSError as error:
+        return f"its rigid file cannot be read ({error.strerror})"
+    words: list[str] = []
+    for line in lines:
+        words += line.split() if not line.lstrip().startswith("#") else []
+    counts = {"inrt": 9, "vertexMass": 1, "volm": 1, "center": 3, "cntr": 3, "frme": 4, "grav": 3}
+    counts.update({"visc": 1, "stck": 1, "step": 1, "prec": 1})
+    found: dict[str, Any] = {}
+    k = 0
+    while k < len(words):
+        word = words[k]
+        n = counts.get(word)
+        if n is None:
+            return f"its rigid file {path.name} has the keyword {word!r}, which sofac does not read"
+        try:
+            numbers = [float(w) for w in words[k + 1 : k + 1 + n]]
+        except ValueError:
+            return f"its rigid file {path.name} has a malformed {word!r}"
+        if len(numbers) != n:
+            return f"its rigid file {path.name} ends inside {word!r}"
+        if word == "inrt":
+            found["inertia"] = np.array(numbers).reshape(3, 3)
+        elif word == "vertexMass":
+            found["mass"] = numbers[0]
+        k += 1 + n
+    return found
 
 
 def lower_diagonal_mass(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
