@@ -342,6 +342,7 @@ class _Checker:
             try:
                 value = field_spec.type.parse(attribute.value)
             except FieldValueError as error:
+                # (a warning: SOFA goes on with the default, which the field keeps)
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 continue
             if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
