@@ -346,6 +346,7 @@ class _Checker:
                 self.diags.add("W233", attribute.loc, f"{owner}: {name}: {read}", read.hint)
                 value = read.value
             except FieldValueError as error:
+                # (a warning: SOFA goes on with the default, which the field keeps)
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 continue
             if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:

@@ -195,6 +195,44 @@ class Real(FieldType):
         return float(values[0])
 
 
+# What strtof / strtol accept in full: leading white space, then one decimal number, nothing after.
+_STRTOF = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_STRTOL = re.compile(r"\s*[+-]?\d+")
+
+
+@dataclass(frozen=True)
+class AttributeNumber(FieldType):
+    """An attribute a component's parse() reads with BaseObjectDescription::getAttributeAsFloat
+    (strtof: a single-precision float) or getAttributeAsInt (strtol), not a Data: the whole text
+    must be one number, else SOFA logs that it cannot parse it and uses the default. So a value
+    that does not parse is a warning (W225) and the field keeps its default. ``flag``: an integer
+    read as ``!= 0`` (VisualModelImpl's normals, castshadow)."""
+
+    kind = "real"
+    integer: bool = False
+    flag: bool = False
+
+    def parse(self, text: str) -> Any:
+        pattern = _STRTOL if self.integer or self.flag else _STRTOF
+        if pattern.fullmatch(text) is None:
+            what, reader = ("an integer", "Int") if pattern is _STRTOL else ("one number", "Float")
+            raise FieldValueError(
+                f"SOFA reads this attribute as {what} (getAttributeAs{reader}), "
+                f"cannot read {text.strip()[:40]!r} and uses its default",
+                code="W225",
+                hint="write one number, or remove the attribute",
+            )
+        if self.integer or self.flag:
+            number = int(text)
+            return number != 0 if self.flag else number
+        value = float(np.float32(float(text)))
+        if not math.isfinite(value):
+            raise FieldValueError(
+                f"{text.strip()} is not finite in single precision (SOFA reads it as a float)", code="E206"
+            )
+        return value
+
+
 @dataclass(frozen=True)
 class Int(FieldType):
     kind = "int"
