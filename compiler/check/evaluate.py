@@ -65,6 +65,7 @@ def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
         translation=np.asarray(ctx.value("translation"), dtype=float),
         rotation_deg=np.asarray(ctx.value("rotation"), dtype=float),
         scale=scale,
+        loader=True,
     )
 
 

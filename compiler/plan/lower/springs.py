@@ -373,7 +373,10 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
                 if (i, j) in seen or i == j:
                     continue
                 seen.add((i, j))
-                length = float(np.linalg.norm(rest[j, :3] - rest[i, :3]))
+                # Vec3::norm() term by term: np.linalg.norm goes through BLAS, whose kernel (and
+                # its use of FMA) depends on the processor
+                dx, dy, dz = (float(rest[j, k]) - float(rest[i, k]) for k in range(3))
+                length = math.sqrt(dx * dx + dy * dy + dz * dz)
                 if length > 1e-12:  # SOFA scales by the rest length (per unit length stiffness)
                     rows.append((i, j, ks / length, kd / length, length))
     springs = np.array(rows, dtype=float).reshape(-1, 5)
