@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
+from sofac.front.meshes import rotate_by_quaternion
 from sofac.front.model import Component, Node
 from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.plan.ir import (
@@ -523,16 +524,9 @@ def _to_local(frames: np.ndarray, frame_of: np.ndarray, points: np.ndarray) -> n
     local = np.empty_like(points)
     for k, (point, c) in enumerate(zip(points, frame_of, strict=True)):
         frame = frames[c]
-        if frames.shape[1] == 7:
-            x, y, z, w = frame[3:7]
-            rotation = np.array(
-                [
-                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-                ]
-            )
-            local[k] = rotation.T @ (point - frame[:3])
+        if frames.shape[1] == 7:  # Quat::inverseRotate: the rotation by (-x, -y, -z, w)
+            inverse = (-frame[3], -frame[4], -frame[5], frame[6])
+            local[k] = rotate_by_quaternion((point - frame[:3]).reshape(1, 3), inverse)[0]
         else:
             c_, s_ = np.cos(frame[2]), np.sin(frame[2])
             d = point - frame[:2]
