@@ -119,10 +119,13 @@ def plan_of(path: Path) -> Plan:
     return plan_scene(checked)
 
 
-def test_the_effects_list_the_contact_rows(tmp_path: Path) -> None:
-    from sofac.plan.report import format_effects
+def test_the_effects_and_schedule_list_the_contact_rows(tmp_path: Path) -> None:
+    from sofac.plan.report import format_effects, format_schedule
 
-    text = format_effects(plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4)))
+    plan = plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4))
+    schedule = format_schedule(plan)
+    assert "constraint rows: 384 (at most: 0 of the scene's constraints, then up to 128 contacts" in schedule
+    text = format_effects(plan)
     assert "local_min_distance::triangle_point, FrictionContactConstraint mu=0.4: 3 constraint row(s)" in text
 
 
