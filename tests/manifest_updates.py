@@ -14,6 +14,8 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
         "LinearMovementProjectiveConstraint"
     ),
+    # Lagrangian contact (issue 17): LocalMinDistance and FrictionContactConstraint
+    "Component/AnimationLoop/FreeMotionAnimationLoop.scn": "LocalMinDistance",
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others
