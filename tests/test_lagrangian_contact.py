@@ -137,6 +137,22 @@ def test_a_negative_mu_is_an_error_with_its_line(tmp_path: Path) -> None:
     assert "mu=-0.5 must be >= 0" in diagnostic.message
 
 
+def test_a_constraint_below_the_root_with_contacts_is_refused(tmp_path: Path) -> None:
+    path = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
+    bilateral = (
+        '        <BilateralLagrangianConstraint object1="@/Floor/dofs" object2="@/Particle/dofs" '
+        'first_point="0" second_point="0"/>\n'
+    )
+    text = path.read_text().replace(
+        "        <PointCollisionModel />\n", "        <PointCollisionModel />\n" + bilateral
+    )
+    path.write_text(text)
+    with pytest.raises(SceneError) as error:
+        plan_of(path)
+    (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E222"]
+    assert diagnostic.loc.line == 17 and "move it to the root" in diagnostic.message
+
+
 def test_penalty_contact_under_free_motion_keeps_the_contact_guard(tmp_path: Path) -> None:
     path = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
     path.write_text(path.read_text().replace("FrictionContactConstraint", "PenalityContactForceField"))
