@@ -495,7 +495,7 @@ inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, doubl
     report[0] += 1.0;
     report[1] = double(result.iterations);
     report[2] = result.error;
-    if (!result.converged) {
+    if (n > 0 && !result.converged) {  // (no row, no contact this step: nothing to converge)
         report[3] += 1.0;
         report[4] = time;
         report[5] = result.error;
@@ -538,7 +538,7 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
     report[0] += 1.0;
     report[1] = double(result.iterations);
     report[2] = result.error;
-    if (!result.converged) {
+    if (n > 0 && !result.converged) {
         report[3] += 1.0;
         report[4] = time;
         report[5] = result.error;
