@@ -460,6 +460,20 @@ CASES = [
     ),
     Case("unknown-plugin", "W224", dyn('    <RequiredPlugin pluginName="NoSuchPlugin"/>\n'), 6),
     Case("child-node-dt", "W225", dyn('    <Node name="c" dt="0.5">\n    </Node>\n'), 6, "dt"),
+    Case(
+        "integer-written-as-a-real",
+        "W233",
+        """\
+<Node name="root">
+    <EulerImplicitSolver/>
+    <CGLinearSolver iterations="1e4" tolerance="1e-9" threshold="1e-9"/>
+    <MechanicalObject position="0 0 0"/>
+</Node>
+""",
+        3,
+        "iterations",
+        hint="write 10000",
+    ),
     Case("loader-without-file", "E226", dyn('    <MeshOBJLoader name="loader"/>\n'), 6),
     Case(
         "unused-loader-missing-file",

@@ -48,3 +48,72 @@ def test_without_triangles_the_edges_are_the_grid_lines(tmp_path: Path) -> None:
     y_lines = [[0, 2], [1, 3], [4, 6], [5, 7]]
     z_lines = [[0, 4], [1, 5], [2, 6], [3, 7]]
     assert cells["edges"] == x_lines + y_lines + z_lines
+
+
+GRID_SCENE = """\
+<Node name="root" gravity="0 -9.81 0" dt="0.01"><DefaultAnimationLoop/>
+  <Node name="a"><EulerImplicitSolver rayleighStiffness="0" rayleighMass="0"/>
+    <CGLinearSolver iterations="100" tolerance="1e-20" threshold="1e-30"/>
+    <RegularGridTopology name="grid" n="3 2 2" min="0 0 0" max="2 1 1"/>
+    <MechanicalObject name="regular"/>
+    <UniformMass totalMass="1"/>
+    <FixedProjectiveConstraint indices="0 3 6 9"/>
+    <HexahedronFEMForceField youngModulus="1000" poissonRatio="0.3"/>
+  </Node>
+  <Node name="b"><EulerImplicitSolver rayleighStiffness="0" rayleighMass="0"/>
+    <CGLinearSolver iterations="100" tolerance="1e-20" threshold="1e-30"/>
+    <GridTopology name="grid" n="3 2 2"/>
+    <MechanicalObject name="plain" position="{points}"/>
+    <UniformMass totalMass="1"/>
+    <FixedProjectiveConstraint indices="0 3 6 9"/>
+    <HexahedronFEMForceField youngModulus="1000" poissonRatio="0.3"/>
+  </Node>
+  <Node name="c">
+    <GridTopology name="short" n="2 2 1" position="1 2 3"/>
+    <MechanicalObject name="padded"/>
+  </Node>
+</Node>
+"""
+LATTICE = [(x, y, z) for z in range(2) for y in range(2) for x in range(3)]
+
+
+def test_grid_topology_gives_regular_grid_cells_to_the_states_points(tmp_path: Path) -> None:
+    """GridTopology has no geometry: with the MechanicalObject's points on the same lattice, the
+    cells (GridUpdate's) and so the whole run are RegularGridTopology's."""
+    from sofac.pipeline import compile_scene
+
+    path = tmp_path / "grids.scn"
+    path.write_text(GRID_SCENE.format(points="  ".join(f"{x} {y} {z}" for x, y, z in LATTICE)))
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    regular, plain = (
+        next(c for c in checked.scene.root.components() if c.type_name == kind)
+        for kind in ("RegularGridTopology", "GridTopology")
+    )
+    for kind in ("hexahedra", "quads", "triangles", "edges"):
+        assert np.array_equal(checked.value(regular, kind), checked.value(plain, kind)), kind
+    simulation = compile_scene(path).instantiate()
+    simulation.step(5)
+    assert np.array_equal(simulation["regular"].position, simulation["plain"].position)
+    assert simulation["plain"].position[2, 1] < 0  # it sagged
+
+
+def test_grid_topology_points_are_its_position_list_resized(tmp_path: Path) -> None:
+    """SOFA's GridTopology::getPoint reads its own position list: nx ny nz points, 0 0 0 past the
+    end of the list (and every point at the origin without one)."""
+    path = tmp_path / "grids.scn"
+    path.write_text(GRID_SCENE.format(points="  ".join(f"{x} {y} {z}" for x, y, z in LATTICE)))
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    padded = next(c for c in checked.scene.root.components() if c.label == "padded")
+    assert checked.positions(padded).tolist() == [[1, 2, 3], [0, 0, 0], [0, 0, 0], [0, 0, 0]]
+
+
+def test_grid_topology_resolution_below_one_is_an_error(tmp_path: Path) -> None:
+    path = tmp_path / "bad.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/>\n  <GridTopology n="0 2 2"/>\n'
+        "  <MechanicalObject/>\n</Node>\n"
+    )
+    _, diags = check_file(path)
+    assert [(d.code, d.loc.line) for d in diags.errors] == [("E207", 2)]

@@ -4,6 +4,7 @@ input, and the DiagonalMass of Demos/liver.scn."""
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -293,3 +294,28 @@ def test_liver_diagonal_mass(corpus_dir: Path) -> None:
     data = mesh_matrix_mass(mesh.positions, tetrahedra=mesh.tetrahedra, mass_density=1.0)
     assert data.total_mass == pytest.approx(volumes.sum(), rel=1e-13)
     assert data.lumped_vertex_mass == pytest.approx(masses, rel=1e-12)
+
+
+@pytest.mark.parametrize(("numbers", "warned"), [(11, False), (12, True), (14, True)])
+def test_a_rigid_mass_with_trailing_numbers_reads_the_first_eleven_as_sofa(
+    tmp_path: Path, numbers: int, warned: bool
+) -> None:
+    """RigidMass's operator>> reads m, volume and the 3x3 inertia; Data::read ignores what follows
+    (SOFA's BilateralLagrangianConstraint_Rigid.scn writes 12 numbers)."""
+    from sofac.pipeline import check_file, plan_file
+
+    mass = [2.0, 1.0, 0.01, 0, 0, 0, 0.1, 0, 0, 0, 0.1, 0, 7, 7][:numbers]
+    scene = tmp_path / "rigid.scn"
+    scene.write_text(
+        '<Node name="root" dt="0.01"><DefaultAnimationLoop/><EulerImplicitSolver/>\n'
+        '<CGLinearSolver iterations="25" tolerance="1e-9" threshold="1e-9"/>\n'
+        '<MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1"/>\n'
+        f'<UniformMass name="mass" vertexMass="{" ".join(str(x) for x in mass)}"/>\n</Node>\n'
+    )
+    _, diagnostics = check_file(scene)
+    found = [(d.code, d.loc.line) for d in diagnostics.sorted()]
+    assert found == ([("W225", 4)] if warned else [])
+    with pytest.warns() if warned else contextlib.nullcontext():
+        buffers = {b.key: b.initial for b in plan_file(scene).buffers}
+    # the mass, then m times the inertia matrix
+    assert buffers["/mass.vertexMass"].tolist() == [2.0, 0.02, 0, 0, 0, 0.2, 0, 0, 0, 0.2]

@@ -1047,3 +1047,45 @@ def test_mutated_corpus_files_fail_cleanly(tmp_path: Path) -> None:
             with contextlib.suppress(MeshError):
                 reader(path)
         assert time.perf_counter() - start_time < 2.0, (source.name, op)
+
+
+def _sofa_euler_quaternion(degrees: tuple[float, float, float]) -> tuple[float, float, float, float]:
+    """Quat::createQuaterFromEuler(rotation * M_PI / 180.0), ZYX, in plain double arithmetic."""
+    a, b, c = (d * math.pi / 180.0 / 2 for d in degrees)
+    c1, c2, c3, s1, s2, s3 = math.cos(a), math.cos(b), math.cos(c), math.sin(a), math.sin(b), math.sin(c)
+    return (
+        s1 * c2 * c3 - c1 * s2 * s3,
+        c1 * s2 * c3 + s1 * c2 * s3,
+        c1 * c2 * s3 - s1 * s2 * c3,
+        c1 * c2 * c3 + s1 * s2 * s3,
+    )
+
+
+def test_transforms_are_sofas_arithmetic_operation_for_operation() -> None:
+    """Loaders: Matrix4::transform of T R S (rows summed left to right, then t). States:
+    applyScale, Quat::rotate (v + w t + q x t, t = 2 q x v), applyTranslation. No BLAS product,
+    whose kernel depends on the processor."""
+    rng = np.random.default_rng(7)
+    points = rng.uniform(-3, 3, (50, 3))
+    rotation, scale, translation = (30.0, -45.0, 110.0), (1.5, 0.7, 2.0), (0.1, -2.0, 3.3)
+    x, y, z, w = _sofa_euler_quaternion(rotation)
+    rows = [
+        (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (z * x + y * w)),
+        (2 * (x * y + z * w), 1 - 2 * (z * z + x * x), 2 * (y * z - x * w)),
+        (2 * (z * x - y * w), 2 * (y * z + x * w), 1 - 2 * (y * y + x * x)),
+    ]
+    loader = meshes.apply_transform(points, translation, rotation, scale, loader=True)
+    state = meshes.apply_transform(points, translation, rotation, scale)
+
+    def cross(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float, float]:
+        return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+    for p, got_loader, got_state in zip(points.tolist(), loader, state, strict=True):
+        m = [[rows[i][j] * scale[j] for j in range(3)] for i in range(3)]
+        want = [m[i][0] * p[0] + m[i][1] * p[1] + m[i][2] * p[2] + translation[i] for i in range(3)]
+        assert got_loader.tolist() == want
+        v = tuple(p[j] * scale[j] for j in range(3))
+        t = tuple(2 * c for c in cross((x, y, z), v))
+        u = cross((x, y, z), t)
+        want = [v[i] + w * t[i] + u[i] + translation[i] for i in range(3)]
+        assert got_state.tolist() == want

@@ -177,3 +177,34 @@ def test_a_rest_position_no_call_reads_is_not_allocated() -> None:
     assert "/oscillator/dofs.rest_position" not in oscillator  # springs and a mass: nobody reads it
     liver = {b.key for b in plan_file(REPO / "scenes" / "liver.scn").buffers}
     assert "/Liver/dofs.rest_position" in liver  # TetrahedronFEMForceField's init reads it
+
+
+@pytest.mark.parametrize(
+    ("force_field", "young", "poisson"),
+    [("TetrahedronFEMForceField", 5000.0, 0.45), ("QuadBendingFEMForceField", 1000.0, 0.45)],
+)
+def test_an_empty_material_list_takes_the_registry_default(
+    tmp_path: Path, force_field: str, young: float, poisson: float
+) -> None:
+    """SOFA's getVecRealInElement falls back on the Data's default; the plan fills it in, so no
+    kernel carries a default of its own."""
+    from sofac.pipeline import plan_file
+    from sofac.registry import lookup
+
+    found = lookup(force_field)
+    assert found is not None and found.spec.field("youngModulus").default == (young,)
+    cells = 'tetrahedra="0 1 2 3"' if force_field.startswith("Tetra") else 'quads="0 1 3 2"'
+    scene = tmp_path / "material.scn"
+    scene.write_text(
+        f"""<Node name="root" dt="0.01"><DefaultAnimationLoop/>
+  <EulerImplicitSolver/><CGLinearSolver iterations="10" tolerance="1e-9" threshold="1e-9"/>
+  <MechanicalObject name="dofs" template="Vec3d" position="0 0 0  1 0 0  0 1 0  1 1 0.5"/>
+  <MeshTopology {cells}/>
+  <UniformMass totalMass="1"/>
+  <{force_field} name="ff" youngModulus="" poissonRatio=""/>
+</Node>
+"""
+    )
+    values = {b.key: b.initial for b in plan_file(scene).buffers}
+    assert values["/ff.youngModulus"].tolist() == [young]
+    assert values["/ff.poissonRatio"].tolist() == [poisson]

@@ -33,6 +33,9 @@ SCENES = [
     # Three dragons voxelised by SparseGridTopology (SOFA's points, in SOFA's order), MeshSpringForceField
     # on its hexahedra, barycentric sphere surfaces that never touch.
     "Component/Topology/Container/Grid/SparseGridTopology.scn",
+    # FreeMotionAnimationLoop with no contact in the compared steps: EulerImplicit + PCG preconditioned
+    # by SparseLDLSolver, Tetra2Triangle surface (the guard stops it only at step 46, not compared).
+    "Demos/fallingBeamLagrangianCollision.scn",
 ]
 
 
@@ -66,3 +69,15 @@ def test_liver_matches_sofa_bit_for_bit(shared_dir: Path) -> None:
         velocity = np.stack([block["vx"], block["vy"], block["vz"]], axis=1)
         assert np.array_equal(sim[path].position, position), step
         assert np.array_equal(sim[path].velocity, velocity), step
+
+
+def test_falling_beam_stops_at_its_first_contact(shared_dir: Path) -> None:
+    """fallingBeamLagrangianCollision.scn: its 45 compared steps run (free motion only: no contact
+    can be detected), then the contact guard stops it before step 46, whose start has the beam's
+    surface within NewProximityIntersection's alarm distance of the floor."""
+    sim = sofac.load(shared_dir / "corpus" / "sofa" / "Demos" / "fallingBeamLagrangianCollision.scn")
+    sim.step(45)
+    bottom = float(np.asarray(sim["/FEM/mstate"].position)[:, 2].min())
+    assert -1.0 < bottom < -0.999  # 0.4 mm above the floor's top (z = -1)
+    with pytest.raises(sofac.ContactNotCompiled, match=r"step 46 .*Torus8CMT.*FloorCM"):
+        sim.step(1)

@@ -25,7 +25,17 @@ from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
-from sofac.registry.fields import Coords, FieldValueError, Link, LinkList, MassValue, SofaData, Springs
+from sofac.registry.fields import (
+    Coords,
+    FieldValueError,
+    JointSprings,
+    Link,
+    LinkList,
+    MassValue,
+    ReadDifferently,
+    SofaData,
+    Springs,
+)
 
 # Attributes SOFA handles itself rather than as Data of the component.
 _RESERVED = frozenset({"template", "src", "type"})
@@ -332,7 +342,11 @@ class _Checker:
                 continue
             try:
                 value = field_spec.type.parse(attribute.value)
+            except ReadDifferently as read:
+                self.diags.add("W233", attribute.loc, f"{owner}: {name}: {read}", read.hint)
+                value = read.value
             except FieldValueError as error:
+                # (a warning: SOFA goes on with the default, which the field keeps)
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 continue
             if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
@@ -381,7 +395,7 @@ class _Checker:
             self.diags.add(
                 "W225",
                 checked.component.attribute_loc("src"),
-                f"{checked.spec.name} {checked.component.label!r}: src=\"@\" names no object: "
+                f'{checked.spec.name} {checked.component.label!r}: src="@" names no object: '
                 "SOFA warns that it does nothing",
                 'remove src="@", or name the loader: src="@loader"',
             )
@@ -679,7 +693,7 @@ class _Checker:
         field_spec = checked.spec.field(name)
         if field_spec is not None and isinstance(field_spec.type, SofaData):
             return None  # a Data known only from SOFA's source: sofac cannot say what it holds
-        if name in checked.fields:
+        if name in checked.fields and (raw or name not in checked.spec.rewrites):
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
             name = "position"  # both start as a copy of the transformed positions
@@ -783,6 +797,11 @@ class _Checker:
         datatype = checked.datatype or DATATYPES["Vec3d"]
         value = self.value(checked, "position", raw=True)
         velocity = self.value(checked, "velocity", raw=True)
+        # MechanicalObject::init: rest positions longer than the positions (one default coordinate
+        # when none is given) are copied into them ("X0 set but not X").
+        rest = self._written_rest_positions(checked)
+        if rest is not None and len(rest) > max(np.size(value) // datatype.coord_size, 1):
+            return rest
         # MechanicalObject::init also takes its topology's points when it holds one position and at
         # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
         # size > 1 resized it at parse time.
@@ -833,6 +852,24 @@ class _Checker:
             return None
         return value.reshape(-1, datatype.coord_size)
 
+    def _written_rest_positions(self, checked: CheckedComponent) -> np.ndarray | None:
+        """A state's rest_position as the scene writes or links it (None when it does neither)."""
+        datatype = checked.datatype or DATATYPES["Vec3d"]
+        if "rest_position" in checked.fields:
+            value = checked.fields["rest_position"]
+        elif "rest_position" in checked.data_links:
+            path, _ = checked.data_links["rest_position"]
+            target = links.resolve(path, checked.component)
+            source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
+            if source is None or source.spec is None:
+                return None
+            value = self.value(source, path.data or "rest_position")
+        else:
+            return None
+        if value is None or not np.size(value) or np.size(value) % datatype.coord_size:
+            return None
+        return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
+
     def _default_single(self, checked: CheckedComponent) -> bool:
         """A state nothing gives positions (none written, linked or from src; no topology in its
         node, no mapping writing it) keeps the one coordinate SOFA's MechanicalObject starts with."""
@@ -871,9 +908,20 @@ class _Checker:
         datatype = checked.datatype
         if datatype is None:
             return
-        for name, value in checked.fields.items():
+        for name, value in list(checked.fields.items()):
             field_spec = checked.spec.field(name)
             assert field_spec is not None
+            if isinstance(field_spec.type, MassValue) and isinstance(value, np.ndarray):
+                read = MassValue.read_by_sofa(value, datatype)
+                if read < value.size:
+                    self.diags.add(
+                        "W225",
+                        checked.component.attribute_loc(self._attribute_name(checked, name)),
+                        f"{checked.spec.name} {checked.component.label!r}: {name}: {value.size} numbers; "
+                        f"SOFA reads the first {read} and ignores the rest",
+                        f"remove the last {value.size - read}",
+                    )
+                    value = checked.fields[name] = value[:read]
             problem = field_spec.type.check_count(value, datatype)
             if problem and not (
                 isinstance(field_spec.type, Coords)
@@ -1182,7 +1230,7 @@ class _Checker:
         spec = checked.spec
         assert spec is not None
         for field_spec in spec.fields:
-            if field_spec.indexes is None and not isinstance(field_spec.type, Springs):
+            if field_spec.indexes is None and not isinstance(field_spec.type, (Springs, JointSprings)):
                 continue
             if field_spec.name not in checked.fields and field_spec.name not in checked.data_links:
                 continue
@@ -1194,8 +1242,8 @@ class _Checker:
             attribute = self._attribute_name(checked, field_spec.name)
             loc = checked.component.attribute_loc(attribute)
             owner = f"{spec.name} {checked.component.label!r}"
-            if isinstance(field_spec.type, Springs):
-                springs = np.asarray(value).reshape(-1, 5)
+            if isinstance(field_spec.type, (Springs, JointSprings)):
+                springs = field_spec.type.ends(value)
                 for column, role in ((0, "object1"), (1, "object2")):
                     state = self._indexed_state(checked, role)
                     self._report_range(
@@ -1379,6 +1427,10 @@ class _EvalContext:
 
     def value(self, name: str) -> Any:
         return self.checker.value(self.checked, name)
+
+    def given(self, name: str) -> Any:
+        """The value as the scene gives it, before the evaluator rewrites it (spec.rewrites)."""
+        return self.checker.value(self.checked, name, raw=True)
 
     def is_set(self, name: str) -> bool:
         return name in self.checked.fields or name in self.checked.data_links

@@ -39,6 +39,8 @@ class Context(Protocol):
 
     def value(self, name: str) -> Any: ...
 
+    def given(self, name: str) -> Any: ...
+
     def is_set(self, name: str) -> bool: ...
 
     def file(self, name: str) -> Path | None: ...
@@ -63,6 +65,7 @@ def _transform(ctx: Context, points: np.ndarray) -> np.ndarray:
         translation=np.asarray(ctx.value("translation"), dtype=float),
         rotation_deg=np.asarray(ctx.value("rotation"), dtype=float),
         scale=scale,
+        loader=True,
     )
 
 
@@ -142,16 +145,48 @@ def _numbers(ctx: Context, name: str, count: int, *, integer: bool = False) -> n
     return numbers
 
 
-def grid(ctx: Context) -> Outputs:
-    """RegularGridTopology / GridTopology points: index = x + nx (y + ny z)."""
-    legacy_counts = ("nx", "ny", "nz")
-    if any(ctx.is_set(name) for name in legacy_counts):
+_LEGACY_COUNTS = ("nx", "ny", "nz")
+
+
+def _grid_counts(ctx: Context) -> np.ndarray:
+    """A grid's resolution: n, or the legacy nx ny nz (1 for one not given)."""
+    if any(ctx.is_set(name) for name in _LEGACY_COUNTS):
         counts = np.array(
-            [int(_numbers(ctx, n, 1, integer=True)[0]) if ctx.is_set(n) else 1 for n in legacy_counts],
+            [int(_numbers(ctx, n, 1, integer=True)[0]) if ctx.is_set(n) else 1 for n in _LEGACY_COUNTS],
             dtype=np.int64,
         )
     else:
         counts = np.array([int(c) for c in _numbers(ctx, "n", 3, integer=True)], dtype=np.int64)
+    if (counts < 1).any():
+        raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
+    refused = limits.too_many_points(counts.tolist())
+    if refused:
+        legacy = any(ctx.is_set(name) for name in _LEGACY_COUNTS)
+        attribute = _LEGACY_COUNTS[int(np.argmax(counts))] if legacy else "n"
+        raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
+    return counts
+
+
+def grid_topology(ctx: Context) -> Outputs:
+    """GridTopology (no geometry): GridUpdate's elements for the resolution, and its points as SOFA's
+    getPoint(i) gives them (what computePointList copies and a MechanicalObject without positions
+    reads): its own `position` list resized to nx ny nz points, 0 0 0 past its end; without
+    `position`, every point at the origin (the MechanicalObject then usually gives positions)."""
+    counts = _grid_counts(ctx)
+    cells = _grid_update(counts, {flag: ctx.value(flag) is not False for flag in _GRID_FLAGS})
+    outputs: Outputs = {"resolution": counts.astype(np.int64), **cells}
+    given = ctx.given("position")
+    flat = np.asarray(given if given is not None else [], dtype=float).ravel()
+    points = np.zeros((int(np.prod(counts)), 3))
+    known = flat[: (flat.size // 3) * 3].reshape(-1, 3)[: len(points)]
+    points[: len(known)] = known
+    outputs["position"] = points.ravel()
+    return outputs
+
+
+def grid(ctx: Context) -> Outputs:
+    """RegularGridTopology points: index = x + nx (y + ny z)."""
+    counts = _grid_counts(ctx)
     legacy_bounds = ("xmin", "ymin", "zmin", "xmax", "ymax", "zmax")
     if all(ctx.is_set(name) for name in legacy_bounds):
         # SOFA reads the legacy bounds as single-precision floats.
@@ -161,13 +196,6 @@ def grid(ctx: Context) -> Outputs:
     else:
         low = _numbers(ctx, "min", 3)
         high = _numbers(ctx, "max", 3)
-    if (counts < 1).any():
-        raise EvaluationError(f"grid resolution {counts.tolist()} must be >= 1 per axis", "n", code="E207")
-    refused = limits.too_many_points(counts.tolist())
-    if refused:
-        legacy = any(ctx.is_set(name) for name in legacy_counts)
-        attribute = legacy_counts[int(np.argmax(counts))] if legacy else "n"
-        raise EvaluationError(f"grid resolution {refused}", attribute, code="E207")
     from sofac.geometry.barycentric import RegularGrid  # SOFA's grid geometry: p0 + i dx + j dy + k dz
 
     # p0, when the scene sets it, replaces the origin setPos derives from min (SOFA's d_p0.isSet())
@@ -609,10 +637,18 @@ def _surface(ctx: Context, volume: str, corners: int, faces: Any, surface: str) 
 
 
 def tetra_to_triangle(ctx: Context) -> Outputs:
-    """Tetra2TriangleTopologicalMapping: the boundary triangles of the input tetrahedra, outward."""
-    from sofac.geometry.fem_topology import TETRA_FACES
+    """Tetra2TriangleTopologicalMapping: the input container's triangles that bound one
+    tetrahedron only, in SOFA's order (see tetrahedron_surface_triangles)."""
+    from sofac.geometry.fem_topology import tetrahedron_surface_triangles
 
-    return _surface(ctx, "tetrahedra", 4, TETRA_FACES, "triangles")
+    tetrahedra = ctx.linked("input", "tetrahedra")
+    if tetrahedra is None or not np.size(tetrahedra):
+        raise UnknownInput("the input topology's tetrahedra are not known at compile time")
+    if ctx.value("noInitialTriangles"):
+        return {"triangles": np.zeros(0, dtype=np.int64)}
+    given = ctx.linked("input", "triangles")
+    surface = tetrahedron_surface_triangles(tetrahedra, given, bool(ctx.value("flipNormals")))
+    return {"triangles": surface.reshape(-1)}
 
 
 def quad_to_triangle(ctx: Context) -> Outputs:
@@ -784,6 +820,7 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "string_mesh": string_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
+    "grid_topology": grid_topology,
     "quad_to_triangle": quad_to_triangle,
     "merge_vectors": merge_vectors,
     "cube_topology": cube_topology,

@@ -71,6 +71,7 @@ __all__ = [
     "read_mesh",
     "read_rigid",
     "read_spheres",
+    "rotate_by_quaternion",
     "transform_matrix",
 ]
 
@@ -1761,7 +1762,8 @@ def euler_to_quaternion(rotation_deg: Sequence[float] | np.ndarray) -> np.ndarra
     ``Rz(c) @ Ry(b) @ Rx(a)``. Angles are counter-clockwise (right-handed) when looking down the
     axis towards the origin.
     """
-    a, b, c = (math.radians(float(v)) / 2.0 for v in _vec3(rotation_deg, 0.0, "rotation"))
+    # SOFA's callers pass ``rotation * M_PI / 180.0`` (not math.radians' single factor pi / 180)
+    a, b, c = (float(v) * math.pi / 180.0 / 2.0 for v in _vec3(rotation_deg, 0.0, "rotation"))
     c1, c2, c3 = math.cos(a), math.cos(b), math.cos(c)
     s1, s2, s3 = math.sin(a), math.sin(b), math.sin(c)
     return np.array(
@@ -1841,12 +1843,17 @@ def apply_transform(
     translation: Sequence[float] | np.ndarray | None = None,
     rotation_deg: Sequence[float] | np.ndarray | None = None,
     scale: float | Sequence[float] | np.ndarray | None = None,
+    *,
+    loader: bool = False,
 ) -> np.ndarray:
     """Transform points as SOFA's loaders and MechanicalObject do: scale, then rotate, then translate.
 
     ``p' = translation + R @ (scale * p)`` with ``R = Rz(c) @ Ry(b) @ Rx(a)`` for
     ``rotation_deg = (a, b, c)`` in degrees (see :func:`euler_to_quaternion`): a rotation about
     the world X axis first, then world Y, then world Z. ``scale`` is per axis (or one number).
+    The arithmetic is SOFA's, operation for operation (never a BLAS product, whose kernel and use
+    of FMA depend on the processor): with ``loader``, MeshLoader's ``Matrix4::transform`` of
+    ``T R S``; otherwise MechanicalObject's applyScale, ``Quat::rotate`` and applyTranslation.
 
     ``points`` is (N, d) with d = 1, 2 or 3 (Vec1/Vec2/Vec3 states): missing coordinates are
     taken as 0 for the transformation and dropped from the result, as SOFA's
@@ -1863,11 +1870,38 @@ def apply_transform(
     s = _vec3(scale, 1.0, "scale")
     rotation = _vec3(rotation_deg, 0.0, "rotation")
     t = _vec3(translation, 0.0, "translation")
-    full *= s
-    if rotation.any():
-        full = full @ euler_to_matrix(rotation).T
+    if loader:
+        if rotation.any() or (s != 1).any():
+            # (T R S)(i, j) = R(i, j) s(j) exactly; transform sums row i left to right, then adds t(i)
+            m = euler_to_matrix(rotation) * s[None, :]
+            full = full[:, 0:1] * m[:, 0] + full[:, 1:2] * m[:, 1] + full[:, 2:3] * m[:, 2]
+    else:
+        full *= s
+        if rotation.any():
+            full = rotate_by_quaternion(full, euler_to_quaternion(rotation))
     full += t
     return np.ascontiguousarray(full[:, :width])
+
+
+def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Vec3::cross row by row, its three differences as SOFA writes them."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
+
+
+def rotate_by_quaternion(points: np.ndarray, quaternion: Sequence[float] | np.ndarray) -> np.ndarray:
+    """(N, 3) points turned by a unit quaternion (x, y, z, w) as SOFA's ``Quat::rotate``:
+    ``t = 2 (q × v)``, then ``v + w t + q × t``."""
+    q = np.asarray(quaternion, dtype=np.float64)
+    axis = np.broadcast_to(q[:3], points.shape)
+    turn = _cross_rows(axis, points) * 2
+    return points + q[3] * turn + _cross_rows(axis, turn)
 
 
 # --------------------------------------------------------------------------------------------

@@ -116,6 +116,53 @@ TETRA_FACES = ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2))
 HEXA_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
 
 
+# Topology.cpp's trianglesOrientationInTetrahedronArray: face j of a tetrahedron, opposite corner j,
+# outward for a positively oriented tetrahedron.
+TETRA_ORIENTED_FACES = ((1, 2, 3), (0, 3, 2), (1, 3, 0), (0, 2, 1))
+
+
+def tetrahedron_container_triangles(tetrahedra: np.ndarray) -> np.ndarray:
+    """The triangle array SOFA's TetrahedronSetTopologyContainer builds from its tetrahedra
+    (createTriangleSetArray): tetrahedron by tetrahedron, face by face in
+    trianglesOrientationInTetrahedronArray's order, each face turned so that its smallest index
+    comes first; a face is added when neither it nor its opposite orientation is there yet (a
+    shared face keeps the orientation of its first tetrahedron)."""
+    seen: set[tuple[int, int, int]] = set()
+    triangles: list[tuple[int, int, int]] = []
+    for tetrahedron in np.asarray(tetrahedra, dtype=np.int64).reshape(-1, 4).tolist():
+        for face in TETRA_ORIENTED_FACES:
+            v = [tetrahedron[k] for k in face]
+            while v[0] > v[1] or v[0] > v[2]:
+                v = [v[1], v[2], v[0]]
+            if (v[0], v[2], v[1]) in seen or (v[0], v[1], v[2]) in seen:
+                continue
+            seen.add((v[0], v[1], v[2]))
+            triangles.append((v[0], v[1], v[2]))
+    return np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+
+
+def tetrahedron_surface_triangles(
+    tetrahedra: np.ndarray, triangles: np.ndarray | None = None, flip: bool = False
+) -> np.ndarray:
+    """Tetra2TriangleTopologicalMapping's output (its init): the triangles of the input container's
+    triangle array (``triangles`` when the container was given some, else the array it builds from
+    its tetrahedra) that belong to one tetrahedron only, in that array's order, as (t0 t1 t2), or
+    (t0 t2 t1) with flipNormals."""
+    tetrahedra = np.asarray(tetrahedra, dtype=np.int64).reshape(-1, 4)
+    if triangles is None or not np.size(triangles):
+        array = tetrahedron_container_triangles(tetrahedra)
+    else:
+        array = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    counts: dict[tuple[int, ...], int] = {}
+    for tetrahedron in tetrahedra.tolist():
+        for face in TETRA_ORIENTED_FACES:
+            key = tuple(sorted(tetrahedron[k] for k in face))
+            counts[key] = counts.get(key, 0) + 1
+    single = np.array([counts.get(tuple(sorted(t)), 0) == 1 for t in array.tolist()], dtype=bool)
+    surface = array[single].reshape(-1, 3)
+    return surface[:, [0, 2, 1]] if flip else surface
+
+
 def boundary_faces(
     cells: np.ndarray, faces: Sequence[Sequence[int]], points: np.ndarray | None
 ) -> np.ndarray:

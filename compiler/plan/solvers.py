@@ -120,20 +120,74 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
         ),
     }
     if isinstance(preconditioner, Component) and planner.value(component, "use_precond") is not False:
-        spec = planner.checked.of(preconditioner).spec
-        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4}.get(spec.lowering if spec else "")
-        if block == 4 and not warp_is_identity(planner, planner.checked.of(preconditioner), group):
+        checked_preconditioner = planner.checked.of(preconditioner)
+        spec = checked_preconditioner.spec
+        lowering = spec.lowering if spec else ""
+        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4, "direct": 4}.get(lowering)
+        if lowering == "warp" and not warp_is_identity(planner, checked_preconditioner, group):
+            return False
+        if lowering == "direct" and not direct_preconditioner(planner, checked_preconditioner, group):
             return False
         if block is None:
             planner.unsupported(
                 planner.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
             )
             return False
+        rate = _assembling_rate(planner, linear)
+        if rate != 1 and lowering == "warp":
+            planner.unsupported(
+                linear, "a WarpPreconditioner refreshed less often than every step is not compiled yet"
+            )
+            return False
+        # PreconditionedMatrixFreeSystem's counter: it starts at assemblingRate (the first solve
+        # assembles), each solve increments it and assembles when it reaches the rate.
+        group.pcg["assemblingRate"] = planner.buffer(component, "assemblingRate", [rate], "i64")
+        group.pcg["assemblyCounter"] = planner.buffer(
+            component, "assemblyCounter", [rate], "i64", role="state"
+        )
         if block == -1:
             group.ssor_omega = planner.buffer(
                 preconditioner, "omega", [float(planner.value(preconditioner, "omega"))], role="param"
             )
         group.preconditioner, group.assembled = block, True
+    return True
+
+
+def _assembling_rate(planner: Planner, pcg: CheckedComponent) -> int:
+    """The assemblingRate of a PCG's PreconditionedMatrixFreeSystem: its `linearSystem` link, else
+    the first one in its node (SOFA's doCheckLinearSystem); 1 when SOFA creates a default one.
+    (PCGLinearSolver's own update_step is a DeprecatedData: SOFA warns and ignores it.)"""
+    system = pcg.links.get("linearSystem")
+    if not isinstance(system, Component):
+        system = next(
+            (
+                c
+                for c in pcg.component.node.objects
+                if (spec := planner.checked.of(c).spec) is not None
+                and spec.name == "PreconditionedMatrixFreeSystem"
+            ),
+            None,
+        )
+    if not isinstance(system, Component):
+        return 1
+    spec = planner.checked.of(system).spec
+    if spec is None or spec.name != "PreconditionedMatrixFreeSystem":
+        return 1
+    return max(int(planner.value(system, "assemblingRate") or 1), 1)
+
+
+def direct_preconditioner(planner: Planner, direct: CheckedComponent, group: Group) -> bool:
+    """A sparse direct solver (SparseLDLSolver...) as a PCG's preconditioner: SOFA links its linear
+    system to the PCG's PreconditionedMatrixFreeSystem, which assembles it (mfact M + bfact B +
+    kfact K, projected) when it refreshes; the solver factorises it when it is next applied
+    (the assembly invalidates its factorisation) and applies it as a solve."""
+    role = direct.spec.role if direct.spec is not None else ""
+    if role == "svd":
+        planner.unsupported(direct, "SVDLinearSolver as a PCG preconditioner is not compiled yet")
+        return False
+    if not assembles_everything(planner, direct):
+        return False
+    direct_kind(planner, direct, group)
     return True
 
 

@@ -27,6 +27,20 @@ class FieldValueError(ValueError):
         self.hint = hint
 
 
+class ReadDifferently(Exception):  # not an error: the value is used, with a warning
+    """A value SOFA's stream reads as something other than what it says (W233): ``value`` is what
+    SOFA reads, and what sofac uses."""
+
+    def __init__(self, value: Any, message: str, hint: str) -> None:
+        super().__init__(message)
+        self.value = value
+        self.hint = hint
+
+
+# An integer written as a real ("1e4", "2.5"): C++'s integer extraction stops at '.', 'e' or 'E'.
+_INTEGER_THEN_REAL = re.compile(r"\s*([+-]?\d+)([.eE])")
+
+
 def _format_real(x: float) -> str:
     return repr(float(x)) if not float(x).is_integer() or abs(x) >= 1e16 else str(int(x))
 
@@ -181,16 +195,74 @@ class Real(FieldType):
         return float(values[0])
 
 
+# What strtof / strtol accept in full: leading white space, then one decimal number, nothing after.
+_STRTOF = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
+_STRTOL = re.compile(r"\s*[+-]?\d+")
+
+
+@dataclass(frozen=True)
+class AttributeNumber(FieldType):
+    """An attribute a component's parse() reads with BaseObjectDescription::getAttributeAsFloat
+    (strtof: a single-precision float) or getAttributeAsInt (strtol), not a Data: the whole text
+    must be one number, else SOFA logs that it cannot parse it and uses the default. So a value
+    that does not parse is a warning (W225) and the field keeps its default. ``flag``: an integer
+    read as ``!= 0`` (VisualModelImpl's normals, castshadow)."""
+
+    kind = "real"
+    integer: bool = False
+    flag: bool = False
+
+    def parse(self, text: str) -> Any:
+        pattern = _STRTOL if self.integer or self.flag else _STRTOF
+        if pattern.fullmatch(text) is None:
+            what, reader = ("an integer", "Int") if pattern is _STRTOL else ("one number", "Float")
+            raise FieldValueError(
+                f"SOFA reads this attribute as {what} (getAttributeAs{reader}), "
+                f"cannot read {text.strip()[:40]!r} and uses its default",
+                code="W225",
+                hint="write one number, or remove the attribute",
+            )
+        if self.integer or self.flag:
+            number = int(text)
+            return number != 0 if self.flag else number
+        value = float(np.float32(float(text)))
+        if not math.isfinite(value):
+            raise FieldValueError(
+                f"{text.strip()} is not finite in single precision (SOFA reads it as a float)", code="E206"
+            )
+        return value
+
+
 @dataclass(frozen=True)
 class Int(FieldType):
     kind = "int"
     nonnegative: bool = False
 
     def parse(self, text: str) -> int:
-        values = parse_ints(text, nonnegative=self.nonnegative)
+        try:
+            values = parse_ints(text, nonnegative=self.nonnegative)
+        except FieldValueError:
+            self._read_as_sofa(text)
+            raise
         if values.size != 1:
             raise FieldValueError(f"expected one integer, got {values.size}", code="E205")
         return int(values[0])
+
+    def _read_as_sofa(self, text: str) -> None:
+        """One real where an integer is expected: SOFA reads its leading digits, and nothing tells."""
+        found = _INTEGER_THEN_REAL.match(text)
+        try:
+            meant = float(text)
+        except ValueError:
+            return
+        if found is None or not math.isfinite(meant) or (self.nonnegative and int(found[1]) < 0):
+            return
+        hint = f"write {int(meant)}" if meant.is_integer() else "write an integer"
+        raise ReadDifferently(
+            int(found[1]),
+            f"{text.strip()!r} is read by SOFA as {int(found[1])} (an integer stops at {found[2]!r})",
+            hint,
+        )
 
 
 _TRUE = {"1", "true", "yes", "on"}
@@ -379,9 +451,182 @@ class Springs(FieldType):
             )
         return springs
 
+    def ends(self, value: Any) -> np.ndarray:
+        return np.asarray(value).reshape(-1, 5)[:, :2]
+
     def format(self, value: Any) -> str:
         rows = np.asarray(value).reshape(-1, 5)
         return "  ".join(f"{int(r[0])} {int(r[1])} {' '.join(_format_real(x) for x in r[2:])}" for r in rows)
+
+
+# JointSpring's stream form, one row per spring (JointSprings.parse): the columns.
+JOINT_SPRING_COLUMNS = (
+    "m1", "m2",
+    *(f"free{i}" for i in range(6)),
+    "softStiffnessTrans", "hardStiffnessTrans", "softStiffnessRot", "hardStiffnessRot",
+    "blocStiffnessRot", "kd",
+    *(f"limit{i}" for i in range(6)),
+    "initTrans0", "initTrans1", "initTrans2",
+    "initRot0", "initRot1", "initRot2", "initRot3",
+    "needToInitialize",
+)  # fmt: skip
+_JOINT_KEYWORDS = {
+    "FREE_AXIS": "6 flags (0/1): translations x y z, rotations x y z free",
+    "KS_T": "2 numbers: soft and hard translation stiffness",
+    "KS_R": "2 numbers: soft and hard rotation stiffness",
+    "KS_B": "1 number: stiffness beyond the angle limits",
+    "KD": "1 number: damping",
+    "R_LIM_X": "2 numbers: angle limits about x",
+    "R_LIM_Y": "2 numbers: angle limits about y",
+    "R_LIM_Z": "2 numbers: angle limits about z",
+    "REST_T": "3 numbers: rest translation",
+    "REST_R": "4 numbers: rest orientation (quaternion x y z w)",
+}
+
+
+@dataclass(frozen=True)
+class JointSprings(FieldType):
+    """JointSpringForceField's ``spring``: ``BEGIN_SPRING m1 m2 [KEYWORD values]... END_SPRING`` per
+    spring, read as SOFA's ``operator>>(istream&, JointSpring&)`` inside ``vector<T>::read``. That
+    reader keeps one JointSpring for the whole list, so the stiffnesses and the damping (KS_T, KS_R,
+    KD) a spring leaves out are the previous spring's (first: 0 10000, 0 10000, 0); the free axes,
+    limits, rest offset and KS_B start afresh for each. KS_B 0 (or none) is KS_R's hard / 100; an
+    axis whose two limits are equal is not free. ``needToInitialize`` is SOFA's flag, set when
+    REST_T is given: bwdInit then replaces REST_T and REST_R by the initial relative placement."""
+
+    kind = "joint springs"
+
+    def parse(self, text: str) -> np.ndarray:
+        tokens = text.split()
+        position = 0
+
+        def word() -> str:
+            nonlocal position
+            if position >= len(tokens):
+                raise FieldValueError(
+                    "the list ends inside a spring (no END_SPRING)",
+                    hint="end each spring with END_SPRING",
+                )
+            position += 1
+            return tokens[position - 1]
+
+        def reals(count: int, keyword: str) -> list[float]:
+            values: list[float] = []
+            while len(values) < count:
+                token = word()
+                pieces = _stream_reals(token)
+                if token in _JOINT_KEYWORDS or token == "END_SPRING" or not pieces:
+                    raise FieldValueError(
+                        f"spring {len(rows)}: {keyword} needs {_JOINT_KEYWORDS[keyword]}, got {token!r}",
+                        hint=f"write {keyword} followed by {count} number{'s' if count > 1 else ''}",
+                    )
+                values.extend(float(piece) for piece in pieces)
+            if len(values) > count:  # a word such as 0-1 read as two numbers: give the rest back
+                raise FieldValueError(
+                    f"spring {len(rows)}: {keyword} takes {count} numbers",
+                    hint="separate the numbers with spaces",
+                )
+            return values
+
+        rows: list[list[float]] = []
+        kept = {"ks_t": [0.0, 10000.0], "ks_r": [0.0, 10000.0], "kd": 0.0}
+        while position < len(tokens):
+            start = word()
+            if start != "BEGIN_SPRING":
+                raise FieldValueError(
+                    f"spring {len(rows)} starts with {start!r}, not BEGIN_SPRING",
+                    hint="each spring is BEGIN_SPRING m1 m2 [FREE_AXIS ..., KS_T ..., ...] END_SPRING",
+                )
+            ends: list[float] = []
+            for _ in range(2):
+                token = word()
+                if not token.isdigit():
+                    raise FieldValueError(
+                        f"spring {len(rows)}: DOF index {token!r} is not a non-negative integer",
+                        hint="BEGIN_SPRING is followed by the indices of the two rigid DOFs",
+                    )
+                ends.append(float(int(token)))
+            free = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]
+            limits = [-100000.0, 100000.0, -100000.0, 100000.0, -100000.0, 100000.0]
+            rest_t, rest_r, bloc, found = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], 0.0, False
+            keyword = word()
+            while keyword != "END_SPRING":
+                if keyword == "FREE_AXIS":
+                    flags = [word() for _ in range(6)]
+                    if any(f not in ("0", "1") for f in flags):
+                        raise FieldValueError(
+                            f"spring {len(rows)}: FREE_AXIS {' '.join(flags)} is not six 0/1 flags",
+                            hint="FREE_AXIS tx ty tz rx ry rz, each 0 (blocked) or 1 (free)",
+                        )
+                    free = [float(f) for f in flags]
+                elif keyword == "KS_T":
+                    kept["ks_t"] = reals(2, keyword)
+                elif keyword == "KS_R":
+                    kept["ks_r"] = reals(2, keyword)
+                elif keyword == "KS_B":
+                    bloc = reals(1, keyword)[0]
+                elif keyword == "KD":
+                    kept["kd"] = reals(1, keyword)[0]
+                elif keyword in ("R_LIM_X", "R_LIM_Y", "R_LIM_Z"):
+                    axis = "XYZ".index(keyword[-1])
+                    limits[2 * axis : 2 * axis + 2] = reals(2, keyword)
+                elif keyword == "REST_T":
+                    rest_t, found = reals(3, keyword), True
+                elif keyword == "REST_R":
+                    rest_r = reals(4, keyword)
+                else:
+                    raise FieldValueError(
+                        f"spring {len(rows)}: unknown attribute {keyword!r} (SOFA stops reading there)",
+                        hint="the attributes are " + ", ".join(_JOINT_KEYWORDS) + "; end with END_SPRING",
+                    )
+                keyword = word()
+            hard_r = kept["ks_r"][1]
+            if bloc == 0.0:
+                bloc = hard_r / 100
+            for axis in range(3):
+                if limits[2 * axis] == limits[2 * axis + 1]:
+                    free[3 + axis] = 0.0
+            rows.append(
+                [
+                    *ends,
+                    *free,
+                    *kept["ks_t"],
+                    *kept["ks_r"],
+                    bloc,
+                    float(kept["kd"]),
+                    *limits,
+                    *rest_t,
+                    *rest_r,
+                    1.0 if found else 0.0,
+                ]
+            )
+        values = np.array(rows, dtype=np.float64).reshape(-1, len(JOINT_SPRING_COLUMNS))
+        if values.size and not np.isfinite(values).all():
+            raise FieldValueError(
+                "a number is not finite", code="E206", hint="nan and inf are not valid scene values"
+            )
+        return values
+
+    def ends(self, value: Any) -> np.ndarray:
+        return np.asarray(value).reshape(-1, len(JOINT_SPRING_COLUMNS))[:, :2]
+
+    def format(self, value: Any) -> str:
+        parts = []
+        for row in np.asarray(value).reshape(-1, len(JOINT_SPRING_COLUMNS)):
+            free = " ".join(str(int(f)) for f in row[2:8])
+            numbers = [_format_real(x) for x in row[8:]]
+            text = f"BEGIN_SPRING {int(row[0])} {int(row[1])} FREE_AXIS {free} KS_T {numbers[0]} {numbers[1]}"
+            text += f" KS_R {numbers[2]} {numbers[3]} KS_B {numbers[4]} KD {numbers[5]}"
+            text += f" R_LIM_X {numbers[6]} {numbers[7]} R_LIM_Y {numbers[8]} {numbers[9]}"
+            text += f" R_LIM_Z {numbers[10]} {numbers[11]}"
+            if row[-1]:
+                text += f" REST_T {' '.join(numbers[12:15])}"
+            text += f" REST_R {' '.join(numbers[15:19])} END_SPRING"
+            parts.append(text)
+        return "\n".join(parts)
+
+    def describe(self) -> str:
+        return "joint springs (BEGIN_SPRING m1 m2 ... END_SPRING)"
 
 
 @dataclass(frozen=True)
@@ -396,10 +641,16 @@ class MassValue(FieldType):
     def check_count(self, value: Any, datatype: DataType | None) -> str | None:
         if datatype is None or not isinstance(value, np.ndarray):
             return None
-        if value.size not in datatype.mass_sizes:
+        if value.size not in datatype.mass_sizes and value.size < max(datatype.mass_sizes):
             sizes = " or ".join(str(s) for s in datatype.mass_sizes)
             return f"a {datatype.name} mass has {sizes} numbers, got {value.size}"
         return None
+
+    @staticmethod
+    def read_by_sofa(value: np.ndarray, datatype: DataType) -> int:
+        """How many of the numbers SOFA's stream reads (``operator>>`` of the mass type stops after
+        the last one it needs; Data::read ignores what follows)."""
+        return min(value.size, max(datatype.mass_sizes))
 
 
 @dataclass(frozen=True)

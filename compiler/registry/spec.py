@@ -137,6 +137,9 @@ class ComponentSpec:
     # Name of the front-end evaluator (in evaluate.py) that computes this component's output Data
     # at compile time: "mesh_loader", "sphere_loader", "grid", "box_roi", ... ("" = none).
     compute: str = ""
+    # Fields the evaluator rewrites even when the scene gives them (GridTopology's position, resized
+    # to the grid by computePointList): their value is the evaluator's output.
+    rewrites: tuple[str, ...] = ()
     # Name of the lowering (plan/lower/__init__.py LOWERINGS) that turns it into calls of the
     # runtime's kernels in the compiled step; "" = the compiler cannot compile it yet (components
     # with no part in the step need none).

@@ -257,7 +257,7 @@ inline void element_fem_stiffness_init(const Index* elements, Index count, const
     constexpr int D = 3 * N;
     for (Index e = 0; e < count; ++e) {
         double C[6][6];
-        isotropic_tensor(fem_detail::young_in(young, n_young, e), fem_detail::poisson_in(poisson, n_poisson, e), C);
+        isotropic_tensor(fem_detail::element_value(young, n_young, e), fem_detail::element_value(poisson, n_poisson, e), C);
         V3 nodes[N];
         gather<N>(elements + N * e, rest, nodes);
         element_stiffness<N>(nodes, C, stiffness + static_cast<Index>(D) * D * e);

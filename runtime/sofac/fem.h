@@ -372,21 +372,9 @@ inline M3 svd_stable_rotation(const M3& f) {
     return mul_nt(u, v);
 }
 
-// Material parameters of element i (BaseLinearElasticityFEMForceField::getVecRealInElement and
-// the checks of its init).
-inline double element_value(const double* list, Index n, Index i, double fallback) {
-    if (n > i) return list[i];
-    if (n > 0) return list[0];
-    return fallback;
-}
-inline double young_in(const double* young, Index n, Index i) {
-    const double e = element_value(young, n, i, 5000.0);
-    return e < 0.0 ? 5000.0 : e;
-}
-inline double poisson_in(const double* poisson, Index n, Index i) {
-    const double nu = element_value(poisson, n, i, 0.45);
-    return (nu < 0.0 || nu >= 0.5) ? 0.45 : nu;
-}
+// Material parameter of element i (BaseLinearElasticityFEMForceField::getVecRealInElement): its
+// own value, else the first. n >= 1: the plan gives an empty list the registry's default.
+inline double element_value(const double* list, Index n, Index i) { return n > i ? list[i] : list[0]; }
 
 // ---- tetrahedra: SOFA's element quantities --------------------------------------------------
 
@@ -639,8 +627,8 @@ inline void tetra_fem_init(const Index* tetra, Index n_tetra, const double* rest
 
         // computeMaterialStiffness
         const double factor = n_factor > 0 ? local_stiffness_factor[i * n_factor / n_tetra] : 1.0;
-        const double E = factor * young_in(young, n_young, i);
-        const double nu = poisson_in(poisson, n_poisson, i);
+        const double E = factor * element_value(young, n_young, i);
+        const double nu = element_value(poisson, n_poisson, i);
         const double scale = (E * (1 - nu)) / ((1 + nu) * (1 - 2 * nu));
         const double volume = std::fabs(dot3(cross(sub(b, a), sub(c, a)), sub(d, a)) / 6.0);
         const double div = volume * 36;
@@ -1433,8 +1421,8 @@ inline void hexa_fem_init(const Index* hexa, Index n_hexa, const double* rest_x,
     for (Index i = 0; i < n_hexa; ++i) {
         double* e = element_data + i * stride;
         const Index* h = hexa + 8 * i;
-        const double nu = poisson_in(poisson, n_poisson, i);
-        const double scale = (young_in(young, n_young, i) * (1 - nu)) / ((1 + nu) * (1 - 2 * nu));
+        const double nu = element_value(poisson, n_poisson, i);
+        const double scale = (element_value(young, n_young, i) * (1 - nu)) / ((1 + nu) * (1 - 2 * nu));
         const double U = 1.0 * scale;
         const double V = (nu / (1 - nu)) * scale;
         const double W = ((1 - 2 * nu) / (2 * (1 - nu))) * scale;

@@ -16,27 +16,15 @@
 #include <cmath>
 
 #include "kernels.h"
+#include "quaternion.h"
 #include "types.h"
 
 namespace sofac {
-
-namespace ellipsoid_detail {
-// SOFA's Quat::rotate / inverseRotate: t = 2 (q x v); v + w t + q x t (q negated for the inverse).
-inline void quat_rotate(const double* q, bool inverse, const double* v, double* out) {
-    const double s = inverse ? -1.0 : 1.0;
-    const double qx = q[0] * s, qy = q[1] * s, qz = q[2] * s, w = q[3];
-    const double t0 = (qy * v[2] - qz * v[1]) * 2, t1 = (qz * v[0] - qx * v[2]) * 2, t2 = (qx * v[1] - qy * v[0]) * 2;
-    out[0] = v[0] + w * t0 + (qy * t2 - qz * t1);
-    out[1] = v[1] + w * t1 + (qz * t0 - qx * t2);
-    out[2] = v[2] + w * t2 + (qx * t1 - qy * t0);
-}
-}  // namespace ellipsoid_detail
 
 // contacts: per point 10 doubles (flag, m row-major); frame_q: 4 doubles (the quaternion used).
 inline void ellipsoid_add_force(const double* x1, const double* v1, double* f1, Index n, const double* x2,
                                 Index frame, const double* ellipsoids, Index n_ellipsoids, double stiffness,
                                 double damping, double* contacts, double* frame_q) {
-    using ellipsoid_detail::quat_rotate;
     const double* c = x2 + 7 * frame;
     const double q[4] = {c[3], c[4], c[5], c[6]};
     for (int k = 0; k < 4; ++k) frame_q[k] = q[k];
@@ -91,7 +79,6 @@ inline void ellipsoid_add_force(const double* x1, const double* v1, double* f1, 
 // df1 += kfactor R m R^-1 dx1 for the points in contact at the last force pass.
 inline void ellipsoid_add_dforce(const double* dx1, double* df1, Index n, const double* contacts,
                                  const double* frame_q, double kfactor) {
-    using ellipsoid_detail::quat_rotate;
     for (Index i = 0; i < n; ++i) {
         const double* contact = contacts + 10 * i;
         if (contact[0] == 0.0) continue;
@@ -283,56 +270,6 @@ inline void project_onto_lines(double* x, const Index* indices, Index count, con
         for (int c = 0; c < S; ++c) p[c] = o[c] + direction[c] * along;
     }
 }
-
-// SOFA's quaternion arithmetic (type::Quat, x y z w), written out so that the operations and their
-// order are SOFA's.
-struct SofaQuat {
-    double q[4];
-
-    SofaQuat operator*(const SofaQuat& b) const {
-        return {{q[3] * b.q[0] + q[0] * b.q[3] + q[1] * b.q[2] - q[2] * b.q[1],
-                 q[3] * b.q[1] + q[1] * b.q[3] + q[2] * b.q[0] - q[0] * b.q[2],
-                 q[3] * b.q[2] + q[2] * b.q[3] + q[0] * b.q[1] - q[1] * b.q[0],
-                 q[3] * b.q[3] - (q[0] * b.q[0] + q[1] * b.q[1] + q[2] * b.q[2])}};
-    }
-    // Quat::inverse: the conjugate divided by the norm (not its square, as SOFA's).
-    SofaQuat inverse() const {
-        double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-        if (norm == 0.0) return {{0.0, 0.0, 0.0, 0.0}};
-        norm = 1.0 / norm;
-        return {{-q[0] * norm, -q[1] * norm, -q[2] * norm, q[3] * norm}};
-    }
-    // Quat::normalize: only when the squared norm differs from 1 by more than 1e-10.
-    void normalize() {
-        const double magnitude = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
-        if (std::abs(magnitude - 1.0) <= 1e-10) return;
-        if (magnitude == 0.0) {
-            q[3] = 1.0;
-            return;
-        }
-        const double scale = 1.0 / std::sqrt(magnitude);
-        for (double& c : q) c *= scale;
-    }
-    // Quat::createQuaterFromEuler, SOFA's default order (ZYX).
-    static SofaQuat from_euler(const double* angles) {
-        const double c1 = std::cos(angles[0] / 2), c2 = std::cos(angles[1] / 2), c3 = std::cos(angles[2] / 2);
-        const double s1 = std::sin(angles[0] / 2), s2 = std::sin(angles[1] / 2), s3 = std::sin(angles[2] / 2);
-        return {{s1 * c2 * c3 - c1 * s2 * s3, c1 * s2 * c3 + s1 * c2 * s3, c1 * c2 * s3 - s1 * s2 * c3,
-                 c1 * c2 * c3 + s1 * s2 * s3}};
-    }
-    // Quat::slerp2: spherical interpolation from this (t = 0) to b (t = 1).
-    SofaQuat slerp2(const SofaQuat& b, double t) const {
-        const double cos_half = q[3] * b.q[3] + q[0] * b.q[0] + q[1] * b.q[1] + q[2] * b.q[2];
-        if (std::abs(cos_half) >= 1.0) return *this;
-        const double half = std::acos(cos_half);
-        const double sin_half = std::sqrt(1.0 - cos_half * cos_half);
-        if (std::abs(sin_half) < 0.001)
-            return {{q[0] * 0.5 + b.q[0] * 0.5, q[1] * 0.5 + b.q[1] * 0.5, q[2] * 0.5 + b.q[2] * 0.5,
-                     q[3] * 0.5 + b.q[3] * 0.5}};
-        const double ra = std::sin((1 - t) * half) / sin_half, rb = std::sin(t * half) / sin_half;
-        return {{q[0] * ra + b.q[0] * rb, q[1] * ra + b.q[1] * rb, q[2] * ra + b.q[2] * rb, q[3] * ra + b.q[3] * rb}};
-    }
-};
 
 // FixedRotationProjectiveConstraint's projectPosition on every rigid: for each fixed axis (x, y, z
 // in that order), the twist about it is removed from the orientation (swing-twist decomposition)

@@ -120,8 +120,8 @@ inline void quad_bending_init(const Index* quads, Index n, const double* rest_x,
         for (int m = 0; m < 3; ++m) centroid[m] = (a[m] + c[m]) / 2;
         for (int k = 0; k < 4; ++k)
             for (int m = 0; m < 3; ++m) d[3 * k + m] = rest_x[3 * q[k] + m] - centroid[m];
-        const double y = fem_detail::element_value(young, n_young, e, 1000.0);
-        const double p = fem_detail::element_value(poisson, n_poisson, e, 0.45);
+        const double y = fem_detail::element_value(young, n_young, e);
+        const double p = fem_detail::element_value(poisson, n_poisson, e);
         const double t = thickness;
         const double k = 5.0 / 6.0;
         d[12] = y * t / (1 - p * p);

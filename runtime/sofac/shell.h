@@ -77,7 +77,7 @@ inline void trifem_optim_add_force(const Index* tri, Index n, const double* x, d
         const V3 a = load(x + 3 * t[0]);
         const V3 ab = sub(load(x + 3 * t[1]), a);
         const V3 ac = sub(load(x + 3 * t[2]), a);
-        const double E = fem_detail::young_in(young, n_young, i), nu = fem_detail::poisson_in(poisson, n_poisson, i);
+        const double E = fem_detail::element_value(young, n_young, i), nu = fem_detail::element_value(poisson, n_poisson, i);
         const double mu = E / (1 + nu);
         const double gamma = (E * nu) / (1 - nu * nu);
         V3 fx, fy;
@@ -111,7 +111,7 @@ inline void trifem_optim_add_dforce(const Index* tri, Index n, const double* dx,
         const double* e = data + TRI_OPTIM_DATA * i;
         const double bx = e[0], cx = e[1], cy = e[2], ss = e[3];
         const V3 fx = load(e + 4), fy = load(e + 7);
-        const double E = fem_detail::young_in(young, n_young, i), nu = fem_detail::poisson_in(poisson, n_poisson, i);
+        const double E = fem_detail::element_value(young, n_young, i), nu = fem_detail::element_value(poisson, n_poisson, i);
         const double mu = E / (1 + nu);
         const double gamma = (E * nu) / (1 - nu * nu);
         const V3 da = load(dx + 3 * t[0]);
@@ -139,7 +139,7 @@ inline void trifem_optim_element_matrix(const double* data, Index e, const doubl
                                         const double* poisson, Index n_poisson, double* out) {
     const double* d = data + shell_detail::TRI_OPTIM_DATA * e;
     const double bx = d[0], cx = d[1], cy = d[2], ss = d[3];
-    const double E = fem_detail::young_in(young, n_young, e), nu = fem_detail::poisson_in(poisson, n_poisson, e);
+    const double E = fem_detail::element_value(young, n_young, e), nu = fem_detail::element_value(poisson, n_poisson, e);
     const double mu = E / (1 + nu);
     const double gamma = (E * nu) / (1 - nu * nu);
     const double fG = ss * gamma, fGM = ss * (gamma + mu), fM2 = ss * (0.5 * mu);
@@ -397,7 +397,7 @@ inline void trifem_init(const Index* tri, Index n, const double* rest_x, const d
         e[11] = c[1];
         strain_displacement(b, c, e + 12);
         const double area = b[0] * c[1] * 0.5;
-        const double y = fem_detail::young_in(young, n_young, i), p = fem_detail::poisson_in(poisson, n_poisson, i);
+        const double y = fem_detail::element_value(young, n_young, i), p = fem_detail::element_value(poisson, n_poisson, i);
         const double scale = (y / (1.0 - p * p)) * area;
         e[30] = 1 * scale;
         e[31] = p * scale;

@@ -175,6 +175,15 @@ std::int64_t conjugate_gradient(const Space& space, const CgControls& controls, 
     return iteration - 1;
 }
 
+// PreconditionedMatrixFreeSystem::buildSystemMatrix's counter: it starts at the assembling rate
+// (the first solve refreshes the preconditioner), each solve increments it, and a solve that
+// brings it to the rate refreshes the preconditioner's matrix and resets it to 0.
+inline bool refresh_due(std::int64_t& counter, std::int64_t rate) {
+    if (++counter < rate) return false;
+    counter = 0;
+    return true;
+}
+
 // SOFA's PCGLinearSolver, from the start x holds (the previous solution): stops when r.z <=
 // tolerance |b|^2 (z the preconditioned residual) or after max_iterations. product() leaves
 // df = A dx; precondition() leaves df = P^-1 z (both vectors are the product's, as in SOFA, which

@@ -45,6 +45,7 @@ from sofac.plan.lower.projective import (
 from sofac.plan.lower.springs import (
     lower_bending_springs,
     lower_grid_springs,
+    lower_joint_springs,
     lower_mesh_springs,
     lower_quad_bending_springs,
     lower_springs,
@@ -77,6 +78,7 @@ LOWERINGS: dict[str, Lowering] = {
     "springs": lower_springs,
     "mesh_springs": lower_mesh_springs,
     "vector_springs": lower_vector_springs,
+    "joint_springs": lower_joint_springs,
     "constant_force": lower_constant_force,
     "rest_shape_springs": lower_rest_shape,
     "fixed": lower_fixed,

@@ -559,7 +559,10 @@ def _lcp_refusal(
     mu = float(value(solver.component, "mu"))
     if not value(solver.component, "build_lcp"):
         if (mu > 0) != (collision.mu > 0):
-            return "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 or > 0"
+            return (
+                "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 "
+                "or both > 0"
+            )
         return ""
     if mu <= 0 or collision.mu <= 0:
         return "LCPConstraintSolver built is compiled for contacts of three rows solved with mu > 0"

@@ -62,12 +62,16 @@ DATA_SIZE_FUNCTIONS = {
 
 
 def _material(planner: Planner, checked: CheckedComponent) -> tuple[Buffer, Buffer]:
-    """Young's modulus and Poisson's ratio (one, or per element) as tunable buffers."""
+    """Young's modulus and Poisson's ratio (one, or per element) as tunable buffers. An empty
+    list takes the registry's default, as SOFA's getVecRealInElement does (so every kernel reads
+    at least one value and none carries a default of its own)."""
     buffers = []
     for name in ("youngModulus", "poissonRatio"):
         value = planner.value(checked.component, name)
-        value = value if value is not None else _default(checked, name)
-        buffers.append(planner.buffer(checked.component, name, np.atleast_1d(value), role="param"))
+        values = np.atleast_1d(value if value is not None else [])
+        if values.size == 0:
+            values = np.atleast_1d(_default(checked, name))
+        buffers.append(planner.buffer(checked.component, name, values, role="param"))
     return buffers[0], buffers[1]
 
 
@@ -371,15 +375,8 @@ def lower_element_fem(planner: Planner, checked: CheckedComponent, owner: dict[i
             return
         method = code
     count, size = cells.size // corners, 3 * corners
-    young = planner.value(component, "youngModulus")
-    poisson = planner.value(component, "poissonRatio")
     elements = planner.buffer(component, element_fem.ELEMENTS[element][1], cells, "i64", columns=corners)
-    young_buffer = planner.buffer(
-        component, "youngModulus", np.atleast_1d(young if young is not None else []), role="param"
-    )
-    poisson_buffer = planner.buffer(
-        component, "poissonRatio", np.atleast_1d(poisson if poisson is not None else []), role="param"
-    )
+    young_buffer, poisson_buffer = _material(planner, checked)
     stiffness = planner.buffer(
         component, "elementStiffness", np.zeros(count * size * size), columns=size * size, role="scratch"
     )

@@ -373,7 +373,10 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
                 if (i, j) in seen or i == j:
                     continue
                 seen.add((i, j))
-                length = float(np.linalg.norm(rest[j, :3] - rest[i, :3]))
+                # Vec3::norm() term by term: np.linalg.norm goes through BLAS, whose kernel (and
+                # its use of FMA) depends on the processor
+                dx, dy, dz = (float(rest[j, k]) - float(rest[i, k]) for k in range(3))
+                length = math.sqrt(dx * dx + dy * dy + dz * dz)
                 if length > 1e-12:  # SOFA scales by the rest length (per unit length stiffness)
                     rows.append((i, j, ks / length, kd / length, length))
     springs = np.array(rows, dtype=float).reshape(-1, 5)
@@ -464,4 +467,87 @@ def lower_vector_springs(planner: Planner, checked: CheckedComponent, owner: dic
             offsets = (group.assembly_offset(first, checked), group.assembly_offset(second, checked))
             group.assemble.append(
                 Op(origin, [_call("assemble_vector_springs", Env.ASSEMBLER, table, *offsets, Env.KFACT)])
+            )
+
+
+def lower_joint_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """JointSpringForceField (Rigid3d): the `spring` rows as JointSprings.parse reads them (SOFA's
+    stream format); per spring a rest offset (7 numbers, taken from the positions at the first force
+    pass when REST_T was given, as SOFA's bwdInit) and the force pass's frame and stiffnesses for K dx
+    and the assembled blocks (runtime/sofac/joint_springs.h)."""
+    from sofac.registry.fields import JOINT_SPRING_COLUMNS
+
+    component = checked.component
+    ends = []
+    for role in ("object1", "object2"):
+        target = checked.links.get(role)
+        if not isinstance(target, Component):
+            target = checked.state or planner.checked.node_state(component.node)
+        ends.append(planner.states.get(id(target)) if target is not None else None)
+    first, second = ends
+    if first is None or second is None:
+        planner.unsupported(checked, "its springs must join MechanicalObjects")
+        return
+    if first.datatype.name != "Rigid3d" or second.datatype.name != "Rigid3d":
+        planner.unsupported(checked, "it joins Rigid3d states only")
+        return
+    group = owner.get(id(first.component))
+    if group is None and owner.get(id(second.component)) is None:
+        planner.ignored.append((component, "its states have no ODE solver"))
+        return
+    if group is None or owner.get(id(second.component)) is not group:
+        planner.unsupported(checked, "springs between states of different ODE solvers are not compiled yet")
+        return
+    if planner.value(component, "infile"):
+        planner.unsupported(checked, "constant joint forces read from infile are not compiled yet")
+        return
+    if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(checked, "a rayleighStiffness of its own is not compiled yet")
+        return
+    if planner.value(component, "outfile"):
+        attribute = "outfile"
+        planner.diags.add(
+            "W225",
+            component.attribute_loc(attribute),
+            f"{origin_of(component)}: sofac does not write JointSpringForceField's output file",
+            "read the rigid states from Python (sim[path].position) instead",
+        )
+    value = planner.value(component, "spring")
+    width = len(JOINT_SPRING_COLUMNS)
+    rows = np.asarray(value if value is not None else np.zeros((0, width)), dtype=float).reshape(-1, width)
+    if not len(rows):
+        planner.ignored.append((component, "it has no springs"))
+        return
+    pairs = rows[:, :2].astype(np.int64)
+    if pairs[:, 0].max() >= first.size or pairs[:, 1].max() >= second.size:
+        planner.unsupported(checked, "its springs use DOFs past the end of object1 or object2")
+        return
+    params = rows[:, 2:20]  # free[6], ksT, khT, ksR, khR, kBloc, kd, limits[6] (JOINT_PARAMS)
+    rest = rows[:, 20:27]
+    pending = rows[:, 27].astype(np.int64)
+    a = planner.buffer(component, "indices1", pairs[:, 0].copy(), "i64")
+    b = planner.buffer(component, "indices2", pairs[:, 1].copy(), "i64")
+    parameters = planner.buffer(component, "spring", params, columns=params.shape[1])
+    rest_buffer = planner.buffer(component, "rest", rest, columns=7, role="scratch")
+    pending_buffer = planner.buffer(component, "pending", pending, "i64", role="scratch")
+    memory = planner.buffer(component, "memory", np.zeros((len(rows), 10)), columns=10, role="scratch")
+    table = Aggregate("JointSprings", (a, b, parameters, rest_buffer, pending_buffer, memory, len(rows)))
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [_call("joint_spring_forces", table, first.x, first.v, first.f, second.x, second.v, second.f)],
+        )
+    )
+    if group.scheme == "implicit":
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call("joint_spring_dforces", table, first.dx, first.df, second.dx, second.df, Env.KFACT)],
+            )
+        )
+        if group.direct or group.assembled_cg:
+            offsets = (group.assembly_offset(first, checked), group.assembly_offset(second, checked))
+            group.assemble.append(
+                Op(origin, [_call("assemble_joint_springs", Env.ASSEMBLER, table, *offsets, Env.KFACT)])
             )

@@ -11,6 +11,7 @@ from ..fields import (
     Int,
     Ints,
     IntVector,
+    JointSprings,
     Link,
     Real,
     Reals,
@@ -242,16 +243,25 @@ REST_SHAPE_SPRINGS_FORCE_FIELD = ComponentSpec(
 
 JOINT_SPRING_FORCE_FIELD = ComponentSpec(
     name="JointSpringForceField",
+    lowering="joint_springs",
     category=Category.INTERACTION_FORCEFIELD,
     module=_SPRING_MODULE,
-    doc="Six-degree-of-freedom joint springs between rigid frames.",
+    doc="Six-degree-of-freedom joint springs between rigid frames (SOFA's formulas: hard or soft "
+    "stiffness per translation and rotation axis in object1's frame, pivot cases, angle limits held "
+    "by the bloc stiffness, damping kd (v2 - v1)); K dx as SOFA's addDForce (no damping, the frame "
+    "held). Output files are not written; infile (constant joint forces) is refused.",
     templates=("Rigid3d",),
     default_template="Rigid3d",
-    unsupported_reason="JointSpringForceField (Rigid3 joint springs) is not implemented yet",
+    supported=True,
     effects=_SPRING_EFFECTS,
     fields=(
-        FieldSpec("spring", Text(), doc="joint springs: indices, stiffnesses, dampings, rest state"),
-        FieldSpec("outfile", FileName(), doc="output file"),
+        FieldSpec(
+            "spring",
+            JointSprings(),
+            doc="joint springs: BEGIN_SPRING m1 m2 [FREE_AXIS, KS_T, KS_R, KS_B, KD, R_LIM_X/Y/Z, REST_T, "
+            "REST_R] END_SPRING each",
+        ),
+        FieldSpec("outfile", FileName(output=True), doc="output file (not written by sofac)"),
         FieldSpec("infile", FileName(), doc="input file of constant joint forces"),
         FieldSpec("period", Real(), 0.0, "time between outputs"),
         FieldSpec("reinit", Bool(), False, "rewrite the output file each step"),

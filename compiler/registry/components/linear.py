@@ -83,6 +83,14 @@ PCG_LINEAR_SOLVER = ComponentSpec(
         _TOLERANCE,
         FieldSpec("use_precond", Bool(), True, "apply the preconditioner"),
         FieldSpec("preconditioner", Link("linear_solver"), doc="linear solver used as preconditioner"),
+        FieldSpec(
+            "update_step",
+            Int(),
+            1,
+            "deprecated in SOFA (a DeprecatedData: warned about, then ignored); the preconditioner's "
+            "refresh period is its PreconditionedMatrixFreeSystem's assemblingRate",
+            deprecated=True,
+        ),
         *LINEAR_SOLVER_FIELDS,
     ),
 )

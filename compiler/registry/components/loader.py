@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..fields import Bool, Coords, FileName, Int, Ints, Real, Reals, Text
+from ..fields import AttributeNumber, Bool, Coords, FileName, Int, Ints, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import MUST_BE_POSITIVE
 
@@ -21,7 +21,9 @@ _MESH_LOADER_DATA = (
     FieldSpec("translation", Reals(3), (0.0, 0.0, 0.0), "translation applied at load (after rotation)"),
     FieldSpec("rotation", Reals(3), (0.0, 0.0, 0.0), "rotation (Euler angles, degrees) applied at load"),
     FieldSpec("scale3d", Reals(3), (1.0, 1.0, 1.0), "scale applied at load (first)"),
-    FieldSpec("scale", Real(), doc="legacy uniform scale (sets scale3d)", valid=MUST_BE_POSITIVE),
+    FieldSpec(
+        "scale", AttributeNumber(), doc="legacy uniform scale (multiplies scale3d)", valid=MUST_BE_POSITIVE
+    ),
     FieldSpec(
         "transformation", Reals(16), _IDENTITY_4X4, "4x4 homogeneous transform; replaces the others if set"
     ),

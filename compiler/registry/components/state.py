@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ...limits import MAX_GENERATED_POINTS
-from ..fields import Bool, Coords, Int, Real, Reals, Text
+from ..fields import AttributeNumber, Bool, Coords, Int, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import ALL_TYPES, MUST_BE_POSITIVE
 
@@ -40,13 +40,19 @@ _TRANSFORM_FIELDS = (
     FieldSpec("scale3d", Reals(3), (1.0, 1.0, 1.0), "scale applied at init"),
     FieldSpec("translation2", Reals(3), (0.0, 0.0, 0.0), "translation applied after the rest shape"),
     FieldSpec("rotation2", Reals(3), (0.0, 0.0, 0.0), "rotation applied after the rest shape"),
-    # Legacy per-axis spellings, still parsed by SOFA.
-    *(FieldSpec(a, Real(), 0.0, "legacy translation component") for a in ("dx", "dy", "dz")),
-    *(FieldSpec(a, Real(), 0.0, "legacy rotation component (degrees)") for a in ("rx", "ry", "rz")),
-    *(FieldSpec(a, Real(), 0.0, "legacy translation2 component") for a in ("dx2", "dy2", "dz2")),
-    *(FieldSpec(a, Real(), 0.0, "legacy rotation2 component") for a in ("rx2", "ry2", "rz2")),
-    FieldSpec("scale", Real(), 1.0, "legacy uniform scale", valid=MUST_BE_POSITIVE),
-    *(FieldSpec(a, Real(), 1.0, "legacy per-axis scale", valid=MUST_BE_POSITIVE) for a in ("sx", "sy", "sz")),
+    # Legacy per-axis spellings, read by MechanicalObject::parse as single-precision floats.
+    *(FieldSpec(a, AttributeNumber(), 0.0, "legacy translation component") for a in ("dx", "dy", "dz")),
+    *(
+        FieldSpec(a, AttributeNumber(), 0.0, "legacy rotation component (degrees)")
+        for a in ("rx", "ry", "rz")
+    ),
+    *(FieldSpec(a, AttributeNumber(), 0.0, "legacy translation2 component") for a in ("dx2", "dy2", "dz2")),
+    *(FieldSpec(a, AttributeNumber(), 0.0, "legacy rotation2 component") for a in ("rx2", "ry2", "rz2")),
+    FieldSpec("scale", AttributeNumber(), 1.0, "legacy uniform scale", valid=MUST_BE_POSITIVE),
+    *(
+        FieldSpec(a, AttributeNumber(), 1.0, "legacy per-axis scale", valid=MUST_BE_POSITIVE)
+        for a in ("sx", "sy", "sz")
+    ),
 )
 
 MECHANICAL_OBJECT = ComponentSpec(

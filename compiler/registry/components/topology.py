@@ -78,10 +78,14 @@ GRID_TOPOLOGY = ComponentSpec(
     name="GridTopology",
     category=Category.TOPOLOGY,
     module=_GRID,
-    doc="Connectivity of an nx x ny x nz grid, without geometry (base of RegularGridTopology).",
+    doc="Connectivity of an nx x ny x nz grid (base of RegularGridTopology), without geometry: its "
+    "points are its own position list resized to nx ny nz (0 0 0 past its end, all of them without "
+    "one), so the MechanicalObject usually gives the positions.",
     former_names=("Grid",),
-    unsupported_reason="GridTopology has no geometry; use RegularGridTopology (min/max) instead",
-    effects=_TOPOLOGY,
+    supported=True,
+    effects=_GENERATED,
+    compute="grid_topology",
+    rewrites=("position",),
     fields=_GRID_FIELDS,
 )
 

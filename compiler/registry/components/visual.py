@@ -2,7 +2,22 @@
 
 from __future__ import annotations
 
-from ..fields import Bool, Color, Coords, Enum, FileName, Int, Ints, Link, Options, Real, Reals, Text, Words
+from ..fields import (
+    AttributeNumber,
+    Bool,
+    Color,
+    Coords,
+    Enum,
+    FileName,
+    Int,
+    Ints,
+    Link,
+    Options,
+    Real,
+    Reals,
+    Text,
+    Words,
+)
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import MUST_BE_POSITIVE, VISUAL_MODEL_FIELDS
 
@@ -48,22 +63,27 @@ _VISUAL_MODEL_IMPL_FIELDS = (
     FieldSpec("srgbTexturing", Bool(), False),
     # Attributes read by VisualModelImpl::parse (legacy spellings).
     FieldSpec("color", Color(), doc="diffuse color (sets the material)"),
-    FieldSpec("normals", Bool(), doc="legacy: sets useNormals", sets=("useNormals",)),
-    FieldSpec("castshadow", Bool(), doc="cast shadows"),
+    # (integers and single-precision floats of getAttributeAs*: a text that is not one number is
+    # SOFA's default, so normals="false" or a normal list leaves useNormals true)
+    FieldSpec(
+        "normals",
+        AttributeNumber(flag=True),
+        doc="legacy: sets useNormals (an integer)",
+        sets=("useNormals",),
+    ),
+    FieldSpec("castshadow", AttributeNumber(flag=True), doc="cast shadows (an integer)"),
     FieldSpec("flip", Bool(), doc="flip the faces"),
     *(
-        FieldSpec(a, Real(), doc="legacy texture scale/translation component")
+        FieldSpec(a, AttributeNumber(), doc="legacy texture scale/translation component")
         for a in ("su", "sv", "du", "dv")
     ),
-    *(FieldSpec(a, Real(), doc="legacy translation component") for a in ("dx", "dy", "dz")),
-    *(FieldSpec(a, Real(), doc="legacy rotation component (degrees)") for a in ("rx", "ry", "rz")),
-    FieldSpec(
-        "scale",
-        Reals(3, allow_scalar=True),
-        doc="legacy scale (one number, or one per axis)",
-        valid=MUST_BE_POSITIVE,
+    *(FieldSpec(a, AttributeNumber(), doc="legacy translation component") for a in ("dx", "dy", "dz")),
+    *(FieldSpec(a, AttributeNumber(), doc="legacy rotation component (degrees)") for a in ("rx", "ry", "rz")),
+    FieldSpec("scale", AttributeNumber(), doc="legacy uniform scale (one number)", valid=MUST_BE_POSITIVE),
+    *(
+        FieldSpec(a, AttributeNumber(), doc="legacy per-axis scale", valid=MUST_BE_POSITIVE)
+        for a in ("sx", "sy", "sz")
     ),
-    *(FieldSpec(a, Real(), doc="legacy per-axis scale", valid=MUST_BE_POSITIVE) for a in ("sx", "sy", "sz")),
     FieldSpec("topology", Link("topology"), doc="topology to draw (default: none, own arrays)"),
     *VISUAL_MODEL_FIELDS,
 )

@@ -1,0 +1,73 @@
+"""Attributes SOFA reads in a component's parse() with getAttributeAsFloat / getAttributeAsInt (strtof,
+strtol): single-precision numbers; a text that is not one number is SOFA's default with a logged
+message, so a warning (W225) here, not an error. Found by `sofac check` on SOFA's example tree
+(Component/Mapping/Linear/CenterOfMassMapping.scn writes dx="0 0 0 ..." on MechanicalObjects and a
+normal list in OglModel's normals; Component/MechanicalLoad/TaitSurfacePressureForceField.scn
+scale="0.25 0.25 0.25" on a MeshOBJLoader)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from sofac.check.checker import check_file
+
+SCENE = """\
+<Node name="root" gravity="0 0 0" dt="0.01"><DefaultAnimationLoop/>
+  <MeshOBJLoader name="loader" filename="cube.obj" {loader}/>
+  <Node name="body">
+    <MechanicalObject name="dofs" position="0 0 0  1 0 0" {state}/>
+    <Node name="visual"><OglModel name="skin" src="@../../loader" {visual}/></Node>
+  </Node>
+</Node>
+"""
+CUBE = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n"
+
+
+def check(tmp_path: Path, *, loader: str = "", state: str = "", visual: str = ""):  # type: ignore[no-untyped-def]
+    (tmp_path / "cube.obj").write_text(CUBE)
+    path = tmp_path / "scene.scn"
+    path.write_text(SCENE.format(loader=loader, state=state, visual=visual))
+    checked, diags = check_file(path)
+    components = {c.label: c for c in checked.scene.root.components()} if checked else {}
+    return checked, diags, components
+
+
+def test_center_of_mass_mapping_attributes_check_clean(tmp_path: Path) -> None:
+    """CenterOfMassMapping.scn's attributes: warnings on their lines, no error, SOFA's defaults."""
+    checked, diags, components = check(
+        tmp_path,
+        state='dx="0 0 0 0 0 0 0 0 0 0 0 0"',
+        visual='normals="-0.57735 -0.57735 -0.57735 0.333333 -0.666667 -0.666667"',
+        loader='scale="0.25 0.25 0.25"',
+    )
+    assert diags.errors == []
+    assert sorted((d.code, d.loc.line, d.loc.attribute) for d in diags.warnings) == [
+        ("W225", 2, "scale"),
+        ("W225", 4, "dx"),
+        ("W225", 5, "normals"),
+    ]
+    assert "uses its default" in diags.warnings[0].message
+    assert checked.positions(components["dofs"]).tolist() == [[0, 0, 0], [1, 0, 0]]  # no translation
+    assert np.asarray(checked.value(components["loader"], "position")).max() == 1.0  # not scaled
+    assert checked.value(components["skin"], "normals") is None  # useNormals keeps its default
+
+
+def test_legacy_numbers_are_single_precision(tmp_path: Path) -> None:
+    """MechanicalObject::parse: translation = (Real) getAttributeAsFloat("dx"): 0.1 is float's 0.1."""
+    checked, diags, components = check(tmp_path, state='dx="0.1" dy="-2"')
+    assert diags.errors == [] and diags.warnings == []
+    points = checked.positions(components["dofs"])
+    assert points[:, 0].tolist() == [float(np.float32(0.1)), 1.0 + float(np.float32(0.1))]
+    assert points[:, 1].tolist() == [-2.0, -2.0]
+
+
+@pytest.mark.parametrize(("text", "flag"), [("0", False), ("2", True), ("false", None)])
+def test_normals_is_an_integer(tmp_path: Path, text: str, flag: bool | None) -> None:
+    """VisualModelImpl::parse: setUseNormals(getAttributeAsInt("normals", 1) != 0): "false" is not an
+    integer, so SOFA keeps useNormals true (a warning, and no value here)."""
+    checked, diags, components = check(tmp_path, visual=f'normals="{text}"')
+    assert diags.errors == []
+    assert [d.code for d in diags.warnings] == ([] if text != "false" else ["W225"])
+    assert checked.value(components["skin"], "normals") is flag
