@@ -14,6 +14,8 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
         "LinearMovementProjectiveConstraint"
     ),
+    # Lagrangian contact (issue 17): LocalMinDistance and FrictionContactConstraint
+    "Component/AnimationLoop/FreeMotionAnimationLoop.scn": "LocalMinDistance",
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others
@@ -30,5 +32,8 @@ SUPPORTED_SINCE_MANIFEST = frozenset(
         "LinearSolverConstraintCorrection",
         # its scene also maps rigids to rigids (RigidMapping Rigid3d,Rigid3d, not compiled)
         "JointSpringForceField",
+        # Lagrangian contact (issue 17): the scenes naming them may stay rejected for others
+        "LocalMinDistance",
+        "RuleBasedContactManager",
     }
 )

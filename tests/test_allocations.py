@@ -157,3 +157,21 @@ def test_contact_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path, 
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}
+
+
+def test_lagrangian_contact_scenes_do_not_allocate_in_a_step(
+    shim: Path, shared_dir: Path, tmp_path: Path
+) -> None:
+    # FrictionContactConstraint under FreeMotionAnimationLoop (runtime/sofac/lagrangian_contact.h):
+    # the detection's buffers, every pair's traversal stack (reserved at the first detection), the
+    # contacts, their rows and Jacobians in buffers reserved at init; a particle resting on a floor
+    # (BGS) and a torus and a cube in a box whose contacts come and go (LCP, 3 to 30 a step).
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_lagrangian_contact import FLAT, scene
+
+    scenes = [
+        scene(tmp_path, FLAT, (0.3, 0.06, 0.2)),
+        shared_dir / "corpus/sofa/Component/Collision/Response/FrictionContact.scn",
+    ]
+    counts = allocations(shim, scenes)
+    assert counts == {str(path): [0, 0] for path in scenes}

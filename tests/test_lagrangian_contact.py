@@ -119,10 +119,13 @@ def plan_of(path: Path) -> Plan:
     return plan_scene(checked)
 
 
-def test_the_effects_list_the_contact_rows(tmp_path: Path) -> None:
-    from sofac.plan.report import format_effects
+def test_the_effects_and_schedule_list_the_contact_rows(tmp_path: Path) -> None:
+    from sofac.plan.report import format_effects, format_schedule
 
-    text = format_effects(plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4)))
+    plan = plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4))
+    schedule = format_schedule(plan)
+    assert "constraint rows: 384 (at most: 0 of the scene's constraints, then up to 128 contacts" in schedule
+    text = format_effects(plan)
     assert "local_min_distance::triangle_point, FrictionContactConstraint mu=0.4: 3 constraint row(s)" in text
 
 
@@ -132,6 +135,22 @@ def test_a_negative_mu_is_an_error_with_its_line(tmp_path: Path) -> None:
     (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E207"]
     assert diagnostic.loc.line == 9 and diagnostic.loc.attribute == "responseParams"
     assert "mu=-0.5 must be >= 0" in diagnostic.message
+
+
+def test_a_constraint_below_the_root_with_contacts_is_refused(tmp_path: Path) -> None:
+    path = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
+    bilateral = (
+        '        <BilateralLagrangianConstraint object1="@/Floor/dofs" object2="@/Particle/dofs" '
+        'first_point="0" second_point="0"/>\n'
+    )
+    text = path.read_text().replace(
+        "        <PointCollisionModel />\n", "        <PointCollisionModel />\n" + bilateral
+    )
+    path.write_text(text)
+    with pytest.raises(SceneError) as error:
+        plan_of(path)
+    (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E222"]
+    assert diagnostic.loc.line == 17 and "move it to the root" in diagnostic.message
 
 
 def test_penalty_contact_under_free_motion_keeps_the_contact_guard(tmp_path: Path) -> None:

@@ -97,6 +97,19 @@ def format_schedule(plan: Plan) -> str:
     return "\n".join(lines)
 
 
+def _contact_rows(plan: Plan) -> str:
+    """How many of the phase's rows its Lagrangian contacts may take, and where they come from."""
+    for collision in plan.collisions:
+        if collision.response == "friction_contact" and collision.pairs:
+            per = 3 if collision.mu > 0 else 1
+            return (
+                f" (at most: {collision.static_rows} of the scene's constraints, then up to "
+                f"{collision.row_capacity // per} contacts of {per} row(s) from {collision.origin}, "
+                "detected each step)"
+            )
+    return ""
+
+
 def _constraint_schedule(plan: Plan) -> list[str]:
     """FreeMotionAnimationLoop's constraint phase: the solver and its settings, the corrections,
     the states SOFA leaves frozen."""
@@ -109,7 +122,8 @@ def _constraint_schedule(plan: Plan) -> list[str]:
         f"constraint phase of {phase.loop} (the solves above are the free motion):",
         f"  solver {solver}: {phase.method}" + (f" ({settings})" if settings else ""),
         f"  constraint rows: {phase.capacity}"
-        + (" (x = x_free, v = v_free: each correction adds C J^T 0)" if not phase.capacity else ""),
+        + (" (x = x_free, v = v_free: each correction adds C J^T 0)" if not phase.capacity else "")
+        + _contact_rows(plan),
         "  corrections:",
     ]
     lines.extend(f"    - {c.origin}: {c.kind} on {c.state.path}" for c in phase.corrections)

@@ -79,12 +79,17 @@ public:
         lagrangian.resize(models.size());
         rank.assign(pairs.size(), 0);
         object_.resize(pairs.size());
-        for (auto& o : object_) o.previous.reserve(64);
+        for (auto& o : object_) o.previous.reserve(static_cast<std::size_t>(capacity));
         previous_forces_.reserve(static_cast<std::size_t>(capacity));
         ids_.reserve(static_cast<std::size_t>(capacity));
         kept_.resize(pairs.size());
-        for (auto& k : kept_) k.reserve(64);
+        for (std::size_t i = 0; i < pairs.size(); ++i) {  // as many as the pair's outputs may be
+            const PenaltyPair& p = pairs[i];
+            const Index most = std::max(models[p.model[0]].elements, models[p.model[1]].elements);
+            kept_[i].reserve(4 * static_cast<std::size_t>(most));
+        }
         contacts_.reserve(static_cast<std::size_t>(capacity));
+        scratch_points_.reserve(1);
         order_.reserve(pairs.size());
         blocks_.reserve(static_cast<std::size_t>(capacity));
         rows_.resize(static_cast<std::size_t>(bodies));
@@ -112,7 +117,8 @@ public:
         contacts_.clear();
         order_.clear();
         for_each_contact([&](Index pair) { order_.push_back(pair); });
-        std::stable_sort(order_.begin(), order_.end(), [&](Index a, Index b) { return rank[a] < rank[b]; });
+        for (std::size_t i = 1; i < order_.size(); ++i)  // stable, without std::stable_sort's buffer
+            for (std::size_t j = i; j > 0 && rank[order_[j]] < rank[order_[j - 1]]; --j) std::swap(order_[j], order_[j - 1]);
         const int lines = mu_ > 0.0 ? 3 : 1;
         Index row = static_rows_;
         for (const Index index : order_) {
@@ -489,7 +495,7 @@ inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, doubl
     report[0] += 1.0;
     report[1] = double(result.iterations);
     report[2] = result.error;
-    if (!result.converged) {
+    if (n > 0 && !result.converged) {  // (no row, no contact this step: nothing to converge)
         report[3] += 1.0;
         report[4] = time;
         report[5] = result.error;
@@ -532,7 +538,7 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
     report[0] += 1.0;
     report[1] = double(result.iterations);
     report[2] = result.error;
-    if (!result.converged) {
+    if (n > 0 && !result.converged) {
         report[3] += 1.0;
         report[4] = time;
         report[5] = result.error;

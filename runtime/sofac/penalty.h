@@ -149,6 +149,10 @@ public:
     void detect(Narrow&& narrow) {
         const Index n = static_cast<Index>(models.size());
         watch_fast_motion();
+        if (!stacks_reserved_) {  // every pair's traversal stack, once the trees exist (first detection)
+            for (PenaltyPair& p : pairs) p.stack.reserve_for(models[p.model[0]].tree, models[p.model[1]].tree);
+            stacks_reserved_ = true;
+        }
         const Index found = brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
         auto& outputs = outputs_map_.map();
         for (auto& entry : outputs) pairs[entry.second].outputs.clear();  // beginNarrowPhase
@@ -494,6 +498,7 @@ private:
 
     double alarm_distance_ = 0.0, contact_distance_ = 0.0;
     bool watching_ = false;  // a detection ran before: root boxes to compare with
+    bool stacks_reserved_ = false;
     Index fast_motions_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;

@@ -301,6 +301,19 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     lagrangian = _lagrangian_collision(planner)
     n = phase.capacity + (lagrangian.row_capacity if lagrangian is not None else 0)
     if lagrangian is not None:
+        root = planner.checked.scene.root
+        for checked in planner.checked:
+            if (
+                phase.capacity
+                and checked.category is Category.LAGRANGIAN_CONSTRAINT
+                and checked.component.node is not root
+            ):
+                planner.unsupported(
+                    checked,
+                    "with Lagrangian contacts, sofac places the scene's own constraint rows before the "
+                    "contacts', which SOFA does for constraints in the root node only; move it to the root",
+                )
+                return
         lagrangian.static_rows = phase.capacity
         phase.capacity = n
         if phase.kept is None:
