@@ -14,6 +14,10 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
         "LinearMovementProjectiveConstraint"
     ),
+    # a SparseLDLSolver preconditioning the PCG, a Tetra2Triangle surface (issue 17, fallbeam); its
+    # augmented-Lagrangian contact response is never compiled: the contact guard stops the run
+    # before the beam's first contact, as in fallingBeamLagrangianCollision.scn
+    "Demos/fallingBeamAugmentedLagrangianCollision.scn": "SparseLDLSolver",
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others

@@ -19,6 +19,7 @@ import pytest
 import sofac
 from kernel_shim import D, build_shim
 from kernel_shim import doubles as _d
+from sofac.pipeline import plan_file
 
 SHIM = r"""
 #include "sofac/solvers.h"
@@ -204,3 +205,14 @@ def test_a_dense_svd_preconditioner_is_refused(tmp_path: Path) -> None:
     solver = '<PCGLinearSolver iterations="5" preconditioner="@svd"/>\n  <SVDLinearSolver name="svd"/>'
     with pytest.raises(sofac.SceneError, match=r"E222.*SVDLinearSolver as a PCG preconditioner"):
         _load(tmp_path, solver)
+
+
+def test_the_preconditioner_is_part_of_the_step(tmp_path: Path) -> None:
+    """`sofac inspect --effects`: the direct solver preconditions the PCG (it is not kept out), on the
+    matrix its PreconditionedMatrixFreeSystem assembles every assemblingRate solves."""
+    scene = tmp_path / "effects.scn"
+    scene.write_text(SCENE.format(solver=RATED.format(rate=3)))
+    effects = plan_file(scene).effects
+    (line,) = [(e, why) for e, origin, why in effects if origin.startswith("SparseLDLSolver")]
+    assert line[0] == "linear_solve"
+    assert line[1].startswith("preconditions PCGLinearSolver") and line[1].endswith("every 3 solves")
