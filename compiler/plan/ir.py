@@ -395,6 +395,9 @@ class Group:
     # A PCGLinearSolver's PrecomputedWarpPreconditioner: SOFA's apply leaves the output as it was,
     # so the PCG stops before its first iteration and dv keeps its start (pcg is then empty).
     inert_preconditioner: Component | None = None
+    # The solvers the PCG's preconditioner runs (a direct solver; WarpPreconditioner and its inner
+    # direct solver): part of the step, not kept out.
+    preconditioners: list[Component] = field(default_factory=list)
     assemble: list[Op] = field(default_factory=list)  # A += mfact M + kfact K, block by block
     # StaticSolver (an "implicit" group: same stiffness and solves): its NewtonRaphsonSolver's
     # parameters; empty for a time integrator.

@@ -65,6 +65,17 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
         linear = group.linear_solver
         if linear is not None and all(linear is not c for c in planner.lowered):
             effects.append(("linear_solve", origin_of(linear), f"solves the system of {states}"))
+        for preconditioner in group.preconditioners:
+            rate = group.pcg.get("assemblingRate")
+            every = int(rate.initial[0]) if rate is not None else 1
+            when = "every solve" if every == 1 else f"every {every} solves"
+            effects.append(
+                (
+                    "linear_solve",
+                    origin_of(preconditioner),
+                    f"preconditions {origin_of(group.linear_solver)}, on the matrix assembled {when}",
+                )
+            )
     if planner.gravity.key not in planner.pruned:
         effects.append(
             ("gravity", "root node", f"g = {planner.gravity.initial.tolist()}, applied by the masses")

@@ -158,6 +158,7 @@ class Planner:
         if self.diags.has_errors():
             raise SceneError(self.diags.sorted())
         solving = {id(g.linear_solver) for g in groups if g.linear_solver is not None}  # in the step
+        solving |= {id(c) for g in groups for c in g.preconditioners}
         self.ignored = [(component, why) for component, why in self.ignored if id(component) not in solving]
         return Plan(
             scene_file=str(self.checked.scene.file),

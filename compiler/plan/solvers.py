@@ -150,6 +150,8 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
                 preconditioner, "omega", [float(planner.value(preconditioner, "omega"))], role="param"
             )
         group.preconditioner, group.assembled = block, True
+        if all(c is not preconditioner for c in group.preconditioners):  # a warp lists itself
+            group.preconditioners.insert(0, preconditioner)
     return True
 
 
@@ -241,6 +243,7 @@ def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> 
         planner.unsupported(warp, "its linearSolver must be a sparse direct solver")
         return False
     group.llt = spec.role == "llt"
+    group.preconditioners += [warp.component, inner]
     return True
 
 
