@@ -159,7 +159,7 @@ CASES = [
     ),
     Case(
         "positions-not-multiple-of-3",
-        "E205",
+        "W225",  # SOFA drops the incomplete last value
         dyn("""\
     <Node name="c">
         <MechanicalObject position="0 0 0  1 0"/>
@@ -171,7 +171,7 @@ CASES = [
     ),
     Case(
         "rigid-positions-not-multiple-of-7",
-        "E205",
+        "W225",  # SOFA drops the incomplete last value
         dyn("""\
     <Node name="r">
         <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0"/>
@@ -183,7 +183,7 @@ CASES = [
     ),
     Case(
         "vec2-positions",
-        "E205",
+        "W225",  # SOFA drops the incomplete last value
         """\
 <Node name="root">
     <MechanicalObject template="Vec2d" position="0 0  1 1  2"/>

@@ -342,8 +342,10 @@ class _Checker:
             try:
                 value = field_spec.type.parse(attribute.value)
             except FieldValueError as error:
-                # (a warning: SOFA goes on with the default, which the field keeps)
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
+                if error.code.startswith("W") and error.value is not None:
+                    out[field_spec.name] = error.value  # what SOFA reads from the text anyway
+                # (otherwise the field keeps its default, as SOFA does after a warning)
                 continue
             if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
                 # Only the mass itself: a rigid mass's volume and inertia terms may be 0 (or negative
@@ -885,6 +887,24 @@ class _Checker:
             field_spec = checked.spec.field(name)
             assert field_spec is not None
             problem = field_spec.type.check_count(value, datatype)
+            if problem and isinstance(field_spec.type, Coords) and not field_spec.type.allow_single:
+                # SOFA's vector<Coord>::read stops at the incomplete last value and drops it (the end
+                # of the text clears the stream's error): a warning, and the complete values only.
+                unit = field_spec.type.unit(datatype)
+                kept = (value.size // unit) * unit
+                what = ("Deriv" if field_spec.type.deriv else "Coord") + ("s" if kept != unit else "")
+                dropped = value.size - kept
+                self.diags.add(
+                    "W225",
+                    checked.component.attribute_loc(self._attribute_name(checked, name)),
+                    f"{checked.spec.name} {checked.component.label!r}: {name}: {problem}: SOFA reads "
+                    f"{kept // unit} {datatype.name} {what} and ignores the last "
+                    f"{dropped} number{'s' if dropped > 1 else ''}",
+                    f"give {unit} numbers per DOF",
+                )
+                checked.fields[name] = value[:kept]
+                checked.cache.pop(name, None)
+                continue
             if problem and not (
                 isinstance(field_spec.type, Coords)
                 and field_spec.type.allow_single

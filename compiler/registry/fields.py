@@ -21,10 +21,12 @@ from .datatypes import DataType
 class FieldValueError(ValueError):
     """A value that does not parse (E204), has the wrong count (E205) or is not finite (E206)."""
 
-    def __init__(self, message: str, code: str = "E204", hint: str = "") -> None:
+    def __init__(self, message: str, code: str = "E204", hint: str = "", value: Any = None) -> None:
         super().__init__(message)
         self.code = code
         self.hint = hint
+        # For a warning (code W...): the value SOFA reads from the text anyway (None: its default).
+        self.value = value
 
 
 def _format_real(x: float) -> str:
@@ -181,6 +183,8 @@ class Real(FieldType):
         return float(values[0])
 
 
+# The integer `istream >> int` reads at the start of a text (white space skipped).
+_STREAM_INT = re.compile(r"\s*[+-]?\d+")
 # What strtof / strtol accept in full: leading white space, then one decimal number, nothing after.
 _STRTOF = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _STRTOL = re.compile(r"\s*[+-]?\d+")
@@ -225,10 +229,26 @@ class Int(FieldType):
     nonnegative: bool = False
 
     def parse(self, text: str) -> int:
-        values = parse_ints(text, nonnegative=self.nonnegative)
-        if values.size != 1:
+        try:
+            values = parse_ints(text, nonnegative=self.nonnegative)
+        except FieldValueError:
+            values = None
+        if values is not None and values.size == 1:
+            return int(values[0])
+        # Data<int>::read is `istream >> int`: the integer the text starts with, the rest unread
+        # (CGLinearSolver iterations="1e4" is 1 iteration, Component/Mapping/NonLinear/SquareMapping.scn).
+        prefix = _STREAM_INT.match(text)
+        if prefix is None or (self.nonnegative and int(prefix.group()) < 0):
+            if values is None:
+                return int(parse_ints(text, nonnegative=self.nonnegative)[0])  # its diagnostic
             raise FieldValueError(f"expected one integer, got {values.size}", code="E205")
-        return int(values[0])
+        number = int(prefix.group())
+        raise FieldValueError(
+            f"SOFA reads an integer from the start of {text.strip()[:40]!r}: {number}, and ignores the rest",
+            code="W225",
+            hint=f"write the integer alone (SOFA's value here: {number})",
+            value=number,
+        )
 
 
 _TRUE = {"1", "true", "yes", "on"}
