@@ -14,6 +14,8 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
         "LinearMovementProjectiveConstraint"
     ),
+    # with RigidMapping Rigid3d,Rigid3d (joints)
+    "Component/SolidMechanics/Spring/JointSpringForceField.scn": "JointSpringForceField",
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others
@@ -28,7 +30,5 @@ SUPPORTED_SINCE_MANIFEST = frozenset(
         "LCPConstraintSolver",
         "UncoupledConstraintCorrection",
         "LinearSolverConstraintCorrection",
-        # its scene also maps rigids to rigids (RigidMapping Rigid3d,Rigid3d, not compiled)
-        "JointSpringForceField",
     }
 )

@@ -115,3 +115,20 @@ def test_integer_data_reads_the_leading_integer(tmp_path: Path) -> None:
     assert "SOFA's value here: 1" in diags.warnings[0].hint
     cg = next(c for c in checked.scene.root.components() if c.label == "cg")
     assert checked.value(cg, "iterations") == 1
+
+
+def test_rigid_mass_reads_its_first_eleven_numbers(tmp_path: Path) -> None:
+    """`istream >> RigidMass` reads mass, volume and the 3x3 inertia and leaves the rest unread
+    (Component/Constraint/Lagrangian/BilateralLagrangianConstraint_Rigid.scn gives 12 numbers)."""
+    path = tmp_path / "mass.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerExplicitSolver/>\n'
+        '  <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1"/>\n'
+        '  <UniformMass name="mass" vertexMass="1 1 0.1 0 0 0 0.1 0 0 0 0.1 0"/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [("W225", 3, "vertexMass")]
+    mass = next(c for c in checked.scene.root.components() if c.label == "mass")
+    assert np.asarray(checked.value(mass, "vertexMass")).tolist() == [1, 1, 0.1, 0, 0, 0, 0.1, 0, 0, 0, 0.1]

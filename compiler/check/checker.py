@@ -887,6 +887,19 @@ class _Checker:
             field_spec = checked.spec.field(name)
             assert field_spec is not None
             problem = field_spec.type.check_count(value, datatype)
+            if problem and isinstance(field_spec.type, MassValue) and value.size > max(datatype.mass_sizes):
+                # `istream >> MassType` reads one mass and leaves the rest of the text unread
+                # (Component/Constraint/Lagrangian/BilateralLagrangianConstraint_Rigid.scn: 12 numbers)
+                kept = max(datatype.mass_sizes)
+                self.diags.add(
+                    "W225",
+                    checked.component.attribute_loc(self._attribute_name(checked, name)),
+                    f"{checked.spec.name} {checked.component.label!r}: {name}: {problem}: SOFA reads the "
+                    f"first {kept} and ignores the rest",
+                    f"give {kept} numbers",
+                )
+                checked.fields[name] = value[:kept]
+                continue
             if problem and isinstance(field_spec.type, Coords) and not field_spec.type.allow_single:
                 # SOFA's vector<Coord>::read stops at the incomplete last value and drops it (the end
                 # of the text clears the stream's error): a warning, and the complete values only.
