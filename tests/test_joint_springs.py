@@ -334,6 +334,23 @@ def test_angle_beyond_a_limit_is_held_by_the_bloc_stiffness(lib: ctypes.CDLL) ->
         assert joint.memory[7:10].tolist() == [2.0, 1000.0, kz]
 
 
+def test_pivot_about_x_holds_the_swing(lib: ctypes.CDLL) -> None:
+    """Only rotation about x free (limits -1 1): SOFA's pivot case. With M the relative rotation's
+    matrix, theta = atan2(|(M10, M20)|, M00) the swing of the x axis; torque (KR_x torsion_x,
+    -M20 theta KR_y, M10 theta KR_z) with KR = (soft, hard, hard), here in body 1's identity frame."""
+    joint = Joint(lib, "BEGIN_SPRING 0 0 FREE_AXIS 0 0 0 1 0 0 KS_R 2 100 R_LIM_X -1 1 END_SPRING")
+    x1 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    q = qmul(turn(np.array([0.5, 0.0, 0.0])), turn(np.array([0.0, 0.2, -0.1])))
+    force = joint.force(x1, np.array([0.0, 0.0, 0.0, *q]))
+    m = rotation_of(q)
+    theta = np.arctan2(np.hypot(m[1, 0], m[2, 0]), m[0, 0])
+    angle = 2 * np.arccos(q[3])
+    torsion_x = q[0] / np.sin(angle / 2) * angle
+    expected = [2 * torsion_x, -m[2, 0] * theta * 100, m[1, 0] * theta * 100]
+    assert force[3:6] == pytest.approx(expected, rel=1e-12)
+    assert joint.memory[7:10].tolist() == [2.0, 100.0, 100.0]
+
+
 def test_rest_t_takes_the_initial_placement(lib: ctypes.CDLL) -> None:
     """REST_T given: SOFA's bwdInit overwrites it with c2 - c1 and the rest rotation with q2 q1^-1
     (that order: a body 1 turned by q1 at the start is then not at rest)."""
