@@ -88,7 +88,6 @@ CODES: dict[str, CodeInfo] = {
     "W230": _w("anisotropic rigid inertia on a rotating body (SOFA applies it in world axes)"),
     "W231": _w("a loader read only by visual models has a missing file"),
     "W232": _w("assembled solve of contacts with a static model (SOFA adds coupling blocks sofac omits)"),
-    "W233": _w("value SOFA reads differently from how it is written (an integer written as a real)"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
     "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),

@@ -43,9 +43,6 @@ _FILE_IN_MESSAGE = re.compile(r"file '([^']*)' not found")
 NOTES = {
     "Demos/collisionMultiple.scn": "The frog meshes are in SOFA's share/mesh but were not copied into it.",
     "Demos/collisionMultipleMask.scn": "The same frog meshes as collisionMultiple.scn.",
-    "Component/SolidMechanics/Spring/JointSpringForceField.scn": "This E218 is sofac being stricter than "
-    "SOFA, whose RigidMapping ignores a rigidIndexPerPoint whose length (5) differs from the number of "
-    "mapped points (32) and maps them all from index 0; a negative scene anyway.",
 }
 
 

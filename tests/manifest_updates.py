@@ -20,6 +20,8 @@ IMPLEMENTED_SINCE_MANIFEST = {
     # augmented-Lagrangian contact response is never compiled: the contact guard stops the run
     # before the beam's first contact, as in fallingBeamLagrangianCollision.scn
     "Demos/fallingBeamAugmentedLagrangianCollision.scn": "SparseLDLSolver",
+    # with RigidMapping Rigid3d,Rigid3d (joints)
+    "Component/SolidMechanics/Spring/JointSpringForceField.scn": "JointSpringForceField",
 }
 
 # Components sofac compiles since the manifest while the scenes naming them stay rejected for others
@@ -34,8 +36,6 @@ SUPPORTED_SINCE_MANIFEST = frozenset(
         "LCPConstraintSolver",
         "UncoupledConstraintCorrection",
         "LinearSolverConstraintCorrection",
-        # its scene also maps rigids to rigids (RigidMapping Rigid3d,Rigid3d, not compiled)
-        "JointSpringForceField",
         # Lagrangian contact (issue 17): the scenes naming them may stay rejected for others
         "LocalMinDistance",
         "RuleBasedContactManager",

@@ -117,3 +117,30 @@ def test_grid_topology_resolution_below_one_is_an_error(tmp_path: Path) -> None:
     )
     _, diags = check_file(path)
     assert [(d.code, d.loc.line) for d in diags.errors] == [("E207", 2)]
+
+
+def test_grid_read_through_src_has_the_legacy_resolution(tmp_path: Path) -> None:
+    """Component/Visual/DataDisplay.scn: a grid given by nx ny nz / xmin..zmax, read by another
+    RegularGridTopology through src=: SOFA's parse wrote them into n, min and max, which src links,
+    so the second grid has the 100 points too (index 99 is valid)."""
+    path = tmp_path / "src.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/>\n'
+        '  <Node name="Mesh">\n'
+        '    <RegularGridTopology name="Grid" nx="10" ny="10" nz="1" xmin="0" xmax="9" ymin="0" ymax="9" '
+        'zmin="0" zmax="1"/>\n'
+        '    <MechanicalObject name="MO"/>\n'
+        "  </Node>\n"
+        '  <Node name="Simulation">\n'
+        '    <RegularGridTopology src="@/Mesh/Grid"/>\n'
+        '    <MechanicalObject name="dofs"/>\n'
+        '    <FixedProjectiveConstraint indices="0 9 99"/>\n'
+        "  </Node>\n"
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == [] and diags.warnings == []
+    states = {c.label: c for c in checked.scene.root.components() if c.type_name == "MechanicalObject"}
+    source, copy = checked.positions(states["MO"]), checked.positions(states["dofs"])
+    assert source.shape == (100, 3) and np.array_equal(source, copy)
+    assert source[99].tolist() == [9.0, 9.0, 0.0]

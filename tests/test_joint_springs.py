@@ -334,6 +334,23 @@ def test_angle_beyond_a_limit_is_held_by_the_bloc_stiffness(lib: ctypes.CDLL) ->
         assert joint.memory[7:10].tolist() == [2.0, 1000.0, kz]
 
 
+def test_pivot_about_x_holds_the_swing(lib: ctypes.CDLL) -> None:
+    """Only rotation about x free (limits -1 1): SOFA's pivot case. With M the relative rotation's
+    matrix, theta = atan2(|(M10, M20)|, M00) the swing of the x axis; torque (KR_x torsion_x,
+    -M20 theta KR_y, M10 theta KR_z) with KR = (soft, hard, hard), here in body 1's identity frame."""
+    joint = Joint(lib, "BEGIN_SPRING 0 0 FREE_AXIS 0 0 0 1 0 0 KS_R 2 100 R_LIM_X -1 1 END_SPRING")
+    x1 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    q = qmul(turn(np.array([0.5, 0.0, 0.0])), turn(np.array([0.0, 0.2, -0.1])))
+    force = joint.force(x1, np.array([0.0, 0.0, 0.0, *q]))
+    m = rotation_of(q)
+    theta = np.arctan2(np.hypot(m[1, 0], m[2, 0]), m[0, 0])
+    angle = 2 * np.arccos(q[3])
+    torsion_x = q[0] / np.sin(angle / 2) * angle
+    expected = [2 * torsion_x, -m[2, 0] * theta * 100, m[1, 0] * theta * 100]
+    assert force[3:6] == pytest.approx(expected, rel=1e-12)
+    assert joint.memory[7:10].tolist() == [2.0, 100.0, 100.0]
+
+
 def test_rest_t_takes_the_initial_placement(lib: ctypes.CDLL) -> None:
     """REST_T given: SOFA's bwdInit overwrites it with c2 - c1 and the rest rotation with q2 q1^-1
     (that order: a body 1 turned by q1 at the start is then not at rest)."""
@@ -398,3 +415,108 @@ def test_infile_is_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(SceneError, match="constant joint forces read from infile are not compiled yet"):
         compile_scene(path)
+
+
+# ---- RigidMapping Rigid3d -> Rigid3d (the frames JointSpringForceField.scn joins) ----------------
+
+FRAMES = """\
+<Node name="root" gravity="0 0 0" dt="0.01"><DefaultAnimationLoop/>
+  <Node name="body">{solver}
+    <MechanicalObject template="Rigid3d" name="parent" position="1 2 3 {q}" velocity="0.5 0 0 0.1 0.2 -0.3"/>
+    <UniformMass vertexMass="1 1 [1 0 0,0 1 0,0 0 1]"/>
+    <Node name="frames">
+      <MechanicalObject template="Rigid3d" name="child" position="0.4 -0.2 0.1 {local}  0 0 0 0 0 0 1"/>
+      <RigidMapping input="@../parent" output="@child"/>
+      {extra}
+    </Node>
+  </Node>
+</Node>
+"""
+QP = turn(np.array([0.3, -0.5, 0.2]))
+QL = turn(np.array([-0.1, 0.4, 0.6]))
+
+
+def frames_scene(tmp_path: Path, solver: str = '<EulerExplicitSolver symplectic="0"/>', extra: str = ""):  # type: ignore[no-untyped-def]
+    path = tmp_path / "frames.scn"
+    text = FRAMES.format(
+        solver=solver,
+        q=" ".join(repr(float(c)) for c in QP),
+        local=" ".join(repr(float(c)) for c in QL),
+        extra=extra,
+    )
+    path.write_text(text)
+    return compile_scene(path).instantiate()
+
+
+def rotation_of(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def test_rigid_to_rigid_mapping_places_and_moves_the_frames(tmp_path: Path) -> None:
+    """x = (c + R p, q q_local), v = (v_c + w x R p, w) (SOFA's RigidMapping<Rigid3, Rigid3>)."""
+    simulation = frames_scene(tmp_path)
+    child = simulation["child"]
+    r = rotation_of(QP) @ np.array([0.4, -0.2, 0.1])
+    assert child.position[0, :3] == pytest.approx(np.array([1.0, 2.0, 3.0]) + r, abs=1e-14)
+    assert child.position[0, 3:] == pytest.approx(qmul(QP, QL), abs=1e-15)
+    assert child.position[1] == pytest.approx([1.0, 2.0, 3.0, *QP], abs=1e-15)
+    w = np.array([0.1, 0.2, -0.3])
+    assert child.velocity[0] == pytest.approx([*(np.array([0.5, 0, 0]) + np.cross(w, r)), *w], abs=1e-14)
+
+
+def test_rigid_to_rigid_mapping_carries_forces_and_torques(tmp_path: Path) -> None:
+    """applyJT with SOFA's Rigid3 updateOmega: f_c += f, tau_c += tau + r x f; one explicit step of a
+    unit body from its velocity."""
+    force = np.array([1.0, -2.0, 0.5, 0.3, 0.0, -0.7])
+    simulation = frames_scene(
+        tmp_path, extra=f'<ConstantForceField indices="0" forces="{" ".join(str(f) for f in force)}"/>'
+    )
+    simulation.step(1)
+    r = rotation_of(QP) @ np.array([0.4, -0.2, 0.1])
+    torque = force[3:] + np.cross(r, force[:3])
+    velocity = simulation["parent"].velocity[0]
+    assert velocity[:3] == pytest.approx(np.array([0.5, 0, 0]) + DT * force[:3], abs=1e-14)
+    assert velocity[3:] == pytest.approx(np.array([0.1, 0.2, -0.3]) + DT * torque, abs=1e-14)
+
+
+def test_joint_spring_on_mapped_frames_direct_and_cg_agree(tmp_path: Path) -> None:
+    """A joint spring between the two mapped frames (one turned and offset from the other): the
+    matrix-free CG and the assembled LDL solve (J^T K J through the mapping) give the same step."""
+    spring = 'object1="@child" object2="@child" spring="BEGIN_SPRING 0 1 KS_T 50 80 KS_R 3 40 END_SPRING"'
+    extra = f"<JointSpringForceField {spring}/>"
+    results = []
+    for solver in (
+        '<EulerImplicitSolver rayleighStiffness="0" rayleighMass="0"/>'
+        '<CGLinearSolver iterations="200" tolerance="1e-30" threshold="1e-30"/>',
+        '<EulerImplicitSolver rayleighStiffness="0" rayleighMass="0"/>'
+        '<SparseLDLSolver template="CompressedRowSparseMatrixd"/>',
+    ):
+        folder = tmp_path / str(len(results))
+        folder.mkdir()
+        simulation = frames_scene(folder, solver=solver, extra=extra)
+        simulation.step(3)
+        results.append(simulation["parent"].velocity.copy())
+    assert np.abs(results[0]).max() > 0.1
+    assert results[0] == pytest.approx(results[1], abs=1e-12)
+
+
+def test_corpus_joint_spring_scene_runs(corpus_dir: Path) -> None:
+    """Component/SolidMechanics/Spring/JointSpringForceField.scn: its rigidIndexPerPoint has 5 entries
+    for 9 frames, so SOFA maps every attach from the fixed DOF 0: the springs hold nothing and the
+    three free bodies fall, unturned."""
+    simulation = compile_scene(
+        corpus_dir / "Component/SolidMechanics/Spring/JointSpringForceField.scn"
+    ).instantiate()
+    simulation.step(10)
+    bodies = simulation["DOFs"].position
+    assert bodies[0].tolist() == [0, 0, 0, 0, 0, 0, 1]
+    assert (bodies[1:, 1] < -0.04).all() and np.allclose(bodies[1:, 3:], [0, 0, 0, 1])
+    centres = simulation["attaches"].position[:, :3]
+    assert centres[:, 0].tolist() == [0, *[-1, 1] * 4] and not centres[:, 1:].any()

@@ -71,3 +71,64 @@ def test_normals_is_an_integer(tmp_path: Path, text: str, flag: bool | None) -> 
     assert diags.errors == []
     assert [d.code for d in diags.warnings] == ([] if text != "false" else ["W225"])
     assert checked.value(components["skin"], "normals") is flag
+
+
+def test_incomplete_last_coordinate_is_dropped(tmp_path: Path) -> None:
+    """vector<Coord>::read stops at an incomplete last value and drops it, the end of the text
+    clearing the stream's error: SOFA reads 3 points from 10 numbers (Component/IO/Mesh/
+    STLExporter.scn) and one rigid, quaternion 0 0 0 0, from "0 0 0 0 0 0 0 1"
+    (Component/SolidMechanics/Spring/RestShapeSpringsForceField2.scn). A warning, not E205."""
+    path = tmp_path / "short.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/>\n'
+        '  <MechanicalObject name="points" position="0 1 2 3 4 5 6 7 8 9"/>\n'
+        '  <Node name="r">\n'
+        '    <MechanicalObject name="frame" template="Rigid3" position="0 0 0 0 0 0 0 1"/>\n'
+        "  </Node>\n"
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [
+        ("W225", 2, "position"),
+        ("W225", 4, "position"),
+    ]
+    assert "SOFA reads 3 Vec3d Coords and ignores the last 1 number" in diags.warnings[0].message
+    components = {c.label: c for c in checked.scene.root.components()}
+    assert checked.positions(components["points"]).tolist() == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    assert checked.positions(components["frame"]).tolist() == [[0, 0, 0, 0, 0, 0, 0]]
+
+
+def test_integer_data_reads_the_leading_integer(tmp_path: Path) -> None:
+    """Data<int>::read is `istream >> int`: iterations="1e4" is 1 iteration in SOFA, silently
+    (Component/Mapping/NonLinear/SquareMapping.scn): a warning naming SOFA's value, which is used."""
+    path = tmp_path / "cg.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/>\n'
+        '  <EulerImplicitSolver/>\n  <CGLinearSolver name="cg" iterations="1e4"/>\n'
+        '  <MechanicalObject position="0 0 0"/>\n  <UniformMass totalMass="1"/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [("W225", 3, "iterations")]
+    assert "SOFA's value here: 1" in diags.warnings[0].hint
+    cg = next(c for c in checked.scene.root.components() if c.label == "cg")
+    assert checked.value(cg, "iterations") == 1
+
+
+def test_rigid_mass_reads_its_first_eleven_numbers(tmp_path: Path) -> None:
+    """`istream >> RigidMass` reads mass, volume and the 3x3 inertia and leaves the rest unread
+    (Component/Constraint/Lagrangian/BilateralLagrangianConstraint_Rigid.scn gives 12 numbers)."""
+    path = tmp_path / "mass.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerExplicitSolver/>\n'
+        '  <MechanicalObject template="Rigid3d" position="0 0 0 0 0 0 1"/>\n'
+        '  <UniformMass name="mass" vertexMass="1 1 0.1 0 0 0 0.1 0 0 0 0.1 0"/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [("W225", 3, "vertexMass")]
+    mass = next(c for c in checked.scene.root.components() if c.label == "mass")
+    assert np.asarray(checked.value(mass, "vertexMass")).tolist() == [1, 1, 0.1, 0, 0, 0, 0.1, 0, 0, 0, 0.1]

@@ -70,10 +70,15 @@ def test_topology_springs_solve_as_a_linear_system(sim: Simulation) -> None:
     assert sim["mesh_dofs"].velocity[0].tolist() == [0.0, 0.0, 0.0]
 
 
-def test_springs_given_by_a_file_are_refused(tmp_path: Path) -> None:
-    from sofac.diagnostics import SceneError
-
-    path = tmp_path / "file.scn"
-    path.write_text(SCENE.replace('useTopology="1"', 'useTopology="1" springs="0 1 30 0 1 0 0"'))
-    with pytest.raises(SceneError, match="springs given by springs are not compiled yet"):
-        compile_scene(path)
+def test_a_springs_list_applies_no_force(tmp_path: Path) -> None:
+    """With `springs` given, SOFA's bwdInit builds no edge for them, so addForce loops over no spring:
+    a warning on the attribute, and the displaced mesh (no gravity) stays at rest."""
+    path = tmp_path / "listed.scn"
+    path.write_text(SCENE.replace('useTopology="1"', 'useTopology="1" springs="30 0 1 0 0"'))
+    with pytest.warns(UserWarning, match="SOFA applies no spring when `springs` is given"):
+        compiled = compile_scene(path)
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in compiled.warnings] == [("W225", 14, "springs")]
+    simulation = compiled.instantiate()
+    simulation["mesh_dofs"].position[2] += [0.1, -0.2, 0.3]
+    simulation.step(1)
+    assert not simulation["mesh_dofs"].velocity.any()

@@ -32,7 +32,6 @@ from sofac.registry.fields import (
     Link,
     LinkList,
     MassValue,
-    ReadDifferently,
     SofaData,
     Springs,
 )
@@ -342,12 +341,11 @@ class _Checker:
                 continue
             try:
                 value = field_spec.type.parse(attribute.value)
-            except ReadDifferently as read:
-                self.diags.add("W233", attribute.loc, f"{owner}: {name}: {read}", read.hint)
-                value = read.value
             except FieldValueError as error:
-                # (a warning: SOFA goes on with the default, which the field keeps)
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
+                if error.code.startswith("W") and error.value is not None:
+                    out[field_spec.name] = error.value  # what SOFA reads from the text anyway
+                # (otherwise the field keeps its default, as SOFA does after a warning)
                 continue
             if isinstance(field_spec.type, MassValue) and np.size(value) and not float(value[0]) > 0:
                 # Only the mass itself: a rigid mass's volume and inertia terms may be 0 (or negative
@@ -797,11 +795,6 @@ class _Checker:
         datatype = checked.datatype or DATATYPES["Vec3d"]
         value = self.value(checked, "position", raw=True)
         velocity = self.value(checked, "velocity", raw=True)
-        # MechanicalObject::init: rest positions longer than the positions (one default coordinate
-        # when none is given) are copied into them ("X0 set but not X").
-        rest = self._written_rest_positions(checked)
-        if rest is not None and len(rest) > max(np.size(value) // datatype.coord_size, 1):
-            return rest
         # MechanicalObject::init also takes its topology's points when it holds one position and at
         # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
         # size > 1 resized it at parse time.
@@ -852,24 +845,6 @@ class _Checker:
             return None
         return value.reshape(-1, datatype.coord_size)
 
-    def _written_rest_positions(self, checked: CheckedComponent) -> np.ndarray | None:
-        """A state's rest_position as the scene writes or links it (None when it does neither)."""
-        datatype = checked.datatype or DATATYPES["Vec3d"]
-        if "rest_position" in checked.fields:
-            value = checked.fields["rest_position"]
-        elif "rest_position" in checked.data_links:
-            path, _ = checked.data_links["rest_position"]
-            target = links.resolve(path, checked.component)
-            source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
-            if source is None or source.spec is None:
-                return None
-            value = self.value(source, path.data or "rest_position")
-        else:
-            return None
-        if value is None or not np.size(value) or np.size(value) % datatype.coord_size:
-            return None
-        return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
-
     def _default_single(self, checked: CheckedComponent) -> bool:
         """A state nothing gives positions (none written, linked or from src; no topology in its
         node, no mapping writing it) keeps the one coordinate SOFA's MechanicalObject starts with."""
@@ -908,21 +883,41 @@ class _Checker:
         datatype = checked.datatype
         if datatype is None:
             return
-        for name, value in list(checked.fields.items()):
+        for name, value in checked.fields.items():
             field_spec = checked.spec.field(name)
             assert field_spec is not None
-            if isinstance(field_spec.type, MassValue) and isinstance(value, np.ndarray):
-                read = MassValue.read_by_sofa(value, datatype)
-                if read < value.size:
-                    self.diags.add(
-                        "W225",
-                        checked.component.attribute_loc(self._attribute_name(checked, name)),
-                        f"{checked.spec.name} {checked.component.label!r}: {name}: {value.size} numbers; "
-                        f"SOFA reads the first {read} and ignores the rest",
-                        f"remove the last {value.size - read}",
-                    )
-                    value = checked.fields[name] = value[:read]
             problem = field_spec.type.check_count(value, datatype)
+            if problem and isinstance(field_spec.type, MassValue) and value.size > max(datatype.mass_sizes):
+                # `istream >> MassType` reads one mass and leaves the rest of the text unread
+                # (Component/Constraint/Lagrangian/BilateralLagrangianConstraint_Rigid.scn: 12 numbers)
+                kept = max(datatype.mass_sizes)
+                self.diags.add(
+                    "W225",
+                    checked.component.attribute_loc(self._attribute_name(checked, name)),
+                    f"{checked.spec.name} {checked.component.label!r}: {name}: {problem}: SOFA reads the "
+                    f"first {kept} and ignores the rest",
+                    f"give {kept} numbers",
+                )
+                checked.fields[name] = value[:kept]
+                continue
+            if problem and isinstance(field_spec.type, Coords) and not field_spec.type.allow_single:
+                # SOFA's vector<Coord>::read stops at the incomplete last value and drops it (the end
+                # of the text clears the stream's error): a warning, and the complete values only.
+                unit = field_spec.type.unit(datatype)
+                kept = (value.size // unit) * unit
+                what = ("Deriv" if field_spec.type.deriv else "Coord") + ("s" if kept != unit else "")
+                dropped = value.size - kept
+                self.diags.add(
+                    "W225",
+                    checked.component.attribute_loc(self._attribute_name(checked, name)),
+                    f"{checked.spec.name} {checked.component.label!r}: {name}: {problem}: SOFA reads "
+                    f"{kept // unit} {datatype.name} {what} and ignores the last "
+                    f"{dropped} number{'s' if dropped > 1 else ''}",
+                    f"give {unit} numbers per DOF",
+                )
+                checked.fields[name] = value[:kept]
+                checked.cache.pop(name, None)
+                continue
             if problem and not (
                 isinstance(field_spec.type, Coords)
                 and field_spec.type.allow_single

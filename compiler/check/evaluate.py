@@ -218,6 +218,11 @@ def grid(ctx: Context) -> Outputs:
         "position": points.ravel(),
         "resolution": counts.astype(np.int64),
         "bounds": np.concatenate([low, high]).astype(float),
+        # the Data SOFA's parse writes from the legacy nx ny nz / xmin..zmax, which another grid's
+        # src= reads (Component/Visual/DataDisplay.scn)
+        "n": counts.astype(np.int64),
+        "min": np.asarray(low, dtype=float),
+        "max": np.asarray(high, dtype=float),
         **cells,
     }
 

@@ -21,24 +21,12 @@ from .datatypes import DataType
 class FieldValueError(ValueError):
     """A value that does not parse (E204), has the wrong count (E205) or is not finite (E206)."""
 
-    def __init__(self, message: str, code: str = "E204", hint: str = "") -> None:
+    def __init__(self, message: str, code: str = "E204", hint: str = "", value: Any = None) -> None:
         super().__init__(message)
         self.code = code
         self.hint = hint
-
-
-class ReadDifferently(Exception):  # not an error: the value is used, with a warning
-    """A value SOFA's stream reads as something other than what it says (W233): ``value`` is what
-    SOFA reads, and what sofac uses."""
-
-    def __init__(self, value: Any, message: str, hint: str) -> None:
-        super().__init__(message)
+        # For a warning (code W...): the value SOFA reads from the text anyway (None: its default).
         self.value = value
-        self.hint = hint
-
-
-# An integer written as a real ("1e4", "2.5"): C++'s integer extraction stops at '.', 'e' or 'E'.
-_INTEGER_THEN_REAL = re.compile(r"\s*([+-]?\d+)([.eE])")
 
 
 def _format_real(x: float) -> str:
@@ -195,6 +183,8 @@ class Real(FieldType):
         return float(values[0])
 
 
+# The integer `istream >> int` reads at the start of a text (white space skipped).
+_STREAM_INT = re.compile(r"\s*[+-]?\d+")
 # What strtof / strtol accept in full: leading white space, then one decimal number, nothing after.
 _STRTOF = re.compile(r"\s*[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?")
 _STRTOL = re.compile(r"\s*[+-]?\d+")
@@ -242,26 +232,22 @@ class Int(FieldType):
         try:
             values = parse_ints(text, nonnegative=self.nonnegative)
         except FieldValueError:
-            self._read_as_sofa(text)
-            raise
-        if values.size != 1:
+            values = None
+        if values is not None and values.size == 1:
+            return int(values[0])
+        # Data<int>::read is `istream >> int`: the integer the text starts with, the rest unread
+        # (CGLinearSolver iterations="1e4" is 1 iteration, Component/Mapping/NonLinear/SquareMapping.scn).
+        prefix = _STREAM_INT.match(text)
+        if prefix is None or (self.nonnegative and int(prefix.group()) < 0):
+            if values is None:
+                return int(parse_ints(text, nonnegative=self.nonnegative)[0])  # its diagnostic
             raise FieldValueError(f"expected one integer, got {values.size}", code="E205")
-        return int(values[0])
-
-    def _read_as_sofa(self, text: str) -> None:
-        """One real where an integer is expected: SOFA reads its leading digits, and nothing tells."""
-        found = _INTEGER_THEN_REAL.match(text)
-        try:
-            meant = float(text)
-        except ValueError:
-            return
-        if found is None or not math.isfinite(meant) or (self.nonnegative and int(found[1]) < 0):
-            return
-        hint = f"write {int(meant)}" if meant.is_integer() else "write an integer"
-        raise ReadDifferently(
-            int(found[1]),
-            f"{text.strip()!r} is read by SOFA as {int(found[1])} (an integer stops at {found[2]!r})",
-            hint,
+        number = int(prefix.group())
+        raise FieldValueError(
+            f"SOFA reads an integer from the start of {text.strip()[:40]!r}: {number}, and ignores the rest",
+            code="W225",
+            hint=f"write the integer alone (SOFA's value here: {number})",
+            value=number,
         )
 
 
@@ -641,16 +627,10 @@ class MassValue(FieldType):
     def check_count(self, value: Any, datatype: DataType | None) -> str | None:
         if datatype is None or not isinstance(value, np.ndarray):
             return None
-        if value.size not in datatype.mass_sizes and value.size < max(datatype.mass_sizes):
+        if value.size not in datatype.mass_sizes:
             sizes = " or ".join(str(s) for s in datatype.mass_sizes)
             return f"a {datatype.name} mass has {sizes} numbers, got {value.size}"
         return None
-
-    @staticmethod
-    def read_by_sofa(value: np.ndarray, datatype: DataType) -> int:
-        """How many of the numbers SOFA's stream reads (``operator>>`` of the mass type stops after
-        the last one it needs; Data::read ignores what follows)."""
-        return min(value.size, max(datatype.mass_sizes))
 
 
 @dataclass(frozen=True)

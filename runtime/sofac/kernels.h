@@ -8,6 +8,7 @@
 #include <cmath>
 #include <limits>
 
+#include "quaternion.h"
 #include "types.h"
 
 // Complete unrolling of the short loops over a point's coordinates (g++ -O2 keeps them as loops).
@@ -479,6 +480,45 @@ inline void rigid_apply_jt(double* in_f, const double* out_f, const Index* frame
         const Eigen::Map<const Vec3> f(out_f + 3 * i);
         linear<Rigid3d>(in_f, c) += f;
         angular(in_f, c) += Eigen::Map<const Vec3>(offset + 3 * i).cross(f);
+    }
+}
+
+// RigidMapping Rigid3d -> Rigid3d (child frames), SOFA's apply / applyJ / applyJT with its
+// Rigid3 specialisation of updateOmega: r = q.rotate(local centre) (SOFA's quaternion arithmetic),
+// x = (c + r, q * q_local); v = (v_c + w x r, w); f_c += f, tau_c += tau + r x f.
+inline void rigid_frame_apply(const double* in_x, double* out_x, const double* local, const Index* frame,
+                              double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const double* parent = in_x + 7 * frame[i];
+        const double* child = local + 7 * i;
+        const SofaQuat q = SofaQuat::load(parent + 3);
+        double* r = offset + 3 * i;
+        q.rotate(child, r);
+        const SofaQuat turned = q * SofaQuat::load(child + 3);
+        double* out = out_x + 7 * i;
+        for (int c = 0; c < 3; ++c) out[c] = parent[c] + r[c];
+        for (int c = 0; c < 4; ++c) out[3 + c] = turned.q[c];
+    }
+}
+
+inline void rigid_frame_apply_j(const double* in_v, double* out_v, const Index* frame, const double* offset,
+                                Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = frame[i];
+        Eigen::Map<Vec3>(out_v + 6 * i) =
+            linear<Rigid3d>(in_v, c) + angular(in_v, c).cross(Eigen::Map<const Vec3>(offset + 3 * i));
+        angular(out_v, i) = angular(in_v, c);
+    }
+}
+
+inline void rigid_frame_apply_jt(double* in_f, const double* out_f, const Index* frame, const double* offset,
+                                 Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = frame[i];
+        const Eigen::Map<const Vec3> f(out_f + 6 * i);
+        linear<Rigid3d>(in_f, c) += f;
+        const Vec3 torque = angular(out_f, i) + Eigen::Map<const Vec3>(offset + 3 * i).cross(f);
+        angular(in_f, c) += torque;
     }
 }
 

@@ -20,6 +20,23 @@ inline void rigid_jacobian(Assembler& A, Index child, Index parent, const Index*
     }
 }
 
+// RigidMapping Rigid3d -> Rigid3d: the linear rows as above, the angular rows the parent's w.
+inline void rigid_frame_jacobian(Assembler& A, Index child, Index parent, const Index* frame,
+                                 const double* offset, Index n) {
+    for (Index i = 0; i < n; ++i) {
+        const Index c = parent + 6 * frame[i];
+        const double* r = offset + 3 * i;
+        const Index rows[3][3] = {{c, c + 4, c + 5}, {c + 1, c + 3, c + 5}, {c + 2, c + 3, c + 4}};
+        const double weights[3][3] = {{1.0, r[2], -r[1]}, {1.0, -r[2], r[0]}, {1.0, r[1], -r[0]}};
+        for (int d = 0; d < 3; ++d) A.jacobian_row(child + 6 * i + d, 3, rows[d], weights[d]);
+        const double one = 1.0;
+        for (int d = 0; d < 3; ++d) {
+            const Index column = c + 3 + d;
+            A.jacobian_row(child + 6 * i + 3 + d, 1, &column, &one);
+        }
+    }
+}
+
 // RigidMapping Rigid2d -> Vec2d: v = v_c + w_c (-r_y, r_x).
 inline void rigid2_jacobian(Assembler& A, Index child, Index parent, const Index* frame, const double* offset,
                             Index n) {

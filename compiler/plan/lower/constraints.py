@@ -656,7 +656,7 @@ def _unbuilt_solve(
 
 
 def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
-    """Mapped by one RigidMapping from an independent Rigid3d state."""
+    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
     mapping = planner.checked.mapping_of(state.component)
     spec = mapping.spec if mapping is not None else None
     parent = mapping.links.get("input") if mapping is not None else None
@@ -667,6 +667,7 @@ def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
         and parent_state is not None
         and not parent_state.mapped
         and parent_state.datatype.name == "Rigid3d"
+        and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
     )
 
 

@@ -279,9 +279,10 @@ def lower_rigid_mapping(planner: Planner, checked: CheckedComponent, owner: dict
     parent, child, group = ends
     component = checked.component
     pair = (parent.datatype.name, child.datatype.name)
-    if pair not in (("Rigid3d", "Vec3d"), ("Rigid2d", "Vec2d")):
+    if pair not in (("Rigid3d", "Vec3d"), ("Rigid2d", "Vec2d"), ("Rigid3d", "Rigid3d")):
         planner.unsupported(checked, f"RigidMapping {pair[0]},{pair[1]} is not compiled yet")
         return
+    frames_out = pair == ("Rigid3d", "Rigid3d")
     if str(planner.value(component, "geometricStiffness")) != "None":
         planner.unsupported(
             checked, "its geometric stiffness is not compiled yet (geometricStiffness=None is)"
@@ -305,11 +306,24 @@ def lower_rigid_mapping(planner: Planner, checked: CheckedComponent, owner: dict
         return
     local = np.array(points, dtype=float)
     if planner.value(component, "globalToLocalCoords"):
-        local = _to_local(frames, frame_of, local)
+        if frames_out:  # SOFA's Rigid3 specialisation: centre q^-1 (x - c), orientation q^-1 q_child
+            local[:, :3] = _to_local(frames, frame_of, local[:, :3])
+            local[:, 3:] = [
+                _quat_product(_quat_inverse(frames[f, 3:]), q)
+                for f, q in zip(frame_of, local[:, 3:], strict=True)
+            ]
+        else:
+            local = _to_local(frames, frame_of, local)
     local_buffer = planner.buffer(component, "initialPoints", local, columns=dim)
     frame_buffer = planner.buffer(component, "rigidIndexPerPoint", frame_of, "i64")
-    offset = planner.buffer(component, "offsets", np.zeros_like(local), columns=dim, role="scratch")
-    prefix = "rigid" if dim == 3 else "rigid2"
+    offset = planner.buffer(
+        component,
+        "offsets",
+        np.zeros((len(local), 3 if frames_out else dim)),
+        columns=3 if frames_out else dim,
+        role="scratch",
+    )
+    prefix = "rigid_frame" if frames_out else "rigid" if dim == 3 else "rigid2"
     n = len(points)
     origin = origin_of(component)
     maps_forces = planner.value(component, "mapForces") is not False
@@ -330,6 +344,25 @@ def lower_rigid_mapping(planner: Planner, checked: CheckedComponent, owner: dict
             ],
         )
     )
+
+
+def _quat_product(p: np.ndarray, q: np.ndarray) -> list[float]:
+    """SOFA's Quat operator* (x y z w), term by term."""
+    return [
+        p[3] * q[0] + p[0] * q[3] + p[1] * q[2] - p[2] * q[1],
+        p[3] * q[1] + p[1] * q[3] + p[2] * q[0] - p[0] * q[2],
+        p[3] * q[2] + p[2] * q[3] + p[0] * q[1] - p[1] * q[0],
+        p[3] * q[3] - (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]),
+    ]
+
+
+def _quat_inverse(q: np.ndarray) -> np.ndarray:
+    """SOFA's Quat::inverse: the conjugate over the norm."""
+    norm = float(np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]))
+    if norm == 0.0:
+        return np.zeros(4)
+    inverse = 1.0 / norm
+    return np.array([-q[0] * inverse, -q[1] * inverse, -q[2] * inverse, q[3] * inverse])
 
 
 def lower_subset_mapping(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:

@@ -405,10 +405,21 @@ def lower_vector_springs(planner: Planner, checked: CheckedComponent, owner: dic
     if group is None or owner.get(id(second.component)) is not group:
         planner.unsupported(checked, "springs between states of different ODE solvers are not compiled yet")
         return
-    for name in ("springs", "filename"):
-        if planner.value(component, name):
-            planner.unsupported(checked, f"springs given by {name} are not compiled yet")
-            return
+    if planner.value(component, "springs"):
+        # SOFA's bwdInit makes its edges only for the default springs (none given): with a `springs`
+        # list its edge array stays empty and addForce / addDForce loop over no spring.
+        planner.diags.add(
+            "W225",
+            component.attribute_loc("springs"),
+            f"{origin_of(component)}: SOFA applies no spring when `springs` is given (its bwdInit "
+            "builds the springs' ends only for the default springs)",
+            "remove `springs` to get SOFA's default springs (stiffness, viscosity, useTopology)",
+        )
+        planner.ignored.append((component, "its `springs` list is given: SOFA applies no force then"))
+        return
+    if planner.value(component, "filename"):
+        planner.unsupported(checked, "springs given by filename are not compiled yet")
+        return
     if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
         planner.unsupported(checked, "a rayleighStiffness of its own is not compiled yet")
         return
