@@ -544,3 +544,17 @@ def test_two_dimensional_grid_has_sofa_s_triangles_and_edges(tmp_path: Path, cap
     assert checked.value(tri, "triangles").reshape(-1, 3).tolist() == triangles
     assert main(["check", "-q", str(tmp_path / "scene.scn")]) == 0  # and the planner accepts it
     assert capsys.readouterr().out == ""
+
+
+def test_a_repeated_template_of_a_registered_type_is_unsupported_not_unknown(tmp_path: Path) -> None:
+    """SofaCUDA's scenes write DiagonalMass template="CudaVec3f,CudaVec3f", SOFA registering it for
+    CudaVec3f: its factory tries every creator when the written template has none, so the class is
+    SOFA's (E222), not an unknown template (E208)."""
+    _, diagnostics = check(
+        tmp_path,
+        '<Node name="root" dt="0.01">\n    <DefaultAnimationLoop/>\n'
+        '    <MechanicalObject template="CudaVec3f" position="0 0 0"/>\n'
+        '    <DiagonalMass template="CudaVec3f,CudaVec3f"/>\n</Node>\n',
+    )
+    assert [(d.code, d.loc.line) for d in diagnostics.errors] == [("E222", 3), ("E222", 4)]
+    assert "DiagonalMass CudaVec3f,CudaVec3f is supported by SOFA" in diagnostics.errors[1].message
