@@ -799,6 +799,11 @@ class _Checker:
         datatype = checked.datatype or DATATYPES["Vec3d"]
         value = self.value(checked, "position", raw=True)
         velocity = self.value(checked, "velocity", raw=True)
+        # MechanicalObject::init: rest positions longer than the positions (one default coordinate
+        # when none is given) are copied into them ("X0 set but not X").
+        rest = self._written_rest_positions(checked)
+        if rest is not None and len(rest) > max(np.size(value) // datatype.coord_size, 1):
+            return rest
         # MechanicalObject::init also takes its topology's points when it holds one position and at
         # most one velocity (position="0 0 0" next to a grid gets the grid's points), unless a
         # size > 1 resized it at parse time.
@@ -848,6 +853,24 @@ class _Checker:
         if value.size % datatype.coord_size:
             return None
         return value.reshape(-1, datatype.coord_size)
+
+    def _written_rest_positions(self, checked: CheckedComponent) -> np.ndarray | None:
+        """A state's rest_position as the scene writes or links it (None when it does neither)."""
+        datatype = checked.datatype or DATATYPES["Vec3d"]
+        if "rest_position" in checked.fields:
+            value = checked.fields["rest_position"]
+        elif "rest_position" in checked.data_links:
+            path, _ = checked.data_links["rest_position"]
+            target = links.resolve(path, checked.component)
+            source = self.checked.components.get(id(target)) if isinstance(target, Component) else None
+            if source is None or source.spec is None:
+                return None
+            value = self.value(source, path.data or "rest_position")
+        else:
+            return None
+        if value is None or not np.size(value) or np.size(value) % datatype.coord_size:
+            return None
+        return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
 
     def _default_single(self, checked: CheckedComponent) -> bool:
         """A state nothing gives positions (none written, linked or from src; no topology in its

@@ -375,8 +375,11 @@ def lower_mesh_springs(planner: Planner, checked: CheckedComponent, owner: dict[
                 seen.add((i, j))
                 # Vec3::norm() term by term: np.linalg.norm goes through BLAS, whose kernel (and
                 # its use of FMA) depends on the processor
-                dx, dy, dz = (float(rest[j, k]) - float(rest[i, k]) for k in range(3))
-                length = math.sqrt(dx * dx + dy * dy + dz * dz)
+                square = 0.0
+                for k in range(min(3, rest.shape[1])):
+                    d = float(rest[j, k]) - float(rest[i, k])
+                    square += d * d
+                length = math.sqrt(square)
                 if length > 1e-12:  # SOFA scales by the rest length (per unit length stiffness)
                     rows.append((i, j, ks / length, kd / length, length))
     springs = np.array(rows, dtype=float).reshape(-1, 5)
