@@ -38,6 +38,7 @@ from sofac.plan.ir import (
     origin_of,
 )
 from sofac.registry import Category
+from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
 from sofac.registry.spec import Effect
 
 if TYPE_CHECKING:
@@ -455,23 +456,12 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
     kept = planner.buffer("/", "constraint_block_kept", [b[3] for b in phase.blocks], "i64")
     assert phase.kept is not None
-    settings = (
-        [
-            Element(phase.settings[name])
-            for name in (
-                "maxIterations",
-                "tolerance",
-                "sor",
-                "scaleTolerance",
-                "allVerified",
-                "regularizationTerm",
-            )
-        ]
-        if phase.settings
-        else []
-    )
-    if not settings:  # SOFA's default BlockGaussSeidelConstraintSolver
-        settings = [1000.0, 0.001, 1.0, 1.0, 0.0, 0.0]
+    order = ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified", "regularizationTerm")
+    if phase.settings:
+        settings: list[Element | float] = [Element(phase.settings[name]) for name in order]
+    else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
+        default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
+        settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
     if phase.method == "unbuilt_gauss_seidel":
         _unbuilt_solve(
             planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
