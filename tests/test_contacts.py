@@ -35,6 +35,27 @@ def test_body_rests_where_the_contact_force_balances_its_weight(scene: Path, rad
     assert np.all(sim["/Particle/dofs"].velocity == pytest.approx(0.0, abs=1e-9))
 
 
+def test_local_min_distance_under_penalty_rests_at_the_same_height(tmp_path: Path) -> None:
+    """LocalMinDistance's triangle-point test (no cone: the floor's vertices have no neighbours
+    beyond it) with the penalty response: the same contact distance, so the same rest height."""
+    scene = tmp_path / "lmd.scn"
+    scene.write_text(
+        FLOOR.read_text().replace(
+            '<MinProximityIntersection alarmDistance="0.5" contactDistance="0.2"/>',
+            '<LocalMinDistance alarmDistance="0.5" contactDistance="0.2"/>',
+        )
+    )
+    plan = plan_file(scene)
+    (pair,) = plan.collisions[0].pairs
+    assert plan.collisions[0].tests[pair.test].name == "local_min_distance::triangle_point"
+    sim = sofac.load(scene)
+    sim.step(800)
+    ks = 10.0 * 10.0 / 0.2
+    (x, y, z) = sim["/Particle/dofs"].position[0]
+    assert (x, z) == pytest.approx((0.1, -0.2), abs=1e-12)
+    assert y == pytest.approx(0.2 - 1.0 * 9.81 / ks, abs=1e-9)
+
+
 def test_a_direct_solver_assembles_the_contact_stiffness(tmp_path: Path) -> None:
     """The particle on the floor with SparseLDLSolver: the contact's -ks n n^T enters the assembled
     matrix; the trajectory is CG's (converged to 1e-12) to round-off, and it settles at the same height."""
