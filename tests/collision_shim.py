@@ -235,7 +235,8 @@ class Shim:
         return outputs(rows, n)
 
     def pretest_run(
-        self, kind: str, b: Model, xs: np.ndarray, pretest: bool, alarm: float, contact: float, floor_cd: float
+        self, kind: str, b: Model, xs: np.ndarray, pretest: bool, alarm: float, contact: float,
+        floor_cd: float,
     ) -> dict[str, np.ndarray | int]:  # fmt: skip
         """PenaltyContacts on a static floor and `b` over the positions `xs` (steps, points, 3)."""
         xs = np.ascontiguousarray(xs, dtype=np.float64)

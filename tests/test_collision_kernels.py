@@ -942,11 +942,12 @@ def falling(kind: str, rng: np.random.Generator) -> tuple[Model, np.ndarray]:
         shape = 2 if code == "L" else 3
         elements = np.array([rng.permutation(n)[:shape] for _ in range(8)])
         x = np.vstack([x, [[0.0, -50.0, 0.0]]])
-        normals = np.cross(x[elements[:, 1]] - x[elements[:, 0]], x[elements[:, 2 % shape]] - x[elements[:, 0]])
+        first, second = x[elements[:, 1]] - x[elements[:, 0]], x[elements[:, 2 % shape]] - x[elements[:, 0]]
+        normals = np.cross(first, second)
         flags = rng.integers(0, 64, len(elements)) if shape == 3 else None
         model = Model(x, elements=elements, flags=flags, normals=normals if shape == 3 else None, cd=0.01)
     heights = [*np.linspace(3.0, -0.25, 40), 2.0, 2.0, 2.0, -3.0, *[-3.0 - 0.01 * k for k in range(16)]]
-    xs = np.array([x + [0.0, h, 0.0] for h in heights])
+    xs = np.array([x + np.array([0.0, h, 0.0]) for h in heights])
     if code in "LT":
         xs[:, -1] = [0.0, -50.0, 0.0]
     return model, xs
