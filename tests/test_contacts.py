@@ -3,6 +3,7 @@ goes, the numbers against closed forms, and SOFA's regression scenes it unlocks.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -103,7 +104,6 @@ def test_models_that_cannot_meet_get_no_collision_code(tmp_path: Path) -> None:
     assert "collide(" not in generate(plan) and "penalty.h" not in generate(plan)
 
 
-
 COLLISION = (
     "CollisionPipeline|BruteForceBroadPhase|BVHNarrowPhase|MinProximityIntersection|CollisionResponse|"
     "TriangleCollisionModel|PointCollisionModel"
@@ -113,8 +113,6 @@ COLLISION = (
 def _dropped_from(tmp_path: Path, height: float) -> tuple[sofac.Simulation, sofac.Simulation]:
     """The particle of contact_particle_floor.scn let go at `height`, and the same scene without its
     collision pipeline and models."""
-    import re
-
     text = FLOOR.read_text().replace('position="0.1 0.4 -0.2"', f'position="0.1 {height!r} -0.2"')
     with_models, bare = tmp_path / "with.scn", tmp_path / "bare.scn"
     with_models.write_text(text)
@@ -125,6 +123,9 @@ def _dropped_from(tmp_path: Path, height: float) -> tuple[sofac.Simulation, sofa
 def _contacts(sim: sofac.Simulation) -> float:
     (key,) = [b.key for b in sim.spec.buffers if b.key.endswith(".contactReport")]
     return float(sim.output(key)[0])  # contacts found by this step's detection
+
+
+FIRST_CONTACT_STEP = 68  # measured on main before the pre-test
 
 
 def test_models_apart_cost_no_trajectory_and_contact_starts_at_the_same_step(tmp_path: Path) -> None:
@@ -147,8 +148,6 @@ def test_models_apart_cost_no_trajectory_and_contact_starts_at_the_same_step(tmp
     assert first is not None and bare["/Particle/dofs"].position[0, 1] < 0.5
     assert first == FIRST_CONTACT_STEP
 
-
-FIRST_CONTACT_STEP = 68  # measured on main before the pre-test
 
 @pytest.mark.parametrize(("solver", "warned"), [("SparseLDLSolver", True), ("CGLinearSolver", False)])
 def test_assembled_solve_of_static_contacts_is_warned(tmp_path: Path, solver: str, warned: bool) -> None:
