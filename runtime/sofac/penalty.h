@@ -473,15 +473,22 @@ private:
         }
         const bool all = m.used.empty();  // point models: element i is point i
         const Index count = !all ? static_cast<Index>(m.used.size()) : (m.kind == ContactSide::kPoint ? m.elements : m.points);
-        V3 lo{}, hi{};
-        for (Index k = 0; k < count; ++k) {
-            const double* p = x + 3 * (all ? k : m.used[static_cast<std::size_t>(k)]);
+        if (count == 0) return true;
+        const Index first = all ? 0 : m.used[0];
+        V3 lo{{x[3 * first], x[3 * first + 1], x[3 * first + 2]}}, hi = lo;
+        int nan = 0;
+        const auto fold = [&](const double* p) {  // branch-free: min / max and a NaN flag per point
             for (int c = 0; c < 3; ++c) {
-                finite = finite && p[c] == p[c];
-                if (k == 0 || p[c] < lo[c]) lo[c] = p[c];
-                if (k == 0 || p[c] > hi[c]) hi[c] = p[c];
+                nan |= p[c] != p[c];
+                lo[c] = p[c] < lo[c] ? p[c] : lo[c];
+                hi[c] = p[c] > hi[c] ? p[c] : hi[c];
             }
-        }
+        };
+        if (all)
+            for (Index k = 1; k < count; ++k) fold(x + 3 * k);
+        else
+            for (Index k = 1; k < count; ++k) fold(x + 3 * m.used[static_cast<std::size_t>(k)]);
+        finite = nan == 0 && lo[0] == lo[0] && lo[1] == lo[1] && lo[2] == lo[2];
         for (int c = 0; c < 3; ++c) {
             box.min[c] = lo[c] - d;
             box.max[c] = hi[c] + d;
