@@ -2,8 +2,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdlib>
+#include <cstring>
 #include <new>
 #include "sofac/contact.h"
+#include "sofac/penalty.h"
 using sofac::Index;
 using namespace sofac::collide;
 #define API extern "C" __attribute__((visibility("default")))
@@ -498,4 +500,74 @@ API long drop_points(double* x, Index n, Index steps, double dt, double mass, do
         if (s > 0) allocations += g_allocations.load() - before;
     }
     return allocations;
+}
+
+// PenaltyContacts (penalty.h) on a static two-triangle floor at y = 0 (model 0) and one moving model
+// `b` of `kind`'s second side (model 1) over `steps` positions (xs: steps x n_points x 3), as the
+// generated step runs it: with (pretest = 1) or without the per-step pre-test. Per step: whether
+// the detection was skipped, the pair's outputs, the contacts and their energy; with the pre-test,
+// `mismatches` counts the steps whose root box from the points differs (bit for bit) from that of
+// the moving model's tree refitted on the same points. Returns the fast motions counted.
+API Index pretest_run(int kind, const Model* b, Index n_points, const double* xs, Index steps, int pretest,
+                      double alarm, double contact, double floor_cd, Index* skipped, Index* outputs,
+                      Index* contacts, double* energy, Index* mismatches) {
+    static const double floor_x[] = {-1, 0, -1, 1, 0, -1, 1, 0, 1, -1, 0, 1};
+    static const Index floor_triangles[] = {0, 2, 1, 0, 3, 2};
+    static int floor_flags[2];
+    triangle_flags(floor_triangles, 2, 4, floor_flags);
+    const Model floor{floor_x, floor_triangles, floor_flags, nullptr, 2, floor_cd, nullptr, 0, 1.0, 3};
+    std::vector<double> x(xs, xs + 3 * n_points);
+    Model moving = *b;
+    moving.x = x.data();
+    const int side = shape(kind, 1);
+    PenaltyContacts C;
+    C.resize(2, alarm, contact, 6);
+    C.models[0].kind = ContactSide::kTriangle;
+    C.models[0].points = 4;
+    C.models[0].elements = 2;
+    C.models[0].cells = floor_triangles;
+    C.models[0].contact_distance = floor_cd;
+    C.models[0].contact_stiffness = 10.0;
+    C.models[0].moving = false;
+    C.models[0].flags.assign(floor_flags, floor_flags + 2);
+    const ContactSide kinds[] = {ContactSide::kPoint, ContactSide::kLine, ContactSide::kTriangle, ContactSide::kSphere};
+    PenaltyModel& m = C.models[1];
+    m.kind = kinds[side];
+    m.points = n_points;
+    m.elements = b->size;
+    m.cells = side == 1 || side == 2 ? b->elements : nullptr;
+    m.contact_distance = b->cd;
+    m.contact_stiffness = 10.0;
+    if (side == 3) m.sphere = SphereModel{nullptr, 3, b->radii, b->n_radii, b->radius, b->size, b->cd};
+    if (side == 2) {
+        m.flags.resize(static_cast<std::size_t>(b->size));
+        triangle_flags(b->elements, b->size, n_points, m.flags.data());
+    }
+    C.add_pair(0, 1, false, std::max<Index>(n_points, 4), 0, 0, 0);
+    C.finish_setup();
+    const Proximity method{alarm, contact};
+    *mismatches = 0;
+    for (Index s = 0; s < steps; ++s) {
+        std::copy(xs + 3 * n_points * s, xs + 3 * n_points * (s + 1), x.begin());
+        const double* const positions[] = {floor_x, x.data()};
+        if (pretest) C.begin_detection(positions);
+        if (C.needs_update(0)) update(TP, 0, floor, C.models[0].tree);
+        if (C.needs_update(1)) update(kind, 1, moving, C.models[1].tree);
+        C.detect([&](Index pair) {
+            C.narrow_phase(C.pairs[pair], [&](Index e1, Index e2, OutputList& out) {
+                test(NEW, kind, floor, e1, moving, e2, method, 0, out);
+            });
+        });
+        C.respond(positions);
+        skipped[s] = C.skipped() ? 1 : 0;
+        outputs[s] = static_cast<Index>(C.pairs[0].outputs.size());
+        contacts[s] = C.contact_count();
+        energy[s] = C.energy();
+        if (pretest && s > 0) {  // the tree refitted on these points (a copy: the run keeps its own)
+            CubeTree refitted = C.models[1].tree;
+            update(kind, 1, moving, refitted);
+            if (std::memcmp(&refitted.root().box, &m.root, sizeof(Box)) != 0) ++*mismatches;
+        }
+    }
+    return C.fast_motions();
 }

@@ -131,6 +131,8 @@ class Shim:
         lib.drop_points.restype = ctypes.c_long
         lib.self_points.argtypes = [i64, i64, I64, I64]
         lib.self_lines.argtypes = [i64, i64, I64, I64, I64]
+        lib.pretest_run.argtypes = [integer, m, i64, D, i64, integer, dbl, dbl, dbl, I64, I64, I64, D, I64]
+        lib.pretest_run.restype = i64
 
     def test(
         self,
@@ -231,6 +233,22 @@ class Shim:
             option, int(boxes), _d(rows), capacity,
         )  # fmt: skip
         return outputs(rows, n)
+
+    def pretest_run(
+        self, kind: str, b: Model, xs: np.ndarray, pretest: bool, alarm: float, contact: float,
+        floor_cd: float,
+    ) -> dict[str, np.ndarray | int]:  # fmt: skip
+        """PenaltyContacts on a static floor and `b` over the positions `xs` (steps, points, 3)."""
+        xs = np.ascontiguousarray(xs, dtype=np.float64)
+        steps, n_points = xs.shape[0], xs.shape[1]
+        skipped, found, contacts = (np.zeros(steps, dtype=np.int64) for _ in range(3))
+        energy, mismatches = np.zeros(steps), np.zeros(1, dtype=np.int64)
+        fast = self.lib.pretest_run(
+            KINDS[kind], ctypes.byref(b.struct), n_points, _d(xs), steps, int(pretest), alarm, contact,
+            floor_cd, _i(skipped), _i(found), _i(contacts), _d(energy), _i(mismatches),
+        )  # fmt: skip
+        return {"skipped": skipped, "outputs": found, "contacts": contacts, "energy": energy,
+                "mismatches": int(mismatches[0]), "fast_motions": int(fast)}  # fmt: skip
 
 
 def make_shim(tmp_path_factory: pytest.TempPathFactory) -> Shim:

@@ -919,3 +919,54 @@ def test_rigid_spheres_through_the_narrow_phase(shim: Shim) -> None:
                 assert close(o.p0, c1 + o.normal * r1, 1e-12) and close(o.p1, c2 - o.normal * r2, 1e-12)
             else:  # NewProximity's point-point kernel keeps the centres, whatever the sphere type
                 assert close(o.p0, c1) and close(o.p1, c2)
+
+
+# -------------------------------------------------------------------------------------------------
+# The per-step pre-test of PenaltyContacts (penalty.h begin_detection): models whose root boxes
+# cannot meet skip the trees, the broad and the narrow phase.
+
+
+def falling(kind: str, rng: np.random.Generator) -> tuple[Model, np.ndarray]:
+    """A small model of `kind`'s second side and its positions over 60 steps: it falls from
+    y = 3 onto the floor (outputs, contacts), is lifted away (contacts removed), jumps through the
+    floor in one step (a fast motion while apart) and stays below. Line and triangle models have an
+    extra point no element uses, far below the floor: it must not count in the root box."""
+    code = kind[1]
+    n = 12
+    x = rng.uniform(-0.3, 0.3, (n, 3))
+    if code == "P":
+        model = Model(x, cd=0.02)
+    elif code == "S":
+        model = Model(x, radius=0.05, radii=rng.uniform(0.02, 0.1, n // 2), cd=0.01)
+    else:
+        shape = 2 if code == "L" else 3
+        elements = np.array([rng.permutation(n)[:shape] for _ in range(8)])
+        x = np.vstack([x, [[0.0, -50.0, 0.0]]])
+        first, second = x[elements[:, 1]] - x[elements[:, 0]], x[elements[:, 2 % shape]] - x[elements[:, 0]]
+        normals = np.cross(first, second)
+        flags = rng.integers(0, 64, len(elements)) if shape == 3 else None
+        model = Model(x, elements=elements, flags=flags, normals=normals if shape == 3 else None, cd=0.01)
+    heights = [*np.linspace(3.0, -0.25, 40), 2.0, 2.0, 2.0, -3.0, *[-3.0 - 0.01 * k for k in range(16)]]
+    xs = np.array([x + np.array([0.0, h, 0.0]) for h in heights])
+    if code in "LT":
+        xs[:, -1] = [0.0, -50.0, 0.0]
+    return model, xs
+
+
+@pytest.mark.parametrize("kind", ["TP", "TL", "TT", "TS"])
+def test_pretest_changes_nothing_but_the_work(shim: Shim, kind: str) -> None:
+    model, xs = falling(kind, np.random.default_rng(KINDS[kind]))
+    full = shim.pretest_run(kind, model, xs, False, 0.2, 0.05, 0.01)
+    fast = shim.pretest_run(kind, model, xs, True, 0.2, 0.05, 0.01)
+    assert not full["skipped"].any()
+    for name in ("outputs", "contacts", "energy", "fast_motions"):
+        assert np.array_equal(full[name], fast[name]), name  # bit for bit
+    assert fast["mismatches"] == 0  # the root box from the points is the refitted tree's
+    skipped, touching = fast["skipped"].astype(bool), full["outputs"] > 0
+    assert not skipped[0]  # the first detection builds the trees
+    assert not (skipped & touching).any()
+    assert skipped[1:20].all() and skipped[-16:].all()  # far above, then far below the floor
+    first = int(np.argmax(touching))  # the first contact: at the same step either way
+    assert 20 < first < 40 and not skipped[first]
+    assert full["contacts"][first:40].any() and not full["contacts"][40:].any()  # lifted: removed
+    assert full["fast_motions"] >= 1  # the jump through the floor, seen while skipped

@@ -3,6 +3,7 @@ goes, the numbers against closed forms, and SOFA's regression scenes it unlocks.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +123,51 @@ def test_models_that_cannot_meet_get_no_collision_code(tmp_path: Path) -> None:
     (left_out,) = plan.collisions[0].left_out
     assert left_out[2] == "they share a collision group"
     assert "collide(" not in generate(plan) and "penalty.h" not in generate(plan)
+
+
+COLLISION = (
+    "CollisionPipeline|BruteForceBroadPhase|BVHNarrowPhase|MinProximityIntersection|CollisionResponse|"
+    "TriangleCollisionModel|PointCollisionModel"
+)
+
+
+def _dropped_from(tmp_path: Path, height: float) -> tuple[sofac.Simulation, sofac.Simulation]:
+    """The particle of contact_particle_floor.scn let go at `height`, and the same scene without its
+    collision pipeline and models."""
+    text = FLOOR.read_text().replace('position="0.1 0.4 -0.2"', f'position="0.1 {height!r} -0.2"')
+    with_models, bare = tmp_path / "with.scn", tmp_path / "bare.scn"
+    with_models.write_text(text)
+    bare.write_text(re.sub(rf"<({COLLISION})\b[^>]*/>", "", text))
+    return sofac.load(with_models), sofac.load(bare)
+
+
+def _contacts(sim: sofac.Simulation) -> float:
+    (key,) = [b.key for b in sim.spec.buffers if b.key.endswith(".contactReport")]
+    return float(sim.output(key)[0])  # contacts found by this step's detection
+
+
+FIRST_CONTACT_STEP = 68  # measured on main before the pre-test
+
+
+def test_models_apart_cost_no_trajectory_and_contact_starts_at_the_same_step(tmp_path: Path) -> None:
+    """Issue 16: while the particle is farther than the alarm distance (0.5) from the floor, the
+    per-step pre-test skips the detection; the trajectory is the bare scene's bit for bit, and the
+    first contact comes at the first step that starts below 0.5, as the full detection finds it
+    (step 68 from 2.0, as before the pre-test)."""
+    sim, bare = _dropped_from(tmp_path, 2.0)
+    first = None
+    for k in range(120):
+        start = bare["/Particle/dofs"].position[0, 1]  # where step k starts (no contact yet)
+        sim.step(1)
+        if _contacts(sim) > 0:
+            first = k
+            break
+        assert start >= 0.5
+        bare.step(1)
+        assert np.array_equal(sim["/Particle/dofs"].position, bare["/Particle/dofs"].position)
+        assert np.array_equal(sim["/Particle/dofs"].velocity, bare["/Particle/dofs"].velocity)
+    assert first is not None and bare["/Particle/dofs"].position[0, 1] < 0.5
+    assert first == FIRST_CONTACT_STEP
 
 
 @pytest.mark.parametrize(("solver", "warned"), [("SparseLDLSolver", True), ("CGLinearSolver", False)])

@@ -44,6 +44,8 @@ struct PenaltyModel {
     std::vector<double> normals;  // triangle models: the normals of the last tree update
     std::vector<double> external; // point / sphere models: the explicit contact forces of this step
     SphereModel sphere{};         // sphere models: the radii (the response reads them)
+    Box root{};                   // this step's root box, from the points (the pre-test)
+    std::vector<Index> used;      // triangle / line models: the points their elements use, if not all
     Box last_root{};              // the root box of the previous detection
     Box swept{};                  // the union of that box and this step's
     double motion = 0.0;          // how far a side of its root box moved since then
@@ -126,13 +128,62 @@ public:
                 m.external.assign(static_cast<std::size_t>(3 * m.points), 0.0);
             m.children.reserve(2 * pairs.size());
             broad_[i] = BroadPhaseModel{&m.tree, m.contact_distance};
+            if (m.kind == ContactSide::kTriangle || m.kind == ContactSide::kLine) {
+                const int width = element_width(m);
+                std::vector<char> seen(static_cast<std::size_t>(m.points), 0);
+                for (Index k = 0; k < width * m.elements; ++k) seen[static_cast<std::size_t>(m.cells[k])] = 1;
+                for (Index k = 0; k < m.points; ++k)
+                    if (seen[static_cast<std::size_t>(k)]) m.used.push_back(k);
+                if (static_cast<Index>(m.used.size()) == m.points) m.used.clear();  // all of them
+            }
         }
         outputs_map_.reserve(n, pairs.size());
         contacts_map_.reserve(n, pairs.size());
     }
 
+    // Before the trees' updates of a step: whether any pair of the table can meet this step. After
+    // the first detection (which builds every tree from its boxes, as SOFA does), each moving
+    // model's root box is taken straight from its points `x[m]` (min / max over the points its
+    // elements use, grown as its leaf boxes are: the numbers the refitted root would hold, min and
+    // max being exact and monotone in the growth), a static model's from its frozen tree. When no
+    // pair's boxes meet at the broad phase's reach, the leaf boxes, the refit, the broad and the
+    // narrow phases are skipped: detect() then finds nothing, as the broad phase would have. A NaN
+    // among the points runs the full detection (the tree's boxes then depend on element order).
+    void begin_detection(const double* const* x) {
+        skip_ = false;
+        if (!stacks_reserved_) return;  // the first detection builds the trees
+        bool finite = true;
+        for (std::size_t i = 0; i < models.size(); ++i) {
+            PenaltyModel& m = models[i];
+            if (!m.tree.built() || m.tree.empty()) continue;
+            if (!m.moving) {
+                m.root = m.tree.root().box;
+                continue;
+            }
+            finite = finite && points_box(m, x[i], m.root);
+        }
+        if (!finite) return;
+        const Index n = static_cast<Index>(models.size());
+        for (const PenaltyPair& p : pairs) {
+            const Index i = std::max(p.model[0], p.model[1]), j = std::min(p.model[0], p.model[1]);
+            const PenaltyModel& a = models[i];
+            const PenaltyModel& b = models[j];
+            if (a.tree.empty() || b.tree.empty()) continue;  // the broad phase skips empty models
+            if (i == j) return;                            // a root box always meets itself
+            if (rule[i * n + j] == kNever) continue;
+            const double reach = alarm_distance_ + a.contact_distance + b.contact_distance;
+            if (boxes_meet(a.root, b.root, reach)) return;
+        }
+        skip_ = true;
+    }
+
+    // Whether the pre-test of this step skipped the detection (no pair can meet).
+    bool skipped() const { return skip_; }
+
     // A model's tree on its current points (`update` builds it from the view the caller made).
-    bool needs_update(Index model) const { return models[model].moving || !models[model].tree.built(); }
+    bool needs_update(Index model) const {
+        return !skip_ && (models[model].moving || !models[model].tree.built());
+    }
 
     // BVHNarrowPhase on one pair: `test(e1, e2, outputs)` is its element test.
     template <class Test>
@@ -148,12 +199,13 @@ public:
     template <class Narrow>
     void detect(Narrow&& narrow) {
         const Index n = static_cast<Index>(models.size());
-        watch_fast_motion();
+        watch_fast_motion(skip_);
         if (!stacks_reserved_) {  // every pair's traversal stack, once the trees exist (first detection)
             for (PenaltyPair& p : pairs) p.stack.reserve_for(models[p.model[0]].tree, models[p.model[1]].tree);
             stacks_reserved_ = true;
         }
-        const Index found = brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
+        const Index found =
+            skip_ ? 0 : brute_force_broad_phase(broad_.data(), n, rule.data(), alarm_distance_, broad_pairs_.data());
         auto& outputs = outputs_map_.map();
         for (auto& entry : outputs) pairs[entry.second].outputs.clear();  // beginNarrowPhase
         for (Index k = 0; k < found; ++k) {
@@ -401,12 +453,56 @@ private:
         return p.model[0] == model ? 0 : (p.model[1] == model ? 1 : -1);
     }
 
+    // The root box of a moving model from its points `x` (see begin_detection), as its leaf boxes
+    // and the refit would make it; false if a coordinate is NaN.
+    static bool points_box(const PenaltyModel& m, const double* x, Box& box) {
+        bool finite = true;
+        const double d = m.contact_distance;
+        if (m.kind == ContactSide::kSphere) {  // per-sphere radii: the leaf boxes' own numbers
+            SphereModel s = m.sphere;
+            s.x = x;
+            for (Index e = 0; e < m.elements; ++e) {
+                const Box b = sphere_box(s.center(e), s.r(e), d);
+                for (int c = 0; c < 3; ++c) {
+                    finite = finite && b.min[c] == b.min[c] && b.max[c] == b.max[c];
+                    if (e == 0 || b.min[c] < box.min[c]) box.min[c] = b.min[c];
+                    if (e == 0 || b.max[c] > box.max[c]) box.max[c] = b.max[c];
+                }
+            }
+            return finite;
+        }
+        const bool all = m.used.empty();  // point models: element i is point i
+        const Index count = !all ? static_cast<Index>(m.used.size()) : (m.kind == ContactSide::kPoint ? m.elements : m.points);
+        if (count == 0) return true;
+        const Index first = all ? 0 : m.used[0];
+        V3 lo{{x[3 * first], x[3 * first + 1], x[3 * first + 2]}}, hi = lo;
+        int nan = 0;
+        const auto fold = [&](const double* p) {  // branch-free: min / max and a NaN flag per point
+            for (int c = 0; c < 3; ++c) {
+                nan |= p[c] != p[c];
+                lo[c] = p[c] < lo[c] ? p[c] : lo[c];
+                hi[c] = p[c] > hi[c] ? p[c] : hi[c];
+            }
+        };
+        if (all)
+            for (Index k = 1; k < count; ++k) fold(x + 3 * k);
+        else
+            for (Index k = 1; k < count; ++k) fold(x + 3 * m.used[static_cast<std::size_t>(k)]);
+        finite = nan == 0 && lo[0] == lo[0] && lo[1] == lo[1] && lo[2] == lo[2];
+        for (int c = 0; c < 3; ++c) {
+            box.min[c] = lo[c] - d;
+            box.max[c] = hi[c] + d;
+        }
+        return finite;
+    }
+
     // Before each detection: how far each model's root box moved since the previous one, and the
-    // pairs whose swept boxes meet while one of them moved farther than the pair's reach.
-    void watch_fast_motion() {
+    // pairs whose swept boxes meet while one of them moved farther than the pair's reach. A step
+    // the pre-test skipped (`from_points`) reads the root boxes it computed: the same numbers.
+    void watch_fast_motion(bool from_points) {
         for (PenaltyModel& m : models) {
             if (!m.tree.built() || m.tree.empty()) continue;
-            const Box& now = m.tree.root().box;
+            const Box& now = from_points ? m.root : m.tree.root().box;
             m.swept = now;
             m.motion = 0.0;
             if (watching_) {
@@ -499,6 +595,7 @@ private:
     double alarm_distance_ = 0.0, contact_distance_ = 0.0;
     bool watching_ = false;  // a detection ran before: root boxes to compare with
     bool stacks_reserved_ = false;
+    bool skip_ = false;  // this step's pre-test found no pair that can meet
     Index fast_motions_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;
