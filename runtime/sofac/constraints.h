@@ -9,6 +9,8 @@
 //   Unilateral1           UnilateralConstraintResolution: f -= d / w, then f >= 0
 //   UnilateralFriction3   UnilateralConstraintResolutionWithFriction: normal, then tangents in
 //                         Coulomb's cone of coefficient `parameter`
+//   Stopper1              StopperLagrangianConstraintResolution1Dof: the free displacement kept in
+//                         [parameter, upper] (min, max), no warm start
 // Solvers, with SOFA's stopping tests, iteration counts and order of operations:
 //   block_gauss_seidel    BlockGaussSeidelConstraintSolver::doSolve (built W)
 //   nncg                  NNCGConstraintSolver::doSolve
@@ -27,7 +29,13 @@
 
 namespace sofac {
 
-enum class Resolution : int { Bilateral3 = 0, Bilateral1 = 1, Unilateral1 = 2, UnilateralFriction3 = 3 };
+enum class Resolution : int {
+    Bilateral3 = 0,
+    Bilateral1 = 1,
+    Unilateral1 = 2,
+    UnilateralFriction3 = 3,
+    Stopper1 = 4
+};
 
 inline constexpr int resolution_lines(Resolution kind) {
     return kind == Resolution::Bilateral3 || kind == Resolution::UnilateralFriction3 ? 3 : 1;
@@ -37,7 +45,8 @@ inline constexpr int resolution_lines(Resolution kind) {
 struct RowBlock {
     Index first = 0;  // first row
     Resolution kind = Resolution::Unilateral1;
-    double parameter = 1.0;      // Bilateral*: load; UnilateralFriction3: mu
+    double parameter = 1.0;      // Bilateral*: load; UnilateralFriction3: mu; Stopper1: min
+    double upper = 0.0;          // Stopper1: max
     double* previous = nullptr;  // Bilateral*: forces kept from the last solve (warm start), or none
     double block[9] = {};        // Bilateral3: inverse of W's block; UnilateralFriction3: W00 W01 W02 W11 W12 W22
     bool singular = false;       // Bilateral3: the block did not invert (SOFA leaves the inverse zero)
@@ -116,6 +125,9 @@ inline void resolution_init(RowBlock& b, const ConstraintProblem& p) {
             b.block[4] = p.w(l + 1, l + 2);
             b.block[5] = p.w(l + 2, l + 2);
             break;
+        case Resolution::Stopper1:
+            p.f[l] = 0.0;
+            break;
         case Resolution::Unilateral1:
             break;
     }
@@ -136,6 +148,17 @@ inline void resolution_solve(const RowBlock& b, const ConstraintProblem& p, doub
             f[l] -= d[l] / p.w(l, l);
             if (f[l] < 0) f[l] = 0.0;
             break;
+        case Resolution::Stopper1: {
+            const double w = p.w(l, l);
+            const double free = d[l] - w * f[l];
+            if (free > b.upper)
+                f[l] = (b.upper - free) * (1.0 / w);
+            else if (free < b.parameter)
+                f[l] = (b.parameter - free) * (1.0 / w);
+            else
+                f[l] = 0;
+            break;
+        }
         case Resolution::UnilateralFriction3: {
             const double* w = b.block;
             const double f0 = f[l];
@@ -614,7 +637,11 @@ inline void bilateral_violation(double* dfree, Index first, const double* x1, co
         }
 }
 
-// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameter, offset
+// StopperLagrangianConstraint<Vec1d>::getConstraintViolation: its row gets x_free[index].
+inline void stopper_violation(double* dfree, Index row, const double* x, Index index) { dfree[row] = x[index]; }
+
+// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameters (two a
+// block: parameter, upper), offset
 // of its kept forces in `previous` or -1); K blocks, on the stack. report: solves, iterations and
 // error of the last solve, solves that hit the iteration limit, and the time, error and iterations
 // of the last such solve.
@@ -628,7 +655,8 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     for (int k = 0; k < K; ++k) {
         blocks[k].first = first[k];
         blocks[k].kind = Resolution(kind[k]);
-        blocks[k].parameter = parameter[k];
+        blocks[k].parameter = parameter[2 * k];
+        blocks[k].upper = parameter[2 * k + 1];
         blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
     }
     if (regularization > std::numeric_limits<double>::epsilon())
@@ -797,7 +825,8 @@ inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double
     for (int k = 0; k < K; ++k) {
         blocks[k].first = first[k];
         blocks[k].kind = Resolution(kind[k]);
-        blocks[k].parameter = parameter[k];
+        blocks[k].parameter = parameter[2 * k];
+        blocks[k].upper = parameter[2 * k + 1];
         blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
     }
     for (const auto& item : set.items) item.reset();
