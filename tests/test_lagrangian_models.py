@@ -113,3 +113,53 @@ def test_a_stopper_holds_a_pushed_particle_at_its_bound(
         assert dofs.velocity[1, 0] == pytest.approx(0.0, abs=1e-12)
     k = inside + 16  # the other particle is free
     assert dofs.position[0, 0] == pytest.approx(a * dt * dt * k * (k + 1) / 2, rel=1e-12)
+
+
+UNIFORM = """<Node name="root" dt="0.01" gravity="0 0 0">
+    <FreeMotionAnimationLoop name="loop"/>
+    <BlockGaussSeidelConstraintSolver maxIterations="100" tolerance="1e-12"/>
+    <Node name="A">
+        <EulerImplicitSolver rayleighMass="0" rayleighStiffness="0"/>
+        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-12"/>
+        <MechanicalObject template="Vec1d" name="dofs" position="0.1  -0.2  0.3" rest_position="1 2 3"/>
+        <UniformMass template="Vec1d" vertexMass="0.5"/>
+        <ConstantForceField template="Vec1d" indices="0 1 2" forces="2 -1 3"/>
+        <UncoupledConstraintCorrection template="Vec1d" defaultCompliance="2"/>
+        <UniformLagrangianConstraint template="Vec1d" {fields}/>
+    </Node>
+</Node>
+"""
+
+
+@pytest.mark.parametrize(("fields", "target"), [("", [0, 0, 0]), ('constrainToRestPos="1"', [1, 2, 3])])
+def test_uniform_rows_hold_every_coordinate_at_zero_or_rest(
+    tmp_path: Path, fields: str, target: list[float]
+) -> None:
+    dt = 0.01
+    path = tmp_path / "uniform.scn"
+    path.write_text(UNIFORM.format(fields=fields))
+    sim = sofac.load(path)
+    phase = sim.plan.constraints
+    assert phase is not None and phase.capacity == 3 and len(phase.blocks) == 3
+    sim.step(1)  # x = x_free + W f: on the target in one step, moving there at (target - x0) / dt
+    dofs = sim["/A/dofs"]
+    np.testing.assert_allclose(dofs.position[:, 0], target, atol=1e-13)
+    np.testing.assert_allclose(dofs.velocity[:, 0], (np.array(target) - [0.1, -0.2, 0.3]) / dt, rtol=1e-10)
+    sim.step(10)
+    np.testing.assert_allclose(dofs.position[:, 0], target, atol=1e-13)
+    np.testing.assert_allclose(dofs.velocity[:, 0], 0.0, atol=1e-10)
+
+
+def test_uniform_not_iterative_is_refused_at_its_line(tmp_path: Path) -> None:
+    from sofac.check.checker import check_file
+    from sofac.plan.planner import plan_scene
+
+    path = tmp_path / "uniform.scn"
+    path.write_text(UNIFORM.format(fields='iterative="0"'))
+    checked, _ = check_file(path)
+    assert checked is not None
+    with pytest.raises(sofac.SceneError) as caught:
+        plan_scene(checked)
+    line = next(n for n, row in enumerate(UNIFORM.splitlines(), start=1) if "<UniformLagrangian" in row)
+    assert f"unsupported component UniformLagrangianConstraint at line {line}" in str(caught.value)
+    assert "iterative=0" in str(caught.value)

@@ -637,6 +637,12 @@ inline void bilateral_violation(double* dfree, Index first, const double* x1, co
         }
 }
 
+// UniformLagrangianConstraint::getConstraintViolation (position order): rows first + i get
+// x_free[i] - rest[i] (rest: constrainToRestPos) or x_free[i], over every coordinate.
+inline void coordinate_violation(double* dfree, Index first, const double* x, const double* rest, Index count) {
+    for (Index i = 0; i < count; ++i) dfree[first + i] = rest ? x[i] - rest[i] : x[i];
+}
+
 // StopperLagrangianConstraint<Vec1d>::getConstraintViolation: its row gets x_free[index].
 inline void stopper_violation(double* dfree, Index row, const double* x, Index index) { dfree[row] = x[index]; }
 

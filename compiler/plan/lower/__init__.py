@@ -12,6 +12,7 @@ from sofac.plan.lower.constraints import (
     lower_constraint_solver,
     lower_fixed_lagrangian,
     lower_stopper,
+    lower_uniform,
 )
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
@@ -107,6 +108,7 @@ LOWERINGS: dict[str, Lowering] = {
     "bilateral_constraint": lower_bilateral,
     "fixed_lagrangian_constraint": lower_fixed_lagrangian,
     "stopper_constraint": lower_stopper,
+    "uniform_constraint": lower_uniform,
     "beam_fem": lower_beam_fem,
     "beam_linear_mapping": lower_beam_linear_mapping,
 }

@@ -124,6 +124,7 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     planner.constraint_phase = phase  # type: ignore[attr-defined]
     planner.pending_violations = []  # type: ignore[attr-defined]
     planner.pending_stoppers = []  # type: ignore[attr-defined]
+    planner.pending_coordinates = []  # type: ignore[attr-defined]
     planner.constraint_solver = solver  # type: ignore[attr-defined]
     return phase
 
@@ -173,6 +174,7 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
 
 # The runtime's Resolution values (runtime/sofac/constraints.h).
 BILATERAL_3 = 0
+BILATERAL_1 = 1
 STOPPER_1 = 4
 
 # The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
@@ -358,6 +360,48 @@ def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     planner.pending_stoppers.append((origin_of(component), row, state, index))  # type: ignore[attr-defined]
 
 
+def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """UniformLagrangianConstraint<Vec1d>: a row +1 on every coordinate of every DOF, violation
+    x_free (- rest_position with constrainToRestPos), one BilateralConstraintResolution per row
+    (iterative) without kept forces."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    if not planner.value(component, "iterative"):
+        planner.unsupported(
+            checked, "iterative=0 (one BilateralConstraintResolutionNDof) is not compiled yet"
+        )
+        return
+    state = _constrained_state(planner, checked)
+    if state is None or state.datatype.name != "Vec1d":
+        planner.unsupported(checked, "it needs a compiled Vec1d MechanicalObject in its node (or mstate)")
+        return
+    if state.mapped or state.rest is None:
+        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
+        return
+    width = state.datatype.deriv_size
+    count = state.size * width
+    if count == 0:
+        planner.ignored.append((component, "no DOF: no constraint row"))
+        return
+    first = phase.capacity
+    phase.capacity += count
+    _kept_forces(planner, phase, 0)
+    for i in range(state.size):
+        for j in range(width):
+            row = first + width * i + j
+            phase.blocks.append((row, BILATERAL_1, 1.0, -1, 0.0))
+            unit = tuple(1.0 if c == j else 0.0 for c in range(width))
+            phase.entries.setdefault(state.ident, []).append((row, i, unit))
+    rest = state.rest if planner.value(component, "constrainToRestPos") else Env.NONE
+    planner.pending_coordinates.append((origin_of(component), first, state, rest, count))  # type: ignore[attr-defined]
+
+
 def _jacobian_rows(
     planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
 ) -> Aggregate:
@@ -451,6 +495,8 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         phase.violation.append(
             Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
         )
+    for origin, row, state, rest, count in planner.pending_coordinates:  # type: ignore[attr-defined]
+        phase.violation.append(Op(origin, [call("coordinate_violation", dfree, row, state.x, rest, count)]))
     for origin, row, state, index in planner.pending_stoppers:  # type: ignore[attr-defined]
         phase.violation.append(Op(origin, [call("stopper_violation", dfree, row, state.x, index)]))
     if lagrangian is not None:

@@ -284,7 +284,8 @@ UNIFORM_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec1d",),
     default_template="Vec1d",
     renamed_from=("UniformConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="uniform_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("iterative", Bool(), True, "iterate over the constraints (else block factorisation)"),
