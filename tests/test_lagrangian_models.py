@@ -1,6 +1,9 @@
 """SOFA's common Lagrangian constraint models compiled under FreeMotionAnimationLoop, against
 closed forms: FixedLagrangianConstraint<Vec3d> holds a particle at its rest position under
-gravity with the multiplier m g dt per step (the impulse), and no drift."""
+gravity with the multiplier m g dt per step (the impulse), and no drift; StopperLagrangianConstraint
+<Vec1d> stops a pushed particle on its bound; UniformLagrangianConstraint<Vec1d> holds every
+coordinate at zero or at rest; SlidingLagrangianConstraint<Vec3d> keeps a point on its segment
+under gravity, sliding as implicit Euler does, and stops it at the end."""
 
 from __future__ import annotations
 
@@ -163,3 +166,46 @@ def test_uniform_not_iterative_is_refused_at_its_line(tmp_path: Path) -> None:
     line = next(n for n, row in enumerate(UNIFORM.splitlines(), start=1) if "<UniformLagrangian" in row)
     assert f"unsupported component UniformLagrangianConstraint at line {line}" in str(caught.value)
     assert "iterative=0" in str(caught.value)
+
+
+SLIDING = """<Node name="root" dt="0.01" gravity="0 -9.81 0">
+    <FreeMotionAnimationLoop name="loop"/>
+    <BlockGaussSeidelConstraintSolver maxIterations="200" tolerance="1e-14"/>
+    <Node name="P">
+        <EulerImplicitSolver rayleighMass="0" rayleighStiffness="0"/>
+        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-12"/>
+        <MechanicalObject name="point" position="0.1 0.1 0"/>
+        <UniformMass vertexMass="0.5"/>
+        <UncoupledConstraintCorrection template="Vec3d" defaultCompliance="2"/>
+    </Node>
+    <Node name="Rail">
+        <MechanicalObject name="ends" position="9 9 9  0 0 0  1 -1 0"/>
+    </Node>
+    <SlidingLagrangianConstraint object1="@P/point" object2="@Rail/ends" sliding_point="0"
+        axis_1="{a}" axis_2="{b}"/>
+</Node>
+"""
+
+
+@pytest.mark.parametrize(("a", "b"), [(1, 2), (2, 1)])
+def test_a_point_slides_down_its_segment_and_stops_at_the_end(tmp_path: Path, a: int, b: int) -> None:
+    """A point on the segment (0 0 0)-(1 -1 0) under gravity: it stays on the line, moves along it
+    with implicit Euler's s_k = s_0 + g' dt^2 k (k + 1) / 2 (g' = g / sqrt 2, the bilateral rows
+    only remove the motion across the axis), then rests at the lower end (the unilateral row)."""
+    dt, g = 0.01, 9.81
+    path = tmp_path / "sliding.scn"
+    path.write_text(SLIDING.format(a=a, b=b))
+    sim = sofac.load(path)
+    axis = np.array([1.0, -1.0, 0.0]) / np.sqrt(2)
+    sim.step(2)  # the point starts off the line (0.1 0.1 0): the first step puts it on it
+    start, speed = sim["/P/point"].position[0] @ axis, sim["/P/point"].velocity[0] @ axis
+    for m in range(1, 29):
+        sim.step(1)
+        p = sim["/P/point"].position[0]
+        along = p @ axis
+        assert np.linalg.norm(p - along * axis) < 1e-13  # on the line
+        expected = start + speed * dt * m + g / np.sqrt(2) * dt * dt * m * (m + 1) / 2
+        assert along == pytest.approx(expected, rel=1e-9)
+    sim.step(100)
+    np.testing.assert_allclose(sim["/P/point"].position[0], [1.0, -1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(sim["/P/point"].velocity[0], 0.0, atol=1e-10)

@@ -643,6 +643,63 @@ inline void coordinate_violation(double* dfree, Index first, const double* x, co
     for (Index i = 0; i < count; ++i) dfree[first + i] = rest ? x[i] - rest[i] : x[i];
 }
 
+// SlidingLagrangianConstraint<Vec3d>::buildConstraintMatrix and getConstraintViolation on the free
+// positions: point m1 of x1 on the segment a-b of x2. Rows first.. first+3: dirProj, dirOrtho
+// (bilateral, on P and on the projection's barycentre of A and B), dirAxe on P - A, -dirAxe on
+// P - B (unilateral). values1: one entry a row (P); values2: rows 0, 1 with A and B in ascending
+// DOF order, row 2 on A, row 3 on B. A segment of zero length (SOFA then adds three bilateral rows
+// on P - A) keeps the last directions and is counted in degenerate[0].
+inline void sliding_rows(double* values1, double* values2, double* dfree, Index first, const double* x1,
+                         const double* x2, Index m1, Index a, Index b, double* degenerate) {
+    const double eps = std::numeric_limits<double>::epsilon();
+    const Vec3 P(x1[3 * m1], x1[3 * m1 + 1], x1[3 * m1 + 2]);
+    const Vec3 A(x2[3 * a], x2[3 * a + 1], x2[3 * a + 2]);
+    const Vec3 B(x2[3 * b], x2[3 * b + 1], x2[3 * b + 2]);
+    Vec3 axis = B - A;
+    const double ab = axis.norm();
+    if (ab < eps) {
+        degenerate[0] += 1.0;
+    } else {
+        axis = axis.normalized();
+        const double r = (P - A).dot(axis);
+        double bary = r / ab < 0 ? 0 : r / ab;
+        bary = bary > 1.0 ? 1.0 : bary;
+        const Vec3 projection = A + axis * r;
+        Vec3 normal = P - projection;
+        if (normal.norm() < eps) {
+            Vec3 x_vec(1, 0, 0);
+            if (x_vec.cross(axis).norm() < eps) x_vec[1] = 1;
+            normal = x_vec.cross(axis);
+        }
+        normal = normal.normalized();
+        const Vec3 ortho = normal.cross(axis).normalized();
+        const Vec3 directions[4] = {normal, ortho, axis, -axis};
+        for (int row = 0; row < 4; ++row)
+            for (int c = 0; c < 3; ++c) values1[3 * row + c] = directions[row][c];
+        const bool a_first = a < b;
+        for (int row = 0; row < 2; ++row)
+            for (int c = 0; c < 3; ++c) {
+                const double on_a = -directions[row][c] * (1 - bary), on_b = -directions[row][c] * bary;
+                values2[6 * row + c] = a_first ? on_a : on_b;
+                values2[6 * row + 3 + c] = a_first ? on_b : on_a;
+            }
+        for (int c = 0; c < 3; ++c) {
+            values2[12 + c] = -axis[c];
+            values2[15 + c] = axis[c];
+        }
+        values1[12] = bary;  // (kept for the violation: the last barycentric coordinate)
+    }
+    const double bary = values1[12];
+    const Vec3 to_projection = P - (B * bary + A * (1 - bary));
+    for (int row = 0; row < 2; ++row) {
+        const Vec3 direction(values1[3 * row], values1[3 * row + 1], values1[3 * row + 2]);
+        dfree[first + row] = to_projection.dot(direction);
+    }
+    const Vec3 axis_kept(values1[6], values1[7], values1[8]);
+    dfree[first + 2] = (P - A).dot(axis_kept);
+    dfree[first + 3] = (P - B).dot(-axis_kept);
+}
+
 // StopperLagrangianConstraint<Vec1d>::getConstraintViolation: its row gets x_free[index].
 inline void stopper_violation(double* dfree, Index row, const double* x, Index index) { dfree[row] = x[index]; }
 

@@ -11,6 +11,7 @@ from sofac.plan.lower.constraints import (
     lower_constraint_correction,
     lower_constraint_solver,
     lower_fixed_lagrangian,
+    lower_sliding,
     lower_stopper,
     lower_uniform,
 )
@@ -108,6 +109,7 @@ LOWERINGS: dict[str, Lowering] = {
     "bilateral_constraint": lower_bilateral,
     "fixed_lagrangian_constraint": lower_fixed_lagrangian,
     "stopper_constraint": lower_stopper,
+    "sliding_constraint": lower_sliding,
     "uniform_constraint": lower_uniform,
     "beam_fem": lower_beam_fem,
     "beam_linear_mapping": lower_beam_linear_mapping,

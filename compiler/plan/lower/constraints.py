@@ -125,6 +125,7 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     planner.pending_violations = []  # type: ignore[attr-defined]
     planner.pending_stoppers = []  # type: ignore[attr-defined]
     planner.pending_coordinates = []  # type: ignore[attr-defined]
+    planner.pending_sliding = []  # type: ignore[attr-defined]
     planner.constraint_solver = solver  # type: ignore[attr-defined]
     return phase
 
@@ -175,6 +176,7 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
 # The runtime's Resolution values (runtime/sofac/constraints.h).
 BILATERAL_3 = 0
 BILATERAL_1 = 1
+UNILATERAL_1 = 2
 STOPPER_1 = 4
 
 # The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
@@ -402,6 +404,80 @@ def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     planner.pending_coordinates.append((origin_of(component), first, state, rest, count))  # type: ignore[attr-defined]
 
 
+def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """SlidingLagrangianConstraint<Vec3d>: object1's point slides on object2's segment axis_1-axis_2.
+    Four rows built each step from the free positions (runtime sliding_rows): two bilateral across
+    the axis, two unilateral at its ends (SOFA's BilateralConstraintResolution and
+    UnilateralConstraintResolution, no kept forces)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if checked.datatype is None or checked.datatype.name != "Vec3d":
+        planner.unsupported(checked, "it is compiled for Vec3d only")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    states = []
+    for name in ("object1", "object2"):
+        linked = checked.links.get(name)
+        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
+        if state is None or state.mapped:
+            planner.unsupported(checked, f"its {name} is not a compiled unmapped MechanicalObject")
+            return
+        states.append(state)
+    point, a, b = (int(planner.value(component, n)) for n in ("sliding_point", "axis_1", "axis_2"))
+    if states[0] is states[1] or a == b:
+        planner.unsupported(checked, "object1 = object2, or axis_1 = axis_2, is not compiled yet")
+        return
+    first = phase.capacity
+    phase.capacity += 4
+    _kept_forces(planner, phase, 0)
+    for row, kind in enumerate((BILATERAL_1, BILATERAL_1, UNILATERAL_1, UNILATERAL_1)):
+        phase.blocks.append((first + row, kind, 1.0, -1, 0.0))
+    rows = list(range(first, first + 4))
+    low, high = min(a, b), max(a, b)
+    layouts = (
+        ([0, 1, 2, 3, 4], [point] * 4, 13),
+        ([0, 2, 4, 5, 6], [low, high, low, high, a, b], 18),
+    )
+    aggregates = []
+    for state, (starts, dofs, size) in zip(states, layouts, strict=True):
+        values = planner.buffer(state.component, "sliding_J_values", np.zeros(size), role="scratch")
+        buffers = (
+            planner.buffer(state.component, "sliding_J_rows", rows, "i64"),
+            planner.buffer(state.component, "sliding_J_starts", starts, "i64"),
+            planner.buffer(state.component, "sliding_J_dofs", dofs, "i64"),
+            values,
+        )
+        aggregates.append((state, Aggregate("JacobianRows", (4, *buffers)), values))
+    degenerate = planner.buffer(component, "degenerate_segments", np.zeros(1), role="state")
+    planner.pending_sliding.append(  # type: ignore[attr-defined]
+        (checked, first, aggregates, point, a, b, degenerate)
+    )
+    for state in states:
+        phase.entries.setdefault(state.ident, [])
+
+
+def _sliding_rows(planner: Planner, phase: ConstraintPhase, dfree: Buffer) -> None:
+    """The sliding constraints' rows (after the rigid mappings' rows are known): each state's J is
+    the constraint's own, so a state it acts on takes no other constraint's rows."""
+    for checked, first, aggregates, point, a, b, degenerate in planner.pending_sliding:  # type: ignore[attr-defined]
+        (s1, J1, values1), (s2, J2, values2) = aggregates
+        if any(phase.entries.get(s.ident) or s.ident in planner.rigid_rows for s in (s1, s2)):  # type: ignore[attr-defined]
+            planner.unsupported(
+                checked,
+                "a state with a SlidingLagrangianConstraint and other constraint rows is not compiled yet",
+            )
+            continue
+        planner.rigid_rows[s1.ident] = J1  # type: ignore[attr-defined]
+        planner.rigid_rows[s2.ident] = J2  # type: ignore[attr-defined]
+        rows = call("sliding_rows", values1, values2, dfree, first, s1.x, s2.x, point, a, b, degenerate)
+        phase.rows.append(Op(origin_of(checked.component), [rows]))
+
+
 def _jacobian_rows(
     planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
 ) -> Aggregate:
@@ -502,6 +578,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     if lagrangian is not None:
         phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
     _carry_through_rigid_mappings(planner, phase)
+    _sliding_rows(planner, phase, dfree)
     bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
     unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
     for body, correction in enumerate(phase.corrections):

@@ -1,7 +1,8 @@
 """The Lagrangian constraint pipeline: FreeMotionAnimationLoop, constraint solvers and corrections.
 
 The loop, the solvers and the corrections compile (plan/lower/constraints.py: the constraint phase
-of the plan); the constraint models do not yet, and are refused clearly.
+of the plan), with the Bilateral, Fixed, Uniform, Stopper and Sliding models' rows; the
+Unilateral model does not yet, and is refused clearly.
 """
 
 from __future__ import annotations
@@ -244,7 +245,8 @@ SLIDING_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec3d", "Rigid3d"),
     default_template="Vec3d",
     renamed_from=("SlidingConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="sliding_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("sliding_point", Int(nonnegative=True), 0, "sliding point in object1", indexes="object1"),
