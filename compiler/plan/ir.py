@@ -509,8 +509,9 @@ class ConstraintPhase:
     saved: dict[str, tuple[Buffer, Buffer]] = field(default_factory=dict)  # frozen state ident -> (x, v)
     capacity: int = 0  # constraint rows the phase can hold
     # Row blocks in row order: (first row, runtime Resolution, parameter, offset of its kept forces
-    # in ``kept`` or -1), and the forces kept across steps (bilateral warm start).
-    blocks: list[tuple[int, int, float, int]] = field(default_factory=list)
+    # in ``kept`` or -1, upper bound (stoppers' max, else 0)), and the forces kept across steps
+    # (bilateral warm start).
+    blocks: list[tuple[int, int, float, int, float]] = field(default_factory=list)
     kept: Buffer | None = None
     # Jacobian entries per constrained state (ident): (row, dof, derivative values), SOFA's
     # MatrixDeriv before it is sorted into rows.

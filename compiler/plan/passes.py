@@ -335,7 +335,9 @@ def drop_unread_rest_positions(planner: Planner, groups: list[Group]) -> None:
     RestShapeSpringsForceField, a mapping's set-up): read from the plan itself, the calls of the
     groups (step, init, mappings computed in the step or on read, projections) and what the
     collision pipeline and the contact guard hold."""
-    used = set(_buffers_held([groups, planner.collisions, planner.guard]))
+    used = set(
+        _buffers_held([groups, planner.collisions, planner.guard, getattr(planner, "constraints", None)])
+    )
     for state in planner.states.values():
         if state.rest is not None and state.rest.ident not in used:
             rest = state.rest

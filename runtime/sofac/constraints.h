@@ -9,6 +9,8 @@
 //   Unilateral1           UnilateralConstraintResolution: f -= d / w, then f >= 0
 //   UnilateralFriction3   UnilateralConstraintResolutionWithFriction: normal, then tangents in
 //                         Coulomb's cone of coefficient `parameter`
+//   Stopper1              StopperLagrangianConstraintResolution1Dof: the free displacement kept in
+//                         [parameter, upper] (min, max), no warm start
 // Solvers, with SOFA's stopping tests, iteration counts and order of operations:
 //   block_gauss_seidel    BlockGaussSeidelConstraintSolver::doSolve (built W)
 //   nncg                  NNCGConstraintSolver::doSolve
@@ -27,7 +29,13 @@
 
 namespace sofac {
 
-enum class Resolution : int { Bilateral3 = 0, Bilateral1 = 1, Unilateral1 = 2, UnilateralFriction3 = 3 };
+enum class Resolution : int {
+    Bilateral3 = 0,
+    Bilateral1 = 1,
+    Unilateral1 = 2,
+    UnilateralFriction3 = 3,
+    Stopper1 = 4
+};
 
 inline constexpr int resolution_lines(Resolution kind) {
     return kind == Resolution::Bilateral3 || kind == Resolution::UnilateralFriction3 ? 3 : 1;
@@ -37,7 +45,8 @@ inline constexpr int resolution_lines(Resolution kind) {
 struct RowBlock {
     Index first = 0;  // first row
     Resolution kind = Resolution::Unilateral1;
-    double parameter = 1.0;      // Bilateral*: load; UnilateralFriction3: mu
+    double parameter = 1.0;      // Bilateral*: load; UnilateralFriction3: mu; Stopper1: min
+    double upper = 0.0;          // Stopper1: max
     double* previous = nullptr;  // Bilateral*: forces kept from the last solve (warm start), or none
     double block[9] = {};        // Bilateral3: inverse of W's block; UnilateralFriction3: W00 W01 W02 W11 W12 W22
     bool singular = false;       // Bilateral3: the block did not invert (SOFA leaves the inverse zero)
@@ -116,6 +125,9 @@ inline void resolution_init(RowBlock& b, const ConstraintProblem& p) {
             b.block[4] = p.w(l + 1, l + 2);
             b.block[5] = p.w(l + 2, l + 2);
             break;
+        case Resolution::Stopper1:
+            p.f[l] = 0.0;
+            break;
         case Resolution::Unilateral1:
             break;
     }
@@ -136,6 +148,17 @@ inline void resolution_solve(const RowBlock& b, const ConstraintProblem& p, doub
             f[l] -= d[l] / p.w(l, l);
             if (f[l] < 0) f[l] = 0.0;
             break;
+        case Resolution::Stopper1: {
+            const double w = p.w(l, l);
+            const double free = d[l] - w * f[l];
+            if (free > b.upper)
+                f[l] = (b.upper - free) * (1.0 / w);
+            else if (free < b.parameter)
+                f[l] = (b.parameter - free) * (1.0 / w);
+            else
+                f[l] = 0;
+            break;
+        }
         case Resolution::UnilateralFriction3: {
             const double* w = b.block;
             const double f0 = f[l];
@@ -614,7 +637,74 @@ inline void bilateral_violation(double* dfree, Index first, const double* x1, co
         }
 }
 
-// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameter, offset
+// UniformLagrangianConstraint::getConstraintViolation (position order): rows first + i get
+// x_free[i] - rest[i] (rest: constrainToRestPos) or x_free[i], over every coordinate.
+inline void coordinate_violation(double* dfree, Index first, const double* x, const double* rest, Index count) {
+    for (Index i = 0; i < count; ++i) dfree[first + i] = rest ? x[i] - rest[i] : x[i];
+}
+
+// SlidingLagrangianConstraint<Vec3d>::buildConstraintMatrix and getConstraintViolation on the free
+// positions: point m1 of x1 on the segment a-b of x2. Rows first.. first+3: dirProj, dirOrtho
+// (bilateral, on P and on the projection's barycentre of A and B), dirAxe on P - A, -dirAxe on
+// P - B (unilateral). values1: one entry a row (P); values2: rows 0, 1 with A and B in ascending
+// DOF order, row 2 on A, row 3 on B. A segment of zero length (SOFA then adds three bilateral rows
+// on P - A) keeps the last directions and is counted in degenerate[0].
+inline void sliding_rows(double* values1, double* values2, double* dfree, Index first, const double* x1,
+                         const double* x2, Index m1, Index a, Index b, double* degenerate) {
+    const double eps = std::numeric_limits<double>::epsilon();
+    const Vec3 P(x1[3 * m1], x1[3 * m1 + 1], x1[3 * m1 + 2]);
+    const Vec3 A(x2[3 * a], x2[3 * a + 1], x2[3 * a + 2]);
+    const Vec3 B(x2[3 * b], x2[3 * b + 1], x2[3 * b + 2]);
+    Vec3 axis = B - A;
+    const double ab = axis.norm();
+    if (ab < eps) {
+        degenerate[0] += 1.0;
+    } else {
+        axis = axis.normalized();
+        const double r = (P - A).dot(axis);
+        double bary = r / ab < 0 ? 0 : r / ab;
+        bary = bary > 1.0 ? 1.0 : bary;
+        const Vec3 projection = A + axis * r;
+        Vec3 normal = P - projection;
+        if (normal.norm() < eps) {
+            Vec3 x_vec(1, 0, 0);
+            if (x_vec.cross(axis).norm() < eps) x_vec[1] = 1;
+            normal = x_vec.cross(axis);
+        }
+        normal = normal.normalized();
+        const Vec3 ortho = normal.cross(axis).normalized();
+        const Vec3 directions[4] = {normal, ortho, axis, -axis};
+        for (int row = 0; row < 4; ++row)
+            for (int c = 0; c < 3; ++c) values1[3 * row + c] = directions[row][c];
+        const bool a_first = a < b;
+        for (int row = 0; row < 2; ++row)
+            for (int c = 0; c < 3; ++c) {
+                const double on_a = -directions[row][c] * (1 - bary), on_b = -directions[row][c] * bary;
+                values2[6 * row + c] = a_first ? on_a : on_b;
+                values2[6 * row + 3 + c] = a_first ? on_b : on_a;
+            }
+        for (int c = 0; c < 3; ++c) {
+            values2[12 + c] = -axis[c];
+            values2[15 + c] = axis[c];
+        }
+        values1[12] = bary;  // (kept for the violation: the last barycentric coordinate)
+    }
+    const double bary = values1[12];
+    const Vec3 to_projection = P - (B * bary + A * (1 - bary));
+    for (int row = 0; row < 2; ++row) {
+        const Vec3 direction(values1[3 * row], values1[3 * row + 1], values1[3 * row + 2]);
+        dfree[first + row] = to_projection.dot(direction);
+    }
+    const Vec3 axis_kept(values1[6], values1[7], values1[8]);
+    dfree[first + 2] = (P - A).dot(axis_kept);
+    dfree[first + 3] = (P - B).dot(-axis_kept);
+}
+
+// StopperLagrangianConstraint<Vec1d>::getConstraintViolation: its row gets x_free[index].
+inline void stopper_violation(double* dfree, Index row, const double* x, Index index) { dfree[row] = x[index]; }
+
+// The loop's constraint solve, on blocks given as arrays (first row, Resolution, parameters (two a
+// block: parameter, upper), offset
 // of its kept forces in `previous` or -1); K blocks, on the stack. report: solves, iterations and
 // error of the last solve, solves that hit the iteration limit, and the time, error and iterations
 // of the last such solve.
@@ -628,7 +718,8 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     for (int k = 0; k < K; ++k) {
         blocks[k].first = first[k];
         blocks[k].kind = Resolution(kind[k]);
-        blocks[k].parameter = parameter[k];
+        blocks[k].parameter = parameter[2 * k];
+        blocks[k].upper = parameter[2 * k + 1];
         blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
     }
     if (regularization > std::numeric_limits<double>::epsilon())
@@ -797,7 +888,8 @@ inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double
     for (int k = 0; k < K; ++k) {
         blocks[k].first = first[k];
         blocks[k].kind = Resolution(kind[k]);
-        blocks[k].parameter = parameter[k];
+        blocks[k].parameter = parameter[2 * k];
+        blocks[k].upper = parameter[2 * k + 1];
         blocks[k].previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
     }
     for (const auto& item : set.items) item.reset();

@@ -255,7 +255,8 @@ public:
             RowBlock b;
             b.first = first[k];
             b.kind = Resolution(kind[k]);
-            b.parameter = parameter[k];
+            b.parameter = parameter[2 * k];
+            b.upper = parameter[2 * k + 1];
             b.previous = kept[k] >= 0 ? previous + kept[k] : nullptr;
             blocks_.push_back(b);
         }

@@ -6,7 +6,15 @@ from __future__ import annotations
 
 from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
-from sofac.plan.lower.constraints import lower_bilateral, lower_constraint_correction, lower_constraint_solver
+from sofac.plan.lower.constraints import (
+    lower_bilateral,
+    lower_constraint_correction,
+    lower_constraint_solver,
+    lower_fixed_lagrangian,
+    lower_sliding,
+    lower_stopper,
+    lower_uniform,
+)
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
@@ -99,6 +107,10 @@ LOWERINGS: dict[str, Lowering] = {
     "constraint_solver": lower_constraint_solver,
     "constraint_correction": lower_constraint_correction,
     "bilateral_constraint": lower_bilateral,
+    "fixed_lagrangian_constraint": lower_fixed_lagrangian,
+    "stopper_constraint": lower_stopper,
+    "sliding_constraint": lower_sliding,
+    "uniform_constraint": lower_uniform,
     "beam_fem": lower_beam_fem,
     "beam_linear_mapping": lower_beam_linear_mapping,
 }

@@ -124,6 +124,9 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     )
     planner.constraint_phase = phase  # type: ignore[attr-defined]
     planner.pending_violations = []  # type: ignore[attr-defined]
+    planner.pending_stoppers = []  # type: ignore[attr-defined]
+    planner.pending_coordinates = []  # type: ignore[attr-defined]
+    planner.pending_sliding = []  # type: ignore[attr-defined]
     planner.constraint_solver = solver  # type: ignore[attr-defined]
     return phase
 
@@ -173,6 +176,9 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
 
 # The runtime's Resolution values (runtime/sofac/constraints.h).
 BILATERAL_3 = 0
+BILATERAL_1 = 1
+UNILATERAL_1 = 2
+STOPPER_1 = 4
 
 # The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
 _ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
@@ -235,7 +241,7 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
     phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
     load = float(planner.value(component, "load"))
     for p in range(pairs):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p))
+        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p, 0.0))
         for k in range(3):
             unit = tuple(1.0 if c == k else 0.0 for c in range(3))
             row = first_row + 3 * p + k
@@ -261,6 +267,216 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
             len(rest),
         )
     )
+
+
+def _constrained_state(planner: Planner, checked: CheckedComponent) -> StatePlan | None:
+    """The state a one-state constraint acts on: its `mstate` link, else its node's state."""
+    linked = checked.links.get("mstate")
+    component = (
+        linked if isinstance(linked, Component) else planner.checked.node_state(checked.component.node)
+    )
+    return planner.states.get(id(component)) if component is not None else None
+
+
+def _kept_forces(planner: Planner, phase: ConstraintPhase, count: int) -> int:
+    """Room for `count` more kept forces (the resolutions' warm start); returns its offset."""
+    if phase.kept is None:
+        phase.kept = planner.buffer(
+            planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
+        )
+    offset = len(phase.kept.initial)
+    phase.kept.initial = np.zeros(offset + count)
+    return offset
+
+
+def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FixedLagrangianConstraint<Vec3d>: rows +e_x, +e_y, +e_z on each fixed DOF (indices, or every
+    DOF with fixAll), violation x_free - rest_position, one BilateralConstraintResolution3Dof per DOF
+    with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if checked.datatype is None or checked.datatype.name != "Vec3d":
+        planner.unsupported(checked, "it is compiled for Vec3d only")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    state = _constrained_state(planner, checked)
+    if state is None:
+        planner.unsupported(checked, "it needs a compiled MechanicalObject in its node (or mstate)")
+        return
+    if state.mapped or state.rest is None:
+        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
+        return
+    if planner.value(component, "fixAll"):
+        indices = np.arange(state.size, dtype=np.int64)
+    else:
+        indices = _values(planner, component, "indices", np.int64)
+    count = len(indices)
+    if count == 0:
+        planner.ignored.append((component, "no index: no constraint row"))
+        return
+    first_row = phase.capacity
+    phase.capacity += 3 * count
+    kept_offset = _kept_forces(planner, phase, 3 * count)
+    for p, dof in enumerate(indices):
+        phase.blocks.append((first_row + 3 * p, BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
+        for k in range(3):
+            unit = tuple(1.0 if c == k else 0.0 for c in range(3))
+            phase.entries.setdefault(state.ident, []).append((first_row + 3 * p + k, int(dof), unit))
+    fixed = planner.buffer(component, "fixed_indices", indices, "i64")
+    no_rest = planner.buffer(component, "no_rest_vector", np.zeros((0, 3)), columns=3)
+    # x_free[i] - rest[i]: the bilateral violation with object1 the rest positions, object2 the state
+    planner.pending_violations.append(  # type: ignore[attr-defined]
+        (origin_of(component), first_row, state.rest, state, fixed, fixed, count, no_rest, 0)
+    )
+
+
+def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """StopperLagrangianConstraint<Vec1d>: one row +1 on DOF `index`, violation x_free[index], its
+    resolution keeping the free displacement in [min, max] (StopperLagrangianConstraintResolution1Dof)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    state = _constrained_state(planner, checked)
+    if state is None or state.datatype.name != "Vec1d":
+        planner.unsupported(checked, "it needs a compiled Vec1d MechanicalObject in its node (or mstate)")
+        return
+    if state.mapped:
+        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
+        return
+    index = int(planner.value(component, "index"))
+    row = phase.capacity
+    phase.capacity += 1
+    low, high = float(planner.value(component, "min")), float(planner.value(component, "max"))
+    _kept_forces(planner, phase, 0)  # (no warm start, but the solve takes the kept forces' buffer)
+    phase.blocks.append((row, STOPPER_1, low, -1, high))
+    phase.entries.setdefault(state.ident, []).append((row, index, (1.0,)))
+    planner.pending_stoppers.append((origin_of(component), row, state, index))  # type: ignore[attr-defined]
+
+
+def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """UniformLagrangianConstraint<Vec1d>: a row +1 on every coordinate of every DOF, violation
+    x_free (- rest_position with constrainToRestPos), one BilateralConstraintResolution per row
+    (iterative) without kept forces."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    if not planner.value(component, "iterative"):
+        planner.unsupported(
+            checked, "iterative=0 (one BilateralConstraintResolutionNDof) is not compiled yet"
+        )
+        return
+    state = _constrained_state(planner, checked)
+    if state is None or state.datatype.name != "Vec1d":
+        planner.unsupported(checked, "it needs a compiled Vec1d MechanicalObject in its node (or mstate)")
+        return
+    if state.mapped or state.rest is None:
+        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
+        return
+    width = state.datatype.deriv_size
+    count = state.size * width
+    if count == 0:
+        planner.ignored.append((component, "no DOF: no constraint row"))
+        return
+    first = phase.capacity
+    phase.capacity += count
+    _kept_forces(planner, phase, 0)
+    for i in range(state.size):
+        for j in range(width):
+            row = first + width * i + j
+            phase.blocks.append((row, BILATERAL_1, 1.0, -1, 0.0))
+            unit = tuple(1.0 if c == j else 0.0 for c in range(width))
+            phase.entries.setdefault(state.ident, []).append((row, i, unit))
+    rest = state.rest if planner.value(component, "constrainToRestPos") else Env.NONE
+    planner.pending_coordinates.append((origin_of(component), first, state, rest, count))  # type: ignore[attr-defined]
+
+
+def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """SlidingLagrangianConstraint<Vec3d>: object1's point slides on object2's segment axis_1-axis_2.
+    Four rows built each step from the free positions (runtime sliding_rows): two bilateral across
+    the axis, two unilateral at its ends (SOFA's BilateralConstraintResolution and
+    UnilateralConstraintResolution, no kept forces)."""
+    phase = constraint_phase(planner)
+    component = checked.component
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return
+    if checked.datatype is None or checked.datatype.name != "Vec3d":
+        planner.unsupported(checked, "it is compiled for Vec3d only")
+        return
+    if float(planner.value(component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return
+    states = []
+    for name in ("object1", "object2"):
+        linked = checked.links.get(name)
+        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
+        if state is None or state.mapped:
+            planner.unsupported(checked, f"its {name} is not a compiled unmapped MechanicalObject")
+            return
+        states.append(state)
+    point, a, b = (int(planner.value(component, n)) for n in ("sliding_point", "axis_1", "axis_2"))
+    if states[0] is states[1] or a == b:
+        planner.unsupported(checked, "object1 = object2, or axis_1 = axis_2, is not compiled yet")
+        return
+    first = phase.capacity
+    phase.capacity += 4
+    _kept_forces(planner, phase, 0)
+    for row, kind in enumerate((BILATERAL_1, BILATERAL_1, UNILATERAL_1, UNILATERAL_1)):
+        phase.blocks.append((first + row, kind, 1.0, -1, 0.0))
+    rows = list(range(first, first + 4))
+    low, high = min(a, b), max(a, b)
+    layouts = (
+        ([0, 1, 2, 3, 4], [point] * 4, 13),
+        ([0, 2, 4, 5, 6], [low, high, low, high, a, b], 18),
+    )
+    aggregates = []
+    for state, (starts, dofs, size) in zip(states, layouts, strict=True):
+        values = planner.buffer(state.component, "sliding_J_values", np.zeros(size), role="scratch")
+        buffers = (
+            planner.buffer(state.component, "sliding_J_rows", rows, "i64"),
+            planner.buffer(state.component, "sliding_J_starts", starts, "i64"),
+            planner.buffer(state.component, "sliding_J_dofs", dofs, "i64"),
+            values,
+        )
+        aggregates.append((state, Aggregate("JacobianRows", (4, *buffers)), values))
+    degenerate = planner.buffer(component, "degenerate_segments", np.zeros(1), role="state")
+    planner.pending_sliding.append(  # type: ignore[attr-defined]
+        (checked, first, aggregates, point, a, b, degenerate)
+    )
+    for state in states:
+        phase.entries.setdefault(state.ident, [])
+
+
+def _sliding_rows(planner: Planner, phase: ConstraintPhase, dfree: Buffer) -> None:
+    """The sliding constraints' rows (after the rigid mappings' rows are known): each state's J is
+    the constraint's own, so a state it acts on takes no other constraint's rows."""
+    for checked, first, aggregates, point, a, b, degenerate in planner.pending_sliding:  # type: ignore[attr-defined]
+        (s1, J1, values1), (s2, J2, values2) = aggregates
+        if any(phase.entries.get(s.ident) or s.ident in planner.rigid_rows for s in (s1, s2)):  # type: ignore[attr-defined]
+            planner.unsupported(
+                checked,
+                "a state with a SlidingLagrangianConstraint and other constraint rows is not compiled yet",
+            )
+            continue
+        planner.rigid_rows[s1.ident] = J1  # type: ignore[attr-defined]
+        planner.rigid_rows[s2.ident] = J2  # type: ignore[attr-defined]
+        rows = call("sliding_rows", values1, values2, dfree, first, s1.x, s2.x, point, a, b, degenerate)
+        phase.rows.append(Op(origin_of(checked.component), [rows]))
 
 
 def _jacobian_rows(
@@ -350,13 +566,20 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     contact_states = {m.state.ident for m in lagrangian.models} if lagrangian is not None else set()
     free_x = _mapped_free_motion(planner, phase, contact_states)
     for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
-        x1, x2 = free_x.get(s1.ident, s1.x), free_x.get(s2.ident, s2.x)
+        # object1 given as a Buffer: constant positions (FixedLagrangianConstraint's rest positions)
+        x1 = s1 if isinstance(s1, Buffer) else free_x.get(s1.ident, s1.x)
+        x2 = free_x.get(s2.ident, s2.x)
         phase.violation.append(
             Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
         )
+    for origin, row, state, rest, count in planner.pending_coordinates:  # type: ignore[attr-defined]
+        phase.violation.append(Op(origin, [call("coordinate_violation", dfree, row, state.x, rest, count)]))
+    for origin, row, state, index in planner.pending_stoppers:  # type: ignore[attr-defined]
+        phase.violation.append(Op(origin, [call("stopper_violation", dfree, row, state.x, index)]))
     if lagrangian is not None:
         phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
     _carry_through_rigid_mappings(planner, phase)
+    _sliding_rows(planner, phase, dfree)
     bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
     unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
     for body, correction in enumerate(phase.corrections):
@@ -368,9 +591,12 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         checked = correction.checked
         assert checked is not None
         state = correction.state
-        if correction.kind != "uncoupled" or state.datatype.name not in ("Vec3d", "Rigid3d"):
+        compiled = ("Vec3d", "Rigid3d") if lagrangian is not None else ("Vec3d", "Rigid3d", "Vec1d")
+        if correction.kind != "uncoupled" or state.datatype.name not in compiled:
             planner.unsupported(
-                checked, "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d is compiled"
+                checked,
+                "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d (Vec1d without "
+                "contacts) is compiled",
             )
             continue
         group = correction.group
@@ -453,7 +679,9 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         return
     firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
     kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
-    parameters = planner.buffer("/", "constraint_block_parameter", [b[2] for b in phase.blocks])
+    parameters = planner.buffer(
+        "/", "constraint_block_parameter", [(b[2], b[4]) for b in phase.blocks], columns=2
+    )
     kept = planner.buffer("/", "constraint_block_kept", [b[3] for b in phase.blocks], "i64")
     assert phase.kept is not None
     order = ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified", "regularizationTerm")

@@ -1,7 +1,8 @@
 """The Lagrangian constraint pipeline: FreeMotionAnimationLoop, constraint solvers and corrections.
 
 The loop, the solvers and the corrections compile (plan/lower/constraints.py: the constraint phase
-of the plan); the constraint models do not yet, and are refused clearly.
+of the plan), with the Bilateral, Fixed, Uniform, Stopper and Sliding models' rows; the
+Unilateral model does not yet, and is refused clearly.
 """
 
 from __future__ import annotations
@@ -218,6 +219,24 @@ BILATERAL_LAGRANGIAN_CONSTRAINT = ComponentSpec(
 
 _MODEL_MODULE = "Sofa.Component.Constraint.Lagrangian.Model"
 
+FIXED_LAGRANGIAN_CONSTRAINT = ComponentSpec(
+    name="FixedLagrangianConstraint",
+    category=Category.LAGRANGIAN_CONSTRAINT,
+    module=_MODEL_MODULE,
+    doc="Holds DOFs at their rest position by bilateral constraint rows (one per coordinate).",
+    templates=("Vec3d", "Vec2d", "Vec1d", "Vec6d", "Rigid3d"),
+    default_template="Vec3d",
+    supported=True,
+    lowering="fixed_lagrangian_constraint",
+    effects=_SOLVE,
+    fields=(
+        FieldSpec("indices", Ints(), doc="DOFs to fix", indexes="state"),
+        FieldSpec("fixAll", Bool(), False, "fix every DOF"),
+        FieldSpec("endTime", Real(), -1.0, "time after which the constraint stops (negative: never)"),
+        MSTATE_LINK,
+    ),
+)
+
 SLIDING_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     name="SlidingLagrangianConstraint",
     category=Category.LAGRANGIAN_CONSTRAINT,
@@ -226,7 +245,8 @@ SLIDING_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec3d", "Rigid3d"),
     default_template="Vec3d",
     renamed_from=("SlidingConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="sliding_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("sliding_point", Int(nonnegative=True), 0, "sliding point in object1", indexes="object1"),
@@ -246,7 +266,8 @@ STOPPER_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec1d",),
     default_template="Vec1d",
     renamed_from=("StopperConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="stopper_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("index", Int(nonnegative=True), 0, "constrained DOF", indexes="state"),
@@ -265,7 +286,8 @@ UNIFORM_LAGRANGIAN_CONSTRAINT = ComponentSpec(
     templates=("Vec1d",),
     default_template="Vec1d",
     renamed_from=("UniformConstraint",),
-    unsupported_reason=_REASON,
+    supported=True,
+    lowering="uniform_constraint",
     effects=_SOLVE,
     fields=(
         FieldSpec("iterative", Bool(), True, "iterate over the constraints (else block factorisation)"),
@@ -297,6 +319,7 @@ COMPONENTS = (
     LINEAR_SOLVER_CONSTRAINT_CORRECTION,
     UNCOUPLED_CONSTRAINT_CORRECTION,
     BILATERAL_LAGRANGIAN_CONSTRAINT,
+    FIXED_LAGRANGIAN_CONSTRAINT,
     SLIDING_LAGRANGIAN_CONSTRAINT,
     STOPPER_LAGRANGIAN_CONSTRAINT,
     UNIFORM_LAGRANGIAN_CONSTRAINT,
