@@ -190,22 +190,40 @@ def _values(planner: Planner, component: Component, name: str, dtype: type) -> n
     return np.asarray(value if value is not None else [], dtype=dtype).ravel()
 
 
+def _phase_for(
+    planner: Planner, checked: CheckedComponent, datatype: str | None = None
+) -> ConstraintPhase | None:
+    """The constraint phase a constraint model's rows go to; None once it is refused (no
+    FreeMotionAnimationLoop, or not the ``datatype`` it is compiled for)."""
+    phase = constraint_phase(planner)
+    if phase is None:
+        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
+        return None
+    if datatype is not None and (checked.datatype is None or checked.datatype.name != datatype):
+        planner.unsupported(checked, f"it is compiled for {datatype} only")
+        return None
+    return phase
+
+
+def _has_end_time(planner: Planner, checked: CheckedComponent) -> bool:
+    """A constraint with an endTime is refused (its rows would stop at that time)."""
+    if float(planner.value(checked.component, "endTime")) >= 0.0:
+        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+        return True
+    return False
+
+
 def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """BilateralLagrangianConstraint<Vec3d>: three rows per pair of points, -e_k on object1's point
     and +e_k on object2's (buildConstraintMatrix), the violation x2_free - x1_free (- rest)."""
-    phase = constraint_phase(planner)
+    phase = _phase_for(planner, checked, "Vec3d")
     component = checked.component
     if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
-        return
-    if checked.datatype is None or checked.datatype.name != "Vec3d":
-        planner.unsupported(checked, "it is compiled for Vec3d only")
         return
     if planner.value(component, "activate") is False:
         planner.ignored.append((component, "activate=0: no constraint"))
         return
-    if float(planner.value(component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+    if _has_end_time(planner, checked):
         return
     states = []
     for name in ("object1", "object2"):
@@ -293,16 +311,11 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
     """FixedLagrangianConstraint<Vec3d>: rows +e_x, +e_y, +e_z on each fixed DOF (indices, or every
     DOF with fixAll), violation x_free - rest_position, one BilateralConstraintResolution3Dof per DOF
     with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation)."""
-    phase = constraint_phase(planner)
+    phase = _phase_for(planner, checked, "Vec3d")
     component = checked.component
     if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
         return
-    if checked.datatype is None or checked.datatype.name != "Vec3d":
-        planner.unsupported(checked, "it is compiled for Vec3d only")
-        return
-    if float(planner.value(component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+    if _has_end_time(planner, checked):
         return
     state = _constrained_state(planner, checked)
     if state is None:
@@ -338,13 +351,11 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
 def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """StopperLagrangianConstraint<Vec1d>: one row +1 on DOF `index`, violation x_free[index], its
     resolution keeping the free displacement in [min, max] (StopperLagrangianConstraintResolution1Dof)."""
-    phase = constraint_phase(planner)
+    phase = _phase_for(planner, checked)
     component = checked.component
     if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
         return
-    if float(planner.value(component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+    if _has_end_time(planner, checked):
         return
     state = _constrained_state(planner, checked)
     if state is None or state.datatype.name != "Vec1d":
@@ -367,13 +378,11 @@ def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     """UniformLagrangianConstraint<Vec1d>: a row +1 on every coordinate of every DOF, violation
     x_free (- rest_position with constrainToRestPos), one BilateralConstraintResolution per row
     (iterative) without kept forces."""
-    phase = constraint_phase(planner)
+    phase = _phase_for(planner, checked)
     component = checked.component
     if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
         return
-    if float(planner.value(component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+    if _has_end_time(planner, checked):
         return
     if not planner.value(component, "iterative"):
         planner.unsupported(
@@ -410,16 +419,11 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     Four rows built each step from the free positions (runtime sliding_rows): two bilateral across
     the axis, two unilateral at its ends (SOFA's BilateralConstraintResolution and
     UnilateralConstraintResolution, no kept forces)."""
-    phase = constraint_phase(planner)
+    phase = _phase_for(planner, checked, "Vec3d")
     component = checked.component
     if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
         return
-    if checked.datatype is None or checked.datatype.name != "Vec3d":
-        planner.unsupported(checked, "it is compiled for Vec3d only")
-        return
-    if float(planner.value(component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
+    if _has_end_time(planner, checked):
         return
     states = []
     for name in ("object1", "object2"):
