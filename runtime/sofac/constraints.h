@@ -82,6 +82,22 @@ struct ConstraintResult {
     bool stalled = false;       // NNCG: stopped as the forces stopped changing (SOFA: not converged)
 };
 
+// The run report of a solve: report[0] solves, [1] and [2] the last one's iterations and error,
+// [3] the unconverged solves and [4..6] the last of those (time, error, iterations). A step with
+// no row (`any_row` false) has nothing to converge.
+inline void record_solve(double* report, const ConstraintResult& result, double time,
+                         bool any_row = true) {
+    report[0] += 1.0;
+    report[1] = double(result.iterations);
+    report[2] = result.error;
+    if (any_row && !result.converged) {
+        report[3] += 1.0;
+        report[4] = time;
+        report[5] = result.error;
+        report[6] = double(result.iterations);
+    }
+}
+
 // SOFA's type::invertMatrix for 3x3 (cofactors over the determinant; false when |det| <= eps).
 inline bool invert3(const double m[9], double out[9]) {
     const double det = m[0] * m[4] * m[8] + m[3] * m[7] * m[2] + m[6] * m[1] * m[5] - m[0] * m[7] * m[5] -
@@ -728,15 +744,7 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
-    report[0] += 1.0;
-    report[1] = double(result.iterations);
-    report[2] = result.error;
-    if (!result.converged) {
-        report[3] += 1.0;
-        report[4] = time;
-        report[5] = result.error;
-        report[6] = double(result.iterations);
-    }
+    record_solve(report, result, time);
 }
 
 // RigidMapping::applyJT on constraint rows: entry e of the frame's rows gets (n, r x n), n the
@@ -902,15 +910,7 @@ inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     const ConstraintResult result = unbuilt_gauss_seidel(p, settings, set);
-    report[0] += 1.0;
-    report[1] = double(result.iterations);
-    report[2] = result.error;
-    if (!result.converged) {
-        report[3] += 1.0;
-        report[4] = time;
-        report[5] = result.error;
-        report[6] = double(result.iterations);
-    }
+    record_solve(report, result, time);
 }
 
 }  // namespace sofac

@@ -493,15 +493,7 @@ inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, doubl
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
-    report[0] += 1.0;
-    report[1] = double(result.iterations);
-    report[2] = result.error;
-    if (n > 0 && !result.converged) {  // (no row, no contact this step: nothing to converge)
-        report[3] += 1.0;
-        report[4] = time;
-        report[5] = result.error;
-        report[6] = double(result.iterations);
-    }
+    record_solve(report, result, time, n > 0);
 }
 
 // An unbuilt correction and the body its contact rows go to.
@@ -536,15 +528,7 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     const ConstraintResult result = unbuilt_gauss_seidel(p, settings, set);
-    report[0] += 1.0;
-    report[1] = double(result.iterations);
-    report[2] = result.error;
-    if (n > 0 && !result.converged) {
-        report[3] += 1.0;
-        report[4] = time;
-        report[5] = result.error;
-        report[6] = double(result.iterations);
-    }
+    record_solve(report, result, time, n > 0);
 }
 
 // LCPConstraintSolver, built, on this step's contact rows (3 per contact): nlcp_gaussseidel with
@@ -561,15 +545,7 @@ inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree
     const LcpSettings settings{Index(max_iterations), tolerance, mu, min_w, max_f, initial_guess != 0.0};
     const ConstraintResult result = lcp_gauss_seidel(p, settings);
     if (initial_guess != 0.0) L->keep_forces(f);
-    report[0] += 1.0;
-    report[1] = double(result.iterations);
-    report[2] = result.error;
-    if (n > 0 && !result.converged) {
-        report[3] += 1.0;
-        report[4] = time;
-        report[5] = result.error;
-        report[6] = double(result.iterations);
-    }
+    record_solve(report, result, time, n > 0);
 }
 
 // LCPConstraintSolver, unbuilt, frictionless (lcp_gaussseidel_unbuilt): one row per contact, each
