@@ -37,6 +37,7 @@ from sofac.plan.ir import (
     FemMethod,
     Function,
     Group,
+    LinearSystem,
     MappingOp,
     Note,
     Offset,
@@ -119,6 +120,8 @@ def _argument(arg: Arg) -> str:
         return f"sofac::Assembler::kMapped + {arg.value}" if arg.mapped else str(arg.value)
     if isinstance(arg, Function):
         return f"sofac::{arg.name}"
+    if isinstance(arg, LinearSystem):
+        return f"S.direct_{arg.group}"
     if isinstance(arg, Aggregate):
         fields = ", ".join(_argument(f) for f in arg.fields)
         return f"sofac::{arg.type}{_templates(arg.templates)}{{{fields}}}"
@@ -470,8 +473,8 @@ class _CollisionView:
             rows, static = collision.row_capacity + collision.static_rows, collision.static_rows
             bodies = max((b for b, *_ in collision.bodies), default=-1) + 1
             self.setup.append(f"C.setup_lagrangian({collision.mu!r}, {rows}, {static}, {bodies});")
-            for i, (body, free, frames, offsets) in enumerate(collision.bodies):
-                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets)]
+            for i, (body, free, frames, offsets, subset) in enumerate(collision.bodies):
+                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets, subset)]
                 self.setup.append(f"C.lagrangian[{i}] = {{{body}, {', '.join(pointers)}}};")
             self.setup.append(f"C.rank = {{{', '.join(str(r) for r in collision.ranks)}}};")
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)

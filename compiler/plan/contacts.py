@@ -181,10 +181,6 @@ def contact_setup_refusal(planner: Planner) -> str:
             return (
                 f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
             )
-        if kind == "friction_contact" and any(
-            c.spec is not None and c.spec.name == "LinearSolverConstraintCorrection" for c in planner.checked
-        ):
-            return "Lagrangian contact with a LinearSolverConstraintCorrection is not compiled yet"
         if kind == "friction_contact" and len(setups) > 1:
             return "Lagrangian contact from several collision pipelines is not compiled yet"
         for checked in setup.models:

@@ -144,6 +144,14 @@ class Function:
 
 
 @dataclass(frozen=True)
+class LinearSystem:
+    """A group's direct solver (its factorisation of this step's system matrix), by group ident:
+    what LinearSolverConstraintCorrection solves with."""
+
+    group: str
+
+
+@dataclass(frozen=True)
 class Aggregate:
     """A runtime struct built from arguments (a spring table, an element split)."""
 
@@ -152,7 +160,7 @@ class Aggregate:
     templates: tuple[TemplateArg, ...] = ()
 
 
-Arg = Union[Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
+Arg = Union[Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
 # str: a DataType name ("Vec3d"); the enums: a kernel's variant, spelt as the runtime's enum class
 TemplateArg = Union[str, int, bool, Constant, SpringDamping, SpringFlags]  # noqa: UP007
 
@@ -218,7 +226,7 @@ def _plain(name: str, arg: Any) -> Arg:
     return arg
 
 
-_ARG_TYPES = (Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float)
+_ARG_TYPES = (Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float)
 
 
 def bind(statement: Call, values: dict[Slot, Arg]) -> Call:
@@ -616,8 +624,11 @@ class Collision:
     ranks: list[int] = field(default_factory=list)
     row_capacity: int = 0
     static_rows: int = 0  # the scene's own constraint rows, before the contacts'
-    # friction_contact, per model: (correction index or -1, free positions, frames, offsets)
-    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None]] = field(default_factory=list)
+    # friction_contact, per model: (correction index or -1, free positions, frames, offsets, subset
+    # indices: RigidMapping's frames and offsets, or an identity/subset mapping's parent DOFs)
+    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None, Buffer | None]] = field(
+        default_factory=list
+    )
 
 
 @dataclass
