@@ -38,9 +38,9 @@ using sofac::Index;
 // J: `rows` rows of Vec3d entries (row_index, start, dof, values). Out: W (rows x rows, factor dt,
 // regularization reg) and, for the forces f, lambda = J^T f and dx = A^-1 lambda, x and v moved
 // from x_free, v_free by dt dx and dx.
-API void run(Index n, const double* A, const Index* fixed, Index rows, const Index* row_index, const Index* start,
-             const Index* dof, const double* values, double dt, double reg, double* W, const double* f, double* x,
-             double* v, double* lambda, double* dx) {
+API void run(Index n, const double* A, const Index* fixed, Index rows, const Index* row_index,
+             const Index* start, const Index* dof, const double* values, double dt, double reg, double* W,
+             const double* f, double* x, double* v, double* lambda, double* dx) {
     sofac::DirectSolver D;
     D.resize(n);
     for (Index i = 0; i < n; ++i) D.fixed[i] = fixed[i] != 0;
@@ -177,7 +177,8 @@ def test_a_particle_rests_on_the_floor_with_the_weight_as_impulse(tmp_path: Path
 def test_it_agrees_with_the_uncoupled_correction_where_a_is_the_mass(tmp_path: Path) -> None:
     # one point mass and no stiffness: A = M, so A^-1 = 1/m = the uncoupled compliance
     linear = _run(particle_scene(tmp_path, "<LinearSolverConstraintCorrection/>"), 60)
-    uncoupled = _run(particle_scene(tmp_path, f'<UncoupledConstraintCorrection compliance="{1 / MASS}"/>'), 60)
+    uncoupled_scene = particle_scene(tmp_path, f'<UncoupledConstraintCorrection compliance="{1 / MASS}"/>')
+    uncoupled = _run(uncoupled_scene, 60)
     for a, b in zip(linear, uncoupled, strict=True):
         assert np.allclose(a, b, rtol=1e-12, atol=1e-15)
     assert linear[2][-1] > 0  # in contact at the end
