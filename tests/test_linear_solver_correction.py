@@ -235,3 +235,39 @@ def test_falling_beam_lands_and_comes_to_rest_on_the_floor(shared_dir: Path) -> 
     # at rest the normal impulses carry the beam's weight over the step: m g dt (m = 1)
     normals = sim.output("/.constraint_f")[: 3 * int(contacts[-1]) : 3]
     assert normals.min() >= 0.0 and normals.sum() == pytest.approx(1.0 * 9.81 * 0.01, rel=1e-3)
+
+
+SPRING = """<Node name="root" dt="0.01" gravity="0 -9.81 0">
+    <FreeMotionAnimationLoop name="loop"/>
+    <BlockGaussSeidelConstraintSolver maxIterations="200" tolerance="1e-14"/>
+    <Node name="A">
+        <EulerImplicitSolver rayleighMass="0.5" rayleighStiffness="0"/>
+        <SparseLDLSolver/>
+        <MechanicalObject name="dofs" position="0 1 0  0 0 0"/>
+        <UniformMass vertexMass="0.5"/>
+        <SpringForceField spring="0 1 100 0 1"/>
+        <LinearSolverConstraintCorrection/>
+    </Node>
+    <Node name="B">
+        <MechanicalObject name="anchor" position="0 1 0"/>
+    </Node>
+    <BilateralLagrangianConstraint object1="@B/anchor" object2="@A/dofs" first_point="0" second_point="0"/>
+</Node>
+"""
+
+
+def test_a_spring_pair_hangs_from_its_anchor_through_the_coupled_compliance(tmp_path: Path) -> None:
+    """Two points joined by a spring (k 100, length 1), the upper one held by a bilateral row: A
+    couples them, so the row's correction moves both. At rest the upper point is at the anchor, the
+    lower one 1 + m g / k below, and the row's impulse per step carries both weights, 2 m g dt."""
+    path = tmp_path / "spring.scn"
+    path.write_text(SPRING)
+    sim = sofac.load(path)
+    sim.step(1500)
+    dofs = sim["/A/dofs"]
+    m, g, k = 0.5, 9.81, 100.0
+    np.testing.assert_allclose(dofs.position[0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(dofs.position[1], [0.0, -m * g / k, 0.0], atol=1e-9)
+    np.testing.assert_allclose(dofs.velocity, 0.0, atol=1e-8)  # (the swing decays: 2e-9 left)
+    impulse = sim.output("/.constraint_kept_forces")
+    np.testing.assert_allclose(impulse / 0.01, [0.0, 2 * m * g, 0.0], rtol=1e-7, atol=1e-9)
