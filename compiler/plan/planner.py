@@ -127,13 +127,15 @@ class Planner:
             return
         group.forces.append(op)
 
-    def unsupported(self, checked: CheckedComponent, why: str) -> None:
+    def unsupported(self, checked: CheckedComponent, why: str, attribute: str | None = None) -> None:
+        """E222 at the component, or at its `attribute` when the scene writes it."""
         component = checked.component
         if id(component) in self.refused:
             return
+        written = component.attributes.get(attribute) if attribute is not None else None
         self.diags.add(
             "E222",
-            component.loc,
+            written.loc if written is not None else component.loc,
             f"unsupported component {component.type_name} at line {component.loc.line}: {why}",
             "sofac check --allow-unsupported validates such scenes without compiling them",
         )

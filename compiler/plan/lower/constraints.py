@@ -164,13 +164,10 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
     assert checked.spec is not None
     kind = checked.spec.role
     if kind == "linear_solver" and planner.value(checked.component, "wire_optimization"):
-        attribute = checked.component.attributes.get("wire_optimization")
-        planner.diags.add(
-            "E222",
-            attribute.loc if attribute is not None else checked.component.loc,
-            f"unsupported component {checked.component.type_name} at line {checked.component.loc.line}: "
-            "wire_optimization=1 (constraints reordered along a wire) is not compiled",
-            'remove wire_optimization or write wire_optimization="0"',
+        planner.unsupported(
+            checked,
+            "wire_optimization=1 (constraints reordered along a wire) is not compiled; remove it",
+            "wire_optimization",
         )
         return
     if kind == "linear_solver" and (group.scheme != "implicit" or group.linear_solver is None):
@@ -781,15 +778,12 @@ def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group)
         or group.btd
     ):
         name = solver.type_name if solver is not None else "none"
-        attribute = checked.component.attributes.get("linearSolver")
-        planner.diags.add(
-            "E222",
-            attribute.loc if attribute is not None else checked.component.loc,
-            f"unsupported component {checked.component.type_name} at line {checked.component.loc.line}: "
+        planner.unsupported(
+            checked,
             f"with constraint rows, its linear solver ({name}) must be the sparse direct solver its ODE "
             "solver's system is factorised by (the group's SparseLDLSolver..., or a PCGLinearSolver's "
-            "direct preconditioner)",
-            'link it with linearSolver="@<the direct solver>"',
+            'direct preconditioner): link it with linearSolver="@<the direct solver>"',
+            "linearSolver",
         )
         return None
     if len(group.states) != 1:
