@@ -347,7 +347,8 @@ class Planner:
                 "euler": (),
                 "rk2": ("x0", "v0"),
                 "rk4": ("x0", "v0", "dx", "dv"),
-                "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
+                # The right-hand side b (CG's residual); PCG's direction p and z (CG's p is dx, q is df).
+                "implicit": ("r", "p", "z") if group.pcg else ("r",),
             }[group.scheme]
             if group.inert_preconditioner is not None:
                 names = ("r",)  # b only: no CG iteration

@@ -9,9 +9,7 @@ from typing import TYPE_CHECKING, Any
 from sofac import registry
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
-from sofac.plan.ir import (
-    Group,
-)
+from sofac.plan.ir import Group, Preconditioner
 from sofac.registry import Category
 from sofac.registry.components.common import GRAPH_SCATTERED
 
@@ -123,12 +121,12 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
         checked_preconditioner = planner.checked.of(preconditioner)
         spec = checked_preconditioner.spec
         lowering = spec.lowering if spec else ""
-        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4, "direct": 4}.get(lowering)
+        kind = _PRECONDITIONERS.get(lowering)
         if lowering == "warp" and not warp_is_identity(planner, checked_preconditioner, group):
             return False
         if lowering == "direct" and not direct_preconditioner(planner, checked_preconditioner, group):
             return False
-        if block is None:
+        if kind is None:
             planner.unsupported(
                 planner.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
             )
@@ -145,14 +143,24 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
         group.pcg["assemblyCounter"] = planner.buffer(
             component, "assemblyCounter", [rate], "i64", role="state"
         )
-        if block == -1:
+        if kind is Preconditioner.SSOR:
             group.ssor_omega = planner.buffer(
                 preconditioner, "omega", [float(planner.value(preconditioner, "omega"))], role="param"
             )
-        group.preconditioner, group.assembled = block, True
+        group.preconditioner, group.assembled = kind, True
         if all(c is not preconditioner for c in group.preconditioners):  # a warp lists itself
             group.preconditioners.insert(0, preconditioner)
     return True
+
+
+# The preconditioners' lowerings (registry) and how the runtime applies each.
+_PRECONDITIONERS = {
+    "jacobi": Preconditioner.JACOBI,
+    "block_jacobi": Preconditioner.BLOCK_JACOBI,
+    "ssor": Preconditioner.SSOR,
+    "warp": Preconditioner.FACTORIZATION,
+    "direct": Preconditioner.FACTORIZATION,
+}
 
 
 def _assembling_rate(planner: Planner, pcg: CheckedComponent) -> int:

@@ -443,7 +443,7 @@ def _matrix_solver(group: Group) -> str:
     """The linear solver of an assembled group, as messages name it."""
     if group.assembled_cg:
         return "a CGLinearSolver on an assembled matrix"
-    if group.preconditioner:
+    if group.preconditioned:
         return "a PCGLinearSolver's assembled preconditioner"
     return "a sparse direct solver"
 
