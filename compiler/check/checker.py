@@ -22,7 +22,7 @@ from sofac.diagnostics import Diagnostics, SceneError, SourceLoc
 from sofac.front import datafiles, links, meshes
 from sofac.front.model import Component, Node, Scene
 from sofac.geometry.fem_topology import CELL_KINDS
-from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
+from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus, Variant
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
 from sofac.registry.fields import (
@@ -1395,7 +1395,7 @@ class _Checker:
         """AddDataRepository: its folder (relative to the scene's) is searched for the files."""
         for checked in self.checked:
             spec = checked.spec
-            if spec is None or spec.role != "data_repository" or not checked.fields.get("path"):
+            if spec is None or spec.variant is not Variant.DATA_REPOSITORY or not checked.fields.get("path"):
                 continue
             text = str(checked.fields["path"])
             folder = Path(checked.component.loc.file).parent / text

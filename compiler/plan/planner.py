@@ -47,7 +47,7 @@ from sofac.plan.passes import (
     route_through_mappings,
 )
 from sofac.plan.solvers import new_group, screen_btd, screen_variational
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.datatypes import DATATYPES
 
 # Categories whose components run inside the step and therefore need a lowering.
@@ -144,7 +144,7 @@ class Planner:
         dt = float(self.value_node(root, "dt"))
         gravity = np.asarray(self.value_node(root, "gravity"), dtype=float)
         for checked in self.checked:
-            if checked.spec and checked.spec.role == "gravity":
+            if checked.spec and checked.spec.variant is Variant.GRAVITY:
                 if checked.component.node is root:
                     gravity = np.asarray(self.value(checked.component, "gravity"), dtype=float)
                 else:

@@ -10,7 +10,7 @@ from sofac import registry
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
 from sofac.plan.ir import Group, Preconditioner
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.components.common import GRAPH_SCATTERED
 
 if TYPE_CHECKING:
@@ -191,8 +191,8 @@ def direct_preconditioner(planner: Planner, direct: CheckedComponent, group: Gro
     system to the PCG's PreconditionedMatrixFreeSystem, which assembles it (mfact M + bfact B +
     kfact K, projected) when it refreshes; the solver factorises it when it is next applied
     (the assembly invalidates its factorisation) and applies it as a solve."""
-    role = direct.spec.role if direct.spec is not None else ""
-    if role == "svd":
+    role = direct.spec.variant if direct.spec is not None else None
+    if role == Variant.SVD:
         planner.unsupported(direct, "SVDLinearSolver as a PCG preconditioner is not compiled yet")
         return False
     if not assembles_everything(planner, direct):
@@ -250,7 +250,7 @@ def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> 
     if spec is None or spec.lowering != "direct":
         planner.unsupported(warp, "its linearSolver must be a sparse direct solver")
         return False
-    group.llt = spec.role == "llt"
+    group.llt = spec.variant is Variant.LLT
     group.preconditioners += [warp.component, inner]
     return True
 
@@ -347,7 +347,7 @@ def screen_variational(planner: Planner, group: Group, owner: dict[int, Group]) 
             )
     for checked in planner.checked:
         spec = checked.spec
-        is_mass = checked.category is Category.MASS or (spec is not None and spec.role == "and_mass")
+        is_mass = checked.category is Category.MASS or (spec is not None and spec.variant is Variant.AND_MASS)
         state = planner.state_of(checked) if is_mass else None
         if state is not None and state.mapped and owner.get(id(state.component)) is group:
             planner.unsupported(
@@ -447,9 +447,9 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
 def direct_kind(planner: Planner, linear: CheckedComponent, group: Group) -> None:
     """The factorisation of a direct solver: L L^T (role "llt"), a dense SVD (role "svd", with
     SVDLinearSolver's minSingularValue) or L D L^T."""
-    role = linear.spec.role if linear.spec is not None else ""
-    group.llt = role == "llt"
-    if role == "svd":
+    role = linear.spec.variant if linear.spec is not None else None
+    group.llt = role == Variant.LLT
+    if role == Variant.SVD:
         threshold = planner.value(linear.component, "minSingularValue")
         group.svd_threshold = planner.buffer(
             linear.component,

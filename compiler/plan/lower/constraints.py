@@ -37,7 +37,7 @@ from sofac.plan.ir import (
     kernel,
     origin_of,
 )
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
 from sofac.registry.spec import Effect
 
@@ -109,8 +109,8 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     settings = {}
     method = "block_gauss_seidel"
     if solver is not None and solver.spec is not None:
-        method = solver.spec.role
-        names = _LCP_SETTINGS if method == "lcp" else _GENERIC_SETTINGS
+        method = solver.spec.variant
+        names = _LCP_SETTINGS if method == Variant.LCP else _GENERIC_SETTINGS
         for name in names:
             value = planner.value(solver.component, name)
             settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
@@ -161,8 +161,8 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
         planner.ignored.append((checked.component, "its state has no ODE solver: it never moves"))
         return
     assert checked.spec is not None
-    kind = checked.spec.role
-    if kind == "linear_solver" and (group.scheme != "implicit" or group.linear_solver is None):
+    kind = checked.spec.variant
+    if kind == Variant.LINEAR_SOLVER and (group.scheme != "implicit" or group.linear_solver is None):
         planner.unsupported(
             checked,
             "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
@@ -541,7 +541,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             phase.kept = planner.buffer(
                 planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
             )
-    if lagrangian is not None and phase.method == "lcp" and solver is not None:
+    if lagrangian is not None and phase.method == Variant.LCP and solver is not None:
         why = _lcp_refusal(planner, solver, phase, lagrangian)
         if why:
             planner.unsupported(solver, why)
@@ -550,7 +550,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
         return
-    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == "lcp"):
+    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == Variant.LCP):
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
         return
@@ -596,7 +596,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         assert checked is not None
         state = correction.state
         compiled = ("Vec3d", "Rigid3d") if lagrangian is not None else ("Vec3d", "Rigid3d", "Vec1d")
-        if correction.kind != "uncoupled" or state.datatype.name not in compiled:
+        if correction.kind != Variant.UNCOUPLED or state.datatype.name not in compiled:
             planner.unsupported(
                 checked,
                 "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d (Vec1d without "
@@ -672,7 +672,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                 kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
             )
         phase.correction.append(Op(correction.origin, [correct]))
-    if phase.method == "lcp":  # LCPConstraintSolver on the contacts' rows
+    if phase.method == Variant.LCP:  # LCPConstraintSolver on the contacts' rows
         names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
         lcp_settings = [Element(phase.settings[name]) for name in names]
         if solver is not None and not planner.value(solver.component, "build_lcp"):
@@ -694,7 +694,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
         default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
         settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    if phase.method == "unbuilt_gauss_seidel":
+    if phase.method == Variant.UNBUILT_GAUSS_SEIDEL:
         _unbuilt_solve(
             planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
         )
