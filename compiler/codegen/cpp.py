@@ -43,6 +43,7 @@ from sofac.plan.ir import (
     Offset,
     Op,
     Plan,
+    Preconditioner,
     Projection,
     Slot,
     SpringDamping,
@@ -86,6 +87,11 @@ _ENV = {
     Env.LAGRANGIAN: "S.lagrangian",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
+_PRECONDITIONER_TYPES = {
+    Preconditioner.JACOBI: "JacobiPreconditioner",
+    Preconditioner.BLOCK_JACOBI: "JacobiPreconditioner",
+    Preconditioner.SSOR: "SsorPreconditioner",
+}
 
 
 def cpp_type(datatype: str) -> str:
@@ -200,7 +206,7 @@ def _headers(plan: Plan) -> list[str]:
         for mapping in (*group.mappings, *group.on_read):
             statements += [*mapping.apply, mapping.jacobian]
             statements += [c for c in (mapping.transpose, mapping.geometric) if c is not None]
-        matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        matrix = group.direct or group.preconditioned or group.assembled_cg
         for projection in group.projections:
             extra = (
                 projection.project,
@@ -339,7 +345,12 @@ class _GroupView:
         self.on_read = [_MappingView(m) for m in group.on_read]
         self.projections = [_ProjectionView(p) for p in group.projections]
         # an assembled system matrix: assemble_<g>, its pattern at init
-        self.matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        self.matrix = group.direct or group.preconditioned or group.assembled_cg
+        # PCGLinearSolver's preconditioner: a direct solver's factorisation, or a runtime
+        # preconditioner object (its type, and the Jacobi block size).
+        self.factored_preconditioner = group.preconditioner is Preconditioner.FACTORIZATION
+        self.preconditioner_type = _PRECONDITIONER_TYPES.get(group.preconditioner, "")
+        self.jacobi_block = 3 if group.preconditioner is Preconditioner.BLOCK_JACOBI else 1
         # The instance member holding it: a direct solver (CHOLMOD, also the preconditioners'
         # container) or the assembled CG's block rows and vectors.
         self.system = f"cg_{group.ident}" if group.assembled_cg else f"direct_{group.ident}"
@@ -555,7 +566,7 @@ def generate_source(plan: Plan) -> str:
         ]
         if plan.constraints
         else [],
-        any_direct=any(g.direct or g.preconditioner for g in plan.groups),
+        any_direct=any(g.direct or g.preconditioned for g in plan.groups),
         on_read=any(g.on_read for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),
         headers=_headers(plan),

@@ -38,7 +38,7 @@ from sofac.plan.ir import (
     kernel,
     origin_of,
 )
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
 from sofac.registry.spec import Effect
 
@@ -110,8 +110,8 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     settings = {}
     method = "block_gauss_seidel"
     if solver is not None and solver.spec is not None:
-        method = solver.spec.role
-        names = _LCP_SETTINGS if method == "lcp" else _GENERIC_SETTINGS
+        method = solver.spec.variant
+        names = _LCP_SETTINGS if method == Variant.LCP else _GENERIC_SETTINGS
         for name in names:
             value = planner.value(solver.component, name)
             settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
@@ -162,15 +162,15 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
         planner.ignored.append((checked.component, "its state has no ODE solver: it never moves"))
         return
     assert checked.spec is not None
-    kind = checked.spec.role
-    if kind == "linear_solver" and planner.value(checked.component, "wire_optimization"):
+    kind = checked.spec.variant
+    if kind == Variant.LINEAR_SOLVER and planner.value(checked.component, "wire_optimization"):
         planner.unsupported(
             checked,
             "wire_optimization=1 (constraints reordered along a wire) is not compiled; remove it",
             "wire_optimization",
         )
         return
-    if kind == "linear_solver" and (group.scheme != "implicit" or group.linear_solver is None):
+    if kind == Variant.LINEAR_SOLVER and (group.scheme != "implicit" or group.linear_solver is None):
         planner.unsupported(
             checked,
             "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
@@ -560,7 +560,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             phase.kept = planner.buffer(
                 planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
             )
-    if lagrangian is not None and phase.method == "lcp" and solver is not None:
+    if lagrangian is not None and phase.method == Variant.LCP and solver is not None:
         why = _lcp_refusal(planner, solver, phase, lagrangian)
         if why:
             planner.unsupported(solver, why)
@@ -569,7 +569,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
         return
-    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == "lcp"):
+    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == Variant.LCP):
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
         return
@@ -629,7 +629,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             continue
         component = checked.component
         J = _jacobian_rows(planner, state, entries)
-        if correction.kind == "linear_solver":
+        if correction.kind == Variant.LINEAR_SOLVER:
             _linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
             continue
         comp = _values(planner, component, "compliance", np.float64)
@@ -683,7 +683,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                 kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
             )
         phase.correction.append(Op(correction.origin, [correct]))
-    if phase.method == "lcp":  # LCPConstraintSolver on the contacts' rows
+    if phase.method == Variant.LCP:  # LCPConstraintSolver on the contacts' rows
         names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
         lcp_settings = [Element(phase.settings[name]) for name in names]
         if solver is not None and not planner.value(solver.component, "build_lcp"):
@@ -705,7 +705,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
         default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
         settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    if phase.method == "unbuilt_gauss_seidel":
+    if phase.method == Variant.UNBUILT_GAUSS_SEIDEL:
         _unbuilt_solve(
             planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
         )
@@ -807,8 +807,10 @@ def _linear_solver_correction(
     checked = correction.checked
     assert checked is not None
     solver = getattr(planner, "constraint_solver", None)
-    unbuilt = phase.method == "unbuilt_gauss_seidel" or (
-        phase.method == "lcp" and solver is not None and not planner.value(solver.component, "build_lcp")
+    unbuilt = phase.method == Variant.UNBUILT_GAUSS_SEIDEL or (
+        phase.method == Variant.LCP
+        and solver is not None
+        and not planner.value(solver.component, "build_lcp")
     )
     if unbuilt:
         planner.unsupported(
