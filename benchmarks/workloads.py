@@ -65,7 +65,7 @@ from machine import describe  # noqa: E402
 
 HANDWRITTEN = HERE / "handwritten"
 HANDWRITTEN_CHOLMOD = ("w3",)  # the loops linked with SuiteSparse's CHOLMOD
-ALL = ("w1", "w2", "w3", "w3asm", "w3ldl", "w3chol", "w4", "beam", "liver")
+ALL = ("w1", "w2", "w3", "w3asm", "w3ldl", "w3chol", "w4", "w5", "beam", "liver")
 
 # SOFA's measured ms/step (the minimum over runs) from shared/reference/sofa/timings.md.
 SOFA_MS: dict[str, float] = {"w1": 4.02, "w2": 9.2, "beam": 27.99, "liver": 1.128}
@@ -117,6 +117,8 @@ class Setup:
     liver_steps: int = 500
     w4_steps: int = 1000
     w4_size: tuple[int, int] = (64, 64)  # W4: particles per side, floor squares per side
+    w5_steps: int = 500
+    w5_sides: tuple[int, ...] = (10, 32, 100)  # W5: spheres per side, one workload row each
     batches: int = 3
     check_steps: int = 10  # the short run whose final positions must agree to rounding
     beam_grid: tuple[int, int, int] = (10, 10, 50)  # W3's grid points along x, y, z
@@ -701,6 +703,46 @@ def run_contact(setup: Setup, log: Callable[[str], None]) -> tuple[list[Row], di
     return rows, {f"sofac vs hand-written, after {total} steps": relative_difference(sofac_final, hand_final)}
 
 
+def run_spheres(setup: Setup, log: Callable[[str], None]) -> tuple[list[Row], dict[str, dict[str, float]]]:
+    """W5 at each size of ``setup.w5_sides``: damped spheres dropped onto a flat floor, sofac's
+    compiled pipeline against a hand-written loop that bins the floor once into a grid. Checks: the
+    final positions agree, and both rest at the analytic height ks (contact + r - h) = m g."""
+    folder = setup.workdir
+    exe = build_handwritten("w5", folder / "bin")
+    steps, batches = setup.w5_steps, setup.batches
+    warmup = max(1, steps // 10)
+    total = warmup + steps * batches
+    rest = scenegen.w5_rest_height()
+    rows: list[Row] = []
+    checks: dict[str, dict[str, float]] = {}
+    for n in setup.w5_sides:
+        workload = f"w5-{n * n}"
+        spheres = scenegen.spheres(n)
+        scene = folder / f"w5_n{n}.scn"
+        scene.write_text(scenegen.sphere_scene(n))
+        data = folder / f"w5_n{n}.bin"
+        write_particles_input(data, spheres)
+        label = f"W5 {n}x{n} spheres, {len(spheres.triangles)} floor triangles"
+        log(f"{label}: sofac")
+        times, sofac_final, loaded = time_sofac(scene, warmup, steps, batches)
+        rows.append(row(workload, "sofac", times, f"load {loaded:.1f} s", sofac_final))
+        log(f"{label}: hand-written C++")
+        args: list[object] = [scenegen.W5_DT, scenegen.W5_MASS, scenegen.W5_RADIUS]
+        args += [scenegen.W5_FLOOR_STIFFNESS, scenegen.W5_SPHERE_STIFFNESS, scenegen.W5_ALARM]
+        args += [scenegen.W5_CONTACT, scenegen.W5_DAMPING, scenegen.GRAVITY[1], warmup, steps, batches]
+        report, hand_final = run_handwritten(exe, data, args)
+        note = "floor binned once in a grid"
+        rows.append(row(workload, "hand-written C++", report["ms_per_step"], note, hand_final))
+        # sofac's contact point on the triangle is mapped back from barycentric weights (as SOFA does),
+        # the loop keeps the projection: the same numbers to their last bits, damped out at rest.
+        checks[workload] = {
+            f"sofac vs hand-written, after {total} steps": relative_difference(sofac_final, hand_final),
+            f"rest height, sofac, after {total} steps": float(np.max(np.abs(sofac_final[:, 1] - rest))),
+            f"rest height, hand-written, after {total} steps": float(np.max(np.abs(hand_final[:, 1] - rest))),
+        }
+    return rows, checks
+
+
 def relative_norm(difference: np.ndarray, reference: np.ndarray) -> float:
     return float(np.linalg.norm(difference) / max(float(np.linalg.norm(reference)), 1e-300))
 
@@ -730,6 +772,10 @@ def run(
             found, check = run_contact(setup, log)
             rows += found
             checks[workload] = check
+        elif workload == "w5":
+            found, by_size = run_spheres(setup, log)
+            rows += found
+            checks.update(by_size)
         elif workload == "beam":
             scene = (
                 shared / "reference" / "sofa" / "scenes" / "e_beam_large_cg25_noexport.scn"
@@ -830,7 +876,10 @@ def checks_text(checks: dict[str, dict[str, float]]) -> str:
     lines = []
     for workload, found in checks.items():
         for what, value in found.items():
-            if what.startswith("tip displacement"):
+            if what.startswith("rest height"):
+                rest = scenegen.w5_rest_height()
+                lines.append(f"{workload.upper()} {what}: max |y - h| = {value:.3g} m (h = {rest:.6g} m)")
+            elif what.startswith("tip displacement"):
                 lines.append(f"{workload.upper()} {what}: |difference| / |sofac's| = {value:.3g}")
             else:
                 lines.append(
@@ -853,6 +902,14 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--liver-steps", type=int, default=500, help="liver steps per batch (default 500)")
     parser.add_argument("--w4-steps", type=int, default=1000, help="W4 steps per batch (default 1000)")
+    parser.add_argument("--w5-steps", type=int, default=500, help="W5 steps per batch (default 500)")
+    parser.add_argument(
+        "--w5-sides",
+        type=int,
+        nargs="+",
+        default=[10, 32, 100],
+        help="W5 spheres per side, one row each (default 10 32 100: 100, 1024, 10000 spheres)",
+    )
     parser.add_argument(
         "--batches", type=int, default=3, help="timed batches (default 3; the fastest is shown)"
     )
@@ -888,6 +945,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             ldl_steps=args.ldl_steps,
             liver_steps=args.liver_steps,
             w4_steps=args.w4_steps,
+            w5_steps=args.w5_steps,
+            w5_sides=tuple(args.w5_sides),
             batches=args.batches,
             check_steps=args.check_steps,
             workdir=Path(tmp),

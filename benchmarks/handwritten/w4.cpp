@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "bench_io.h"
+#include "floor_grid.h"
 
 int main(int argc, char** argv) {
     if (argc != 13) {
@@ -37,29 +38,7 @@ int main(int argc, char** argv) {
     const double alarm = std::atof(argv[7]), contact = std::atof(argv[8]), gy = std::atof(argv[9]);
     const long warmup = std::atol(argv[10]), steps = std::atol(argv[11]), batches = std::atol(argv[12]);
 
-    // The grid: cells of the triangles' mean size over the floor's (x, z) box; each cell lists the
-    // triangles whose box, grown by the alarm distance, overlaps it.
-    double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
-    for (std::size_t p = 0; p < floor.size(); p += 3)
-        for (int a = 0; a < 2; ++a) {
-            lo[a] = std::min(lo[a], floor[p + 2 * a]);
-            hi[a] = std::max(hi[a], floor[p + 2 * a]);
-        }
-    const int side = std::max(1, int(std::sqrt(double(nt) / 2.0)));
-    const double cell[2] = {(hi[0] - lo[0]) / side, (hi[1] - lo[1]) / side};
-    auto cell_of = [&](double v, int a) { return std::clamp(int(std::floor((v - lo[a]) / cell[a])), 0, side - 1); };
-    std::vector<std::vector<std::int64_t>> bins(std::size_t(side) * side);
-    for (std::int64_t t = 0; t < nt; ++t) {
-        double tlo[2] = {1e300, 1e300}, thi[2] = {-1e300, -1e300};
-        for (int c = 0; c < 3; ++c)
-            for (int a = 0; a < 2; ++a) {
-                tlo[a] = std::min(tlo[a], floor[3 * tri[3 * t + c] + 2 * a]);
-                thi[a] = std::max(thi[a], floor[3 * tri[3 * t + c] + 2 * a]);
-            }
-        for (int j = cell_of(tlo[1] - alarm, 1); j <= cell_of(thi[1] + alarm, 1); ++j)
-            for (int i = cell_of(tlo[0] - alarm, 0); i <= cell_of(thi[0] + alarm, 0); ++i)
-                bins[std::size_t(j) * side + i].push_back(t);
-    }
+    const FloorGrid grid(floor, tri, alarm);  // the triangles within the alarm distance of each cell
 
     std::vector<double> v(3 * n, 0.0), f(3 * n, 0.0);
     const double weight = mass * gy;
@@ -70,9 +49,9 @@ int main(int argc, char** argv) {
             fp[0] = 0.0;
             fp[1] = weight;
             fp[2] = 0.0;
-            if (P[0] < lo[0] - alarm || P[0] > hi[0] + alarm || P[2] < lo[1] - alarm || P[2] > hi[1] + alarm) continue;
+            if (grid.outside(P[0], P[2], alarm)) continue;
             double best_d2 = alarm * alarm, best[3] = {0.0, 0.0, 0.0};  // the closest projection
-            for (std::int64_t t : bins[std::size_t(cell_of(P[2], 1)) * side + cell_of(P[0], 0)]) {
+            for (const std::int64_t t : grid.triangles(P[0], P[2])) {
                 const double* p1 = &floor[3 * tri[3 * t]];
                 const double* p2 = &floor[3 * tri[3 * t + 1]];
                 const double* p3 = &floor[3 * tri[3 * t + 2]];
