@@ -41,7 +41,9 @@ def test_generated_scenes_check_clean(workloads: ModuleType, tmp_path: Path) -> 
     from sofac.cli.main import main as sofac_main
 
     beams = workloads.scenegen.write_beam(tmp_path, 3, 3, 4).values()
-    scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *beams]
+    spheres = tmp_path / "w5_n2.scn"
+    spheres.write_text(workloads.scenegen.sphere_scene(2))
+    scenes = [*workloads.scenegen.write_cloth(tmp_path, 4), *beams, spheres]
     assert sofac_main(["check", "--quiet", *map(str, scenes)]) == 0
 
 
@@ -106,3 +108,34 @@ def test_beam_workloads_run_and_agree(workloads: ModuleType, tmp_path: Path) -> 
     cells = workloads.table(rows, sofa=False)
     hand = {c[0]: c[4] for c in cells if c[1] == "sofac"}
     assert hand["w3"] != "-" and hand["w3asm"] != "-" and hand["w3ldl"] != "-"
+
+
+def test_sphere_floor_matches_the_workload_definition(workloads: ModuleType) -> None:
+    scenegen = workloads.scenegen
+    spheres = scenegen.spheres(4)
+    assert len(spheres.positions) == 16
+    assert len(spheres.triangles) == 2 * scenegen.W5_FLOOR_SQUARES**2
+    assert all(y == 0.0 for _x, y, _z in spheres.floor)
+    # every sphere starts out of contact (no initial penetration) and over the floor's interior
+    reach = scenegen.W5_RADIUS + scenegen.W5_CONTACT
+    assert all(y > reach and 0.05 < x < 0.95 and 0.05 < z < 0.95 for x, y, z in spheres.positions)
+    # ks = k1 k2 / (contactDistance + r) = 1 * 0.5 / 0.005; rest: ks (0.005 - h) = 0.01 * 9.81
+    assert scenegen.w5_contact_stiffness() == pytest.approx(100.0)
+    assert scenegen.w5_rest_height() == pytest.approx(0.005 - 0.0981 / 100.0)
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+def test_sphere_floor_workload_runs_agrees_and_rests(workloads: ModuleType, tmp_path: Path) -> None:
+    # 1540 steps of 1 ms: the damped spheres (decay rate c / 2m = 10 / s in contact) are at rest
+    setup = workloads.Setup(w5_steps=700, w5_sides=(3,), batches=2, workdir=tmp_path)
+    rows, checks = workloads.run(["w5"], setup, lambda _: None)
+    assert {(r.workload, r.implementation) for r in rows} == {("w5-9", "sofac"), ("w5-9", "hand-written C++")}
+    assert all(r.ms > 0 for r in rows)
+    found = checks["w5-9"]
+    assert len(found) == 3, found
+    # the same algorithm gives the same positions to rounding
+    assert all(v < 1e-12 for k, v in found.items() if k.startswith("sofac vs hand-written")), found
+    # both rest where ks (contactDistance + r - h) = m g, h = 4.019 mm, to 1e-8 m
+    assert all(v < 1e-8 for k, v in found.items() if k.startswith("rest height")), found
+    cells = workloads.table(rows, sofa=False)
+    assert next(c for c in cells if c[:2] == ["w5-9", "hand-written C++"])[4] == "1.00"
