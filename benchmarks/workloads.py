@@ -22,6 +22,11 @@ matrix-free W3 beside it. Its sparse direct variant (b) is timed with SOFA's Spa
 loop with CHOLMOD's defaults. ``Demos/liver.scn`` from the SOFA corpus is timed with sofac against
 SOFA's figure.
 
+W4 and W5 are penalty contact (issue 16) against hand-written loops that bin the static floor once
+into a grid (``handwritten/w4.cpp``, ``w5.cpp``): W4 particles bouncing on a wavy floor, W5 damped
+spheres dropped onto a flat floor at 100, 1024 and 10,000 spheres (``--w5-sides``), one row each,
+whose final centres must also rest at the analytic height ks (contactDistance + r - h) = m g.
+
 ms/step is the fastest batch, in CPU time by default (``--clock wall`` for the wall clock; the
 machine is shared; the median is printed too). The final positions of sofac and the hand-written
 loop after the same number of steps are compared (the same algorithm must give the same numbers to
