@@ -618,6 +618,9 @@ class Collision:
     static_rows: int = 0  # the scene's own constraint rows, before the contacts'
     # friction_contact, per model: (correction index or -1, free positions, frames, offsets)
     bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None]] = field(default_factory=list)
+    # friction_contact: the constraint problem's buffers sized by the rows (W, dfree, f, d, scratch),
+    # grown with the capacity when a step's contacts outgrow it (lagrangian_fit)
+    problem: list[Buffer] = field(default_factory=list)
 
 
 @dataclass
