@@ -477,7 +477,7 @@ class _CollisionView:
         self.fit = ""  # friction_contact: the problem's buffers grown with the rows (lagrangian_fit)
         if self.lagrangian and collision.problem:
             vectors = ", ".join(f"S.{b.ident}" for b in collision.problem)
-            self.fit = f"sofac::lagrangian_fit(S.lagrangian, {vectors});"
+            self.fit = f"sofac::lagrangian_fit(S.lagrangian, S.lagrangian_retired, {vectors});"
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
         assert collision.report is not None
         self.report = _ptr(collision.report)

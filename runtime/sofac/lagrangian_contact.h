@@ -93,19 +93,21 @@ public:
     // After respond(): when this step's rows outgrow the capacity, the capacity doubles (as many
     // times as needed) and every buffer sized by it grows with it, this pipeline's and the
     // constraint problem's (W, dfree, f, d, the solvers' scratch), counted as one growth. The
-    // problem's old storage is kept alive (views taken of it before stay readable, with stale
-    // values): a step that does not grow allocates nothing.
-    void fit(std::vector<double>& W, std::vector<double>& dfree, std::vector<double>& f, std::vector<double>& d,
-             std::vector<double>& scratch) {
+    // problem's old storage goes to `retired` (the instance's: views taken of it before stay
+    // readable, with the values before the growth); buffers already large enough (grown before a
+    // reset) are kept. A step that does not grow allocates nothing.
+    void fit(std::vector<std::vector<double>>& retired, std::vector<double>& W, std::vector<double>& dfree,
+             std::vector<double>& f, std::vector<double>& d, std::vector<double>& scratch) {
         if (rows_total_ <= capacity_) return;
         Index capacity = std::max<Index>(capacity_, 1);
         while (capacity < rows_total_) capacity *= 2;
         reserve(capacity);
-        const auto grow = [&](std::vector<double>& v, Index size) {  // (never smaller: after a reset)
-            std::vector<double> bigger(std::max(static_cast<std::size_t>(size), v.size()), 0.0);
+        const auto grow = [&](std::vector<double>& v, Index size) {
+            if (v.size() >= static_cast<std::size_t>(size)) return;
+            std::vector<double> bigger(static_cast<std::size_t>(size), 0.0);
             std::copy(v.begin(), v.end(), bigger.begin());
             v.swap(bigger);
-            retired_.push_back(std::move(bigger));
+            retired.push_back(std::move(bigger));
         };
         grow(W, capacity * capacity);
         grow(dfree, capacity);
@@ -471,7 +473,6 @@ private:
     std::vector<RowBlock> blocks_;
     std::vector<DynamicRows> rows_;
     BarycentricContactPoints scratch_points_;
-    std::vector<std::vector<double>> retired_;  // the problem's storage before each fit()
 };
 
 }  // namespace sofac::collide
@@ -482,9 +483,10 @@ using LagrangianPipeline = std::unique_ptr<collide::FrictionContacts>;
 
 // The constraint problem's rows this step (static, then contacts); W, dfree, f, d zeroed.
 // After the response: the rows' capacity grown to this step's rows if they outgrew it (see fit()).
-inline void lagrangian_fit(LagrangianPipeline& L, std::vector<double>& W, std::vector<double>& dfree,
-                           std::vector<double>& f, std::vector<double>& d, std::vector<double>& scratch) {
-    L->fit(W, dfree, f, d, scratch);
+inline void lagrangian_fit(LagrangianPipeline& L, std::vector<std::vector<double>>& retired, std::vector<double>& W,
+                           std::vector<double>& dfree, std::vector<double>& f, std::vector<double>& d,
+                           std::vector<double>& scratch) {
+    L->fit(retired, W, dfree, f, d, scratch);
 }
 
 inline void lagrangian_begin(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d) {
