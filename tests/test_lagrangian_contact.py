@@ -124,7 +124,8 @@ def test_the_effects_and_schedule_list_the_contact_rows(tmp_path: Path) -> None:
 
     plan = plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4))
     schedule = format_schedule(plan)
-    assert "constraint rows: 384 (at most: 0 of the scene's constraints, then up to 128 contacts" in schedule
+    assert "constraint rows: 384 (reserved: 0 of the scene's constraints, then 128 contacts" in schedule
+    assert "more contacts double the reserve" in schedule
     text = format_effects(plan)
     assert "local_min_distance::triangle_point, FrictionContactConstraint mu=0.4: 3 constraint row(s)" in text
 
