@@ -65,9 +65,13 @@ def grid(n: int, x0: float, z0: float) -> np.ndarray:
 BGS = '<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>'
 
 
-def grids_scene(path: Path) -> Path:
+NNCG = '<NNCGConstraintSolver tolerance="1e-12" maxIterations="1000"/>'
+LCP = '<LCPConstraintSolver maxIt="1000" tolerance="1e-12" initial_guess="true" build_lcp="true" mu="0.5"/>'
+
+
+def grids_scene(path: Path, solver: str = BGS) -> Path:
     """A 20 x 20 grid (400 contacts of 3 rows: 1200 rows, past the 384 reserved) and a 5 x 5 one."""
-    text = _header(0.5, BGS)
+    text = _header(0.5, solver)
     text += _particles("Big", grid(20, -2.5, 0.05), MASS)
     text += _particles("Small", grid(5, 1.0, -1.9), MASS)
     path.write_text(text + "</Node>\n")
@@ -130,8 +134,11 @@ def _report(sim: sofac.Simulation) -> np.ndarray:
     return sim.output("/CollisionPipeline3.contactReport")
 
 
-def test_more_contacts_than_reserved_rows_grow_the_capacity(folder: Path) -> None:
-    sim = sofac.load(grids_scene(folder / "grids.scn"))
+@pytest.mark.parametrize("name", ["BGS", "NNCG", "LCP"])
+def test_more_contacts_than_reserved_rows_grow_the_capacity(folder: Path, name: str) -> None:
+    # the solvers on the grown W, dfree, f, d and scratch: BlockGaussSeidel, NNCG, LCP built with
+    # its initial guess (the previous forces, kept by persistent id in the grown lists)
+    sim = sofac.load(grids_scene(folder / f"grids_{name}.scn", {"BGS": BGS, "NNCG": NNCG, "LCP": LCP}[name]))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         sim.step(30)  # landed (a plastic impact) within 5 steps, then at rest
