@@ -182,3 +182,25 @@ def test_lagrangian_regression_scene_passes(shared_dir: Path, name: str) -> None
     )
     assert result.status is Status.PASS, (result.status, result.message, result.error)
     assert result.error is not None and result.error <= result.epsilon
+
+
+def test_one_compliance_for_many_points_is_each_point_s(tmp_path: Path) -> None:
+    # SOFA's UncoupledConstraintCorrection::init: a compliance that is not one per DOF becomes one
+    # per DOF, each its first value (defaultCompliance when that is set)
+    path = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
+    first = f'position="{0.3:.17g}'
+    text = path.read_text().replace(first, 'position="0.5 0.1 0.2  ' + first[len('position="') :])
+    assert text != path.read_text()
+    path.write_text(text)
+    plan = plan_of(path)
+    (compliance,) = [b for b in plan.buffers if b.key.endswith("UncoupledConstraintCorrection5.compliance")]
+    assert compliance.initial.tolist() == [1.0 / MASS, 1.0 / MASS]
+    path.write_text(
+        text.replace(
+            "<UncoupledConstraintCorrection ", '<UncoupledConstraintCorrection defaultCompliance="3" '
+        )
+    )
+    (compliance,) = [
+        b for b in plan_of(path).buffers if b.key.endswith("UncoupledConstraintCorrection5.compliance")
+    ]
+    assert compliance.initial.tolist() == [3.0, 3.0]
