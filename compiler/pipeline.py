@@ -112,7 +112,7 @@ def compile_checked(
     )
     spec = dataclasses.replace(run_spec(scene_plan), rules=param_rules.rules_of(checked, scene_plan.buffers))
     source = generate(scene_plan)
-    direct = any(g.direct or g.preconditioner for g in scene_plan.groups)  # CHOLMOD / assembly
+    direct = any(g.direct or g.preconditioned for g in scene_plan.groups)  # CHOLMOD / assembly
     numbers = sum(b.initial.size for b in scene_plan.buffers)  # picks -O2 or -O3 (build.scene_flags)
     built = build.build_scene(source, direct_solver=direct, numbers=numbers, openmp=scene_plan.threads > 1)
     found = scene_warnings.scene_warnings(diagnostics.sorted()) if diagnostics is not None else ()

@@ -18,7 +18,7 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/AnimationLoop/FreeMotionAnimationLoop.scn": "LocalMinDistance",
     # a SparseLDLSolver preconditioning the PCG, a Tetra2Triangle surface (issue 17, fallbeam); its
     # augmented-Lagrangian contact response is never compiled: the contact guard stops the run
-    # before the beam's first contact, as in fallingBeamLagrangianCollision.scn
+    # before the beam's first contact (fallingBeamLagrangianCollision.scn, FrictionContactConstraint, runs on)
     "Demos/fallingBeamAugmentedLagrangianCollision.scn": "SparseLDLSolver",
     # with RigidMapping Rigid3d,Rigid3d (joints)
     "Component/SolidMechanics/Spring/JointSpringForceField.scn": "JointSpringForceField",

@@ -179,3 +179,14 @@ def test_lagrangian_contact_scenes_do_not_allocate_in_a_step(
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}
+
+
+def test_linear_solver_correction_contacts_do_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
+    # LinearSolverConstraintCorrection (runtime/sofac/linear_correction.h): W += dt J A^-1 J^T and the
+    # correction through the direct solver's own right-hand side and solution, CHOLMOD's solve
+    # workspaces kept; a particle in contact with a floor from the first step.
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_linear_solver_correction import particle_scene
+
+    path = particle_scene(tmp_path, "<LinearSolverConstraintCorrection/>")
+    assert allocations(shim, [path]) == {str(path): [0, 0]}

@@ -451,7 +451,7 @@ def test_mapper_for_topology_classes() -> None:
 
     def mapper(name: str) -> str:
         resolution = lookup(name)
-        return mapper_for(resolution.spec.role if resolution is not None else "")
+        return mapper_for(resolution.spec.variant if resolution is not None else None)
 
     assert mapper("TetrahedronSetTopologyContainer") == "dynamic"
     assert mapper("HexahedronSetTopologyContainer") == "dynamic"

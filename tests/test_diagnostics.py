@@ -302,7 +302,7 @@ CASES = [
     # --- links and mappings
     Case(
         "broken-data-link",
-        "E213",
+        "W233",
         dyn('    <FixedProjectiveConstraint indices="@box.indices"/>\n'),
         6,
         "indices",

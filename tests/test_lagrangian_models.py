@@ -209,3 +209,22 @@ def test_a_point_slides_down_its_segment_and_stops_at_the_end(tmp_path: Path, a:
     sim.step(100)
     np.testing.assert_allclose(sim["/P/point"].position[0], [1.0, -1.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(sim["/P/point"].velocity[0], 0.0, atol=1e-10)
+
+
+@pytest.mark.parametrize(("a", "b"), [(1, 1), (1, 3)])
+def test_a_zero_length_sliding_axis_is_an_error_at_its_attribute(tmp_path: Path, a: int, b: int) -> None:
+    """axis_1 = axis_2, or two points of object2 at the same position: no direction to slide along
+    (SOFA would divide by the zero length): E207 at axis_2, with the line and the fix."""
+    from sofac.check.checker import check_file
+    from sofac.plan.planner import plan_scene
+
+    path = tmp_path / "sliding.scn"
+    path.write_text(SLIDING.format(a=a, b=b).replace("0 0 0  1 -1 0", "0 0 0  1 -1 0  0 0 0"))
+    checked, _ = check_file(path)
+    assert checked is not None
+    with pytest.raises(sofac.SceneError) as caught:
+        plan_scene(checked)
+    (diagnostic,) = [d for d in caught.value.diagnostics if d.code == "E207"]
+    line = next(n for n, row in enumerate(SLIDING.splitlines(), start=1) if "axis_2=" in row)
+    assert (diagnostic.loc.line, diagnostic.loc.attribute) == (line, "axis_2")
+    assert f"axis_1={a} and axis_2={b}" in diagnostic.message and "zero length" in diagnostic.message

@@ -22,7 +22,7 @@ from sofac.diagnostics import Diagnostics, SceneError, SourceLoc
 from sofac.front import datafiles, links, meshes
 from sofac.front.model import Component, Node, Scene
 from sofac.geometry.fem_topology import CELL_KINDS
-from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus
+from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus, Variant
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
 from sofac.registry.fields import (
@@ -157,6 +157,7 @@ class _Checker:
         for checked in self.checked:
             if checked.spec is not None:
                 self._resolve_links(checked)
+                self._drop_broken_data_links(checked)
         for node in self.scene.root.walk():
             self._check_states_of(node)
         for checked in self.checked:
@@ -165,7 +166,6 @@ class _Checker:
         for checked in self.checked:
             if checked.spec is not None:
                 self._check_counts(checked)
-                self._check_data_links(checked)
                 self._check_required(checked)
         self._check_mappings()
         self._check_solvers()
@@ -510,37 +510,31 @@ class _Checker:
         checked = self.checked.components.get(id(component))
         return checked is not None and checked.category is category
 
-    def _broken_link(self, checked: CheckedComponent, name: str, path: Any) -> bool:
-        """A Data link (of field ``name``) that points to nothing, or to a component without that Data."""
-        target = links.resolve(path, checked.component)
-        if target is None or isinstance(target, Node):
-            return True
-        source = self.checked.components.get(id(target))
-        return source is not None and source.spec is not None and source.spec.field(path.data or name) is None
-
-    def _check_data_links(self, checked: CheckedComponent) -> None:
+    def _drop_broken_data_links(self, checked: CheckedComponent) -> None:
+        """A Data link to no object, or to an object without that Data: SOFA keeps the path and,
+        when nothing ever answers it, the Data its default (BaseData::setParent), so sofac warns
+        and reads the field as if the attribute were not written."""
         assert checked.spec is not None
-        for name, (path, loc) in checked.data_links.items():
+        owner = f"{checked.spec.name} {checked.component.label!r}"
+        for name, (path, loc) in list(checked.data_links.items()):
             target = links.resolve(path, checked.component)
-            owner = f"{checked.spec.name} {checked.component.label!r}"
+            link = f"@{path.path}{'.' + path.data if path.data else ''}"
             if target is None or isinstance(target, Node):
-                self.diags.add(
-                    "E213",
-                    loc,
-                    f"{owner}: {name}=@{path.path}{'.' + path.data if path.data else ''} points to nothing",
-                    "a Data link is '@path/to/object.dataName'",
-                )
-                continue
-            source = self.checked.components.get(id(target))
-            data = path.data or name
-            known = source is not None and source.spec is not None and not source.spec.from_sofa_source
-            if known and source.spec.field(data) is None:  # type: ignore[union-attr]
-                self.diags.add(
-                    "E213",
-                    loc,
-                    f"{owner}: {name} links to {source.spec.name} {target.label!r}, "
-                    f"which has no Data {data!r}",
-                )
+                problem = f"{name}={link} points to nothing"
+            else:
+                source = self.checked.components.get(id(target))
+                data = path.data or name
+                known = source is not None and source.spec is not None and not source.spec.from_sofa_source
+                if not known or source.spec.field(data) is not None:  # type: ignore[union-attr]
+                    continue
+                problem = f"{name} links to {source.spec.name} {target.label!r}, which has no Data {data!r}"  # type: ignore[union-attr]
+            self.diags.add(
+                "W233",
+                loc,
+                f"{owner}: {problem}: SOFA goes on as if {name} were not written",
+                "a Data link is '@path/to/object.dataName', relative to the component's node",
+            )
+            del checked.data_links[name]
 
     # --- states and templates ----------------------------------------------------------------
     def _check_states_of(self, node: Node) -> None:
@@ -737,8 +731,6 @@ class _Checker:
         assert checked.spec is not None
         evaluator = evaluate.EVALUATORS[checked.spec.compute]
         checked.outputs = {}  # guards against cycles while evaluating
-        if any(self._broken_link(checked, name, path) for name, (path, _) in checked.data_links.items()):
-            return checked.outputs  # nothing to compute from; _check_data_links reports it (E213)
         try:
             checked.outputs = evaluator(_EvalContext(self, checked))
         except evaluate.UnknownInput:
@@ -1395,7 +1387,7 @@ class _Checker:
         """AddDataRepository: its folder (relative to the scene's) is searched for the files."""
         for checked in self.checked:
             spec = checked.spec
-            if spec is None or spec.role != "data_repository" or not checked.fields.get("path"):
+            if spec is None or spec.variant is not Variant.DATA_REPOSITORY or not checked.fields.get("path"):
                 continue
             text = str(checked.fields["path"])
             folder = Path(checked.component.loc.file).parent / text

@@ -37,11 +37,13 @@ from sofac.plan.ir import (
     FemMethod,
     Function,
     Group,
+    LinearSystem,
     MappingOp,
     Note,
     Offset,
     Op,
     Plan,
+    Preconditioner,
     Projection,
     Slot,
     SpringDamping,
@@ -85,6 +87,11 @@ _ENV = {
     Env.LAGRANGIAN: "S.lagrangian",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
+_PRECONDITIONER_TYPES = {
+    Preconditioner.JACOBI: "JacobiPreconditioner",
+    Preconditioner.BLOCK_JACOBI: "JacobiPreconditioner",
+    Preconditioner.SSOR: "SsorPreconditioner",
+}
 
 
 def cpp_type(datatype: str) -> str:
@@ -119,6 +126,8 @@ def _argument(arg: Arg) -> str:
         return f"sofac::Assembler::kMapped + {arg.value}" if arg.mapped else str(arg.value)
     if isinstance(arg, Function):
         return f"sofac::{arg.name}"
+    if isinstance(arg, LinearSystem):
+        return f"S.direct_{arg.group}"
     if isinstance(arg, Aggregate):
         fields = ", ".join(_argument(f) for f in arg.fields)
         return f"sofac::{arg.type}{_templates(arg.templates)}{{{fields}}}"
@@ -197,7 +206,7 @@ def _headers(plan: Plan) -> list[str]:
         for mapping in (*group.mappings, *group.on_read):
             statements += [*mapping.apply, mapping.jacobian]
             statements += [c for c in (mapping.transpose, mapping.geometric) if c is not None]
-        matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        matrix = group.direct or group.preconditioned or group.assembled_cg
         for projection in group.projections:
             extra = (
                 projection.project,
@@ -336,7 +345,12 @@ class _GroupView:
         self.on_read = [_MappingView(m) for m in group.on_read]
         self.projections = [_ProjectionView(p) for p in group.projections]
         # an assembled system matrix: assemble_<g>, its pattern at init
-        self.matrix = group.direct or bool(group.preconditioner) or group.assembled_cg
+        self.matrix = group.direct or group.preconditioned or group.assembled_cg
+        # PCGLinearSolver's preconditioner: a direct solver's factorisation, or a runtime
+        # preconditioner object (its type, and the Jacobi block size).
+        self.factored_preconditioner = group.preconditioner is Preconditioner.FACTORIZATION
+        self.preconditioner_type = _PRECONDITIONER_TYPES.get(group.preconditioner, "")
+        self.jacobi_block = 3 if group.preconditioner is Preconditioner.BLOCK_JACOBI else 1
         # The instance member holding it: a direct solver (CHOLMOD, also the preconditioners'
         # container) or the assembled CG's block rows and vectors.
         self.system = f"cg_{group.ident}" if group.assembled_cg else f"direct_{group.ident}"
@@ -470,8 +484,8 @@ class _CollisionView:
             rows, static = collision.row_capacity + collision.static_rows, collision.static_rows
             bodies = max((b for b, *_ in collision.bodies), default=-1) + 1
             self.setup.append(f"C.setup_lagrangian({collision.mu!r}, {rows}, {static}, {bodies});")
-            for i, (body, free, frames, offsets) in enumerate(collision.bodies):
-                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets)]
+            for i, (body, free, frames, offsets, subset) in enumerate(collision.bodies):
+                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets, subset)]
                 self.setup.append(f"C.lagrangian[{i}] = {{{body}, {', '.join(pointers)}}};")
             self.setup.append(f"C.rank = {{{', '.join(str(r) for r in collision.ranks)}}};")
         self.fit = ""  # friction_contact: the problem's buffers grown with the rows (lagrangian_fit)
@@ -556,7 +570,7 @@ def generate_source(plan: Plan) -> str:
         ]
         if plan.constraints
         else [],
-        any_direct=any(g.direct or g.preconditioner for g in plan.groups),
+        any_direct=any(g.direct or g.preconditioned for g in plan.groups),
         on_read=any(g.on_read for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),
         headers=_headers(plan),

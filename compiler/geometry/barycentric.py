@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 from sofac.geometry.masses import EPSILON, as_cells, cross_rows, topology_edges
+from sofac.registry.spec import Variant
 
 # Trilinear weights of a hexahedron with coordinates (fx, fy, fz), per node 0..7, as SOFA writes them.
 _HEXA_ORDER_MESH = (0, 1, 3, 2, 4, 5, 7, 6)  # the mesh / grid mappers' summation order
@@ -47,12 +48,13 @@ _CHUNK = 1 << 21  # candidate (point, element) pairs evaluated at once
 # The mapper SOFA's BarycentricMapping::createMapperFromTopology picks for an input topology class.
 
 
-def mapper_for(topology_role: str) -> str:
-    """Which mapper SOFA uses for an input topology, from its registry role (ComponentSpec.role):
+def mapper_for(topology: Variant | None) -> str:
+    """Which mapper SOFA uses for an input topology, from its registry variant (ComponentSpec.variant):
     ``"regular_grid"`` (pass ``grid=RegularGrid(...)``), ``"sparse_grid"`` (``grid=SparseGrid(...)``),
     ``"dynamic"`` (``topology="dynamic"``: the *SetTopologyContainer family) or ``"mesh"``
     (``topology="mesh"``: MeshTopology, GridTopology, CubeTopology, ...)."""
-    return topology_role if topology_role in ("regular_grid", "sparse_grid", "dynamic") else "mesh"
+    grids = (Variant.REGULAR_GRID, Variant.SPARSE_GRID, Variant.DYNAMIC)
+    return topology.value if topology in grids and topology is not None else "mesh"
 
 
 @dataclass(frozen=True)

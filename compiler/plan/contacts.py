@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 
 from .ir import Call, Collision, CollisionModel, ContactPair, ElementTest, Env, Group, Op, call, origin_of
 
@@ -25,10 +25,10 @@ if TYPE_CHECKING:
 
 # The intersector's type order: a pair's first model is the one of higher rank (SOFA registers
 # Triangle-Line, Line-Point, Sphere-Point, Line-Sphere, Triangle-Sphere, never the other way).
-_RANK = {"triangle": 3, "line": 2, "sphere": 1, "point": 0}
+_RANK = {Variant.TRIANGLE: 3, Variant.LINE: 2, Variant.SPHERE: 1, Variant.POINT: 0}
 # The element tests each method registers (runtime/sofac/proximity.h), by (first, second) kind.
 _TESTS = {
-    "new_proximity": {
+    Variant.NEW_PROXIMITY: {
         ("point", "point"),
         ("line", "point"),
         ("line", "line"),
@@ -41,7 +41,7 @@ _TESTS = {
         ("triangle", "sphere"),
     },
     # MinProximity ignores Triangle-Line and Triangle-Triangle (MinProximityIntersection::init).
-    "min_proximity": {
+    Variant.MIN_PROXIMITY: {
         ("point", "point"),
         ("line", "point"),
         ("line", "line"),
@@ -54,7 +54,7 @@ _TESTS = {
 }
 # LocalMinDistance registers MinProximity's pairs (Triangle-Line and Triangle-Triangle ignored);
 # sofac compiles its triangle, line and point tests (runtime local_min_distance::).
-_TESTS["local_min_distance"] = {
+_TESTS[Variant.LOCAL_MIN_DISTANCE] = {
     ("point", "point"),
     ("line", "point"),
     ("line", "line"),
@@ -91,9 +91,9 @@ _PARTS = {
 }
 
 
-def _role(checked: CheckedComponent) -> str:
-    role = checked.spec.role if checked.spec else ""
-    return "intersection" if role in ("min_proximity", "new_proximity", "local_min_distance") else role
+def _role(checked: CheckedComponent) -> str | None:
+    role = checked.spec.variant if checked.spec else None
+    return "intersection" if role in _TESTS else role
 
 
 def _setups(planner: Planner) -> list[_Setup] | str:
@@ -103,7 +103,7 @@ def _setups(planner: Planner) -> list[_Setup] | str:
     ]
     if not pipelines:
         return "a collision pipeline"
-    composite = next((c for c in pipelines if _role(c) == "composite_pipeline"), None)
+    composite = next((c for c in pipelines if _role(c) == Variant.COMPOSITE_PIPELINE), None)
     setups: list[_Setup] = []
     if composite is not None:
         subs = composite.link_lists.get("subCollisionPipelines", [])
@@ -132,7 +132,7 @@ def _setups(planner: Planner) -> list[_Setup] | str:
     return [_Setup(pipeline, found, models)]
 
 
-_PIPELINES = ("pipeline", "composite_pipeline")
+_PIPELINES = (Variant.PIPELINE, Variant.COMPOSITE_PIPELINE)
 
 
 def _below(planner: Planner, node: Node) -> list[CheckedComponent]:
@@ -159,7 +159,7 @@ def contact_setup_refusal(planner: Planner) -> str:
     for setup in setups:
         for role, checked in setup.parts.items():
             spec = checked.spec
-            if spec is None or not spec.supported or (role == "intersection" and spec.role not in _TESTS):
+            if spec is None or not spec.supported or (role == "intersection" and spec.variant not in _TESTS):
                 return f"{checked.component.type_name} is not compiled yet"
         manager = setup.parts["contact_manager"]
         if manager.spec is not None and manager.spec.name == "RuleBasedContactManager":
@@ -181,18 +181,14 @@ def contact_setup_refusal(planner: Planner) -> str:
             return (
                 f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
             )
-        if kind == "friction_contact" and any(
-            c.spec is not None and c.spec.name == "LinearSolverConstraintCorrection" for c in planner.checked
-        ):
-            return "Lagrangian contact with a LinearSolverConstraintCorrection is not compiled yet"
         if kind == "friction_contact" and len(setups) > 1:
             return "Lagrangian contact from several collision pipelines is not compiled yet"
         for checked in setup.models:
             spec = checked.spec
             assert spec is not None
-            if spec.role not in _RANK:
+            if spec.variant not in _RANK:
                 return f"{spec.name} takes no part in compiled contacts"
-            if kind == "friction_contact" and spec.role == "sphere":
+            if kind == "friction_contact" and spec.variant is Variant.SPHERE:
                 return "Lagrangian contact on spheres is not compiled yet"
             if checked.datatype is not None and checked.datatype.name != "Vec3d":
                 return (
@@ -222,10 +218,10 @@ def _plan_collision(
     planner: Planner, setup: _Setup, number: int, owner: dict[int, Group]
 ) -> Collision | None:
     pipeline, intersection = setup.pipeline, setup.parts["intersection"]
-    method = intersection.spec.role if intersection.spec else ""
+    method = intersection.spec.variant if intersection.spec else None
     value = planner.value
     tests = set(_TESTS[method])
-    if method == "min_proximity":
+    if method == Variant.MIN_PROXIMITY:
         for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
             if value(intersection.component, switch) is False:
                 tests -= removed
@@ -249,7 +245,7 @@ def _plan_collision(
         tests=[],
         pairs=[],
     )
-    if method == "local_min_distance":
+    if method == Variant.LOCAL_MIN_DISTANCE:
         i = intersection.component
         collision.lmd = (
             value(i, "filterIntersection") is not False,
@@ -281,7 +277,7 @@ def _plan_collision(
             "raise alarmDistance or lower contactDistance",
         )
         return None
-    use_line_line = bool(value(intersection.component, "useLineLine")) if method == "new_proximity" else False
+    use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
     for later in range(len(models)):
         for earlier in range(later):
             a, b = models[later], models[earlier]
@@ -296,9 +292,9 @@ def _plan_collision(
             options: tuple[bool, ...] = ()
             if kinds == ("triangle", "triangle"):
                 options = (False, use_line_line)
-            elif kinds == ("triangle", "line") and method == "new_proximity":
+            elif kinds == ("triangle", "line") and method == Variant.NEW_PROXIMITY:
                 options = (use_line_line,)
-            elif kinds == ("triangle", "point") and method == "min_proximity":
+            elif kinds == ("triangle", "point") and method == Variant.MIN_PROXIMITY:
                 options = (bool(value(intersection.component, "useSurfaceNormals")),)
             test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options)
             if test not in collision.tests:
@@ -335,7 +331,7 @@ def _plan_collision(
             a, b = models[pair.first], models[pair.second]
             collision.ranks.append(here if pair.root else (a.node_rank if a.simulated else b.node_rank))
         collision.row_capacity = (3 if collision.mu > 0 else 1) * _CONTACT_CAPACITY
-        if method == "local_min_distance":
+        if method == Variant.LOCAL_MIN_DISTANCE:
             for model, checked in zip(models, checked_models, strict=True):
                 _add_cone(planner, collision, model, checked)
         return collision
@@ -385,8 +381,8 @@ def _add_cone(
     if model.kind not in ("point", "line") or not collision.lmd[0]:
         return
     node = checked.component.node
-    if model.kind == "point" and not any(
-        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.role == "line"
+    if model.kind == Variant.POINT and not any(
+        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.variant is Variant.LINE
         for c in node.objects
     ):
         return
@@ -399,7 +395,7 @@ def _add_cone(
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     owner = checked.component
     tri_buffer = planner.buffer(owner, "cone_triangles", triangles, "i64", columns=3)
-    if model.kind == "point":
+    if model.kind == Variant.POINT:
         around_vertex: list[list[int]] = [[] for _ in range(n)]
         for t, tri in enumerate(triangles):
             for v in tri:
@@ -448,17 +444,17 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
     if state is None or state.datatype.name != "Vec3d":
         planner.unsupported(checked, "a collision model needs a Vec3d MechanicalObject in its node")
         return None
-    kind = spec.role
+    kind = spec.variant
     value = planner.value
     cells_buffer = radii = None
     elements = flagged = state.size
-    if kind == "sphere":
+    if kind == Variant.SPHERE:
         listed = value(checked.component, "listRadius")
         if listed is not None and np.size(listed):
             radii = planner.buffer(checked.component, "listRadius", listed)
     if kind in ("triangle", "line"):
         cells = _topology_cells(planner, checked) or {}
-        if kind == "triangle":
+        if kind == Variant.TRIANGLE:
             # The topology's triangles, then two per quad (TriangleCollisionModel::updateFromTopology:
             # (q1, q2, q0) and (q3, q0, q2)); only the first ones get vertex and edge flags.
             array = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
@@ -491,11 +487,11 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         contact_stiffness=float(value(checked.component, "contactStiffness")),
         moving=bool(value(checked.component, "moving")),
         simulated=bool(value(checked.component, "simulated")),
-        compute_normals=bool(value(checked.component, "computeNormals")) if kind == "triangle" else False,
+        compute_normals=kind == Variant.TRIANGLE and bool(value(checked.component, "computeNormals")),
         radii=radii,
-        radius=float(value(checked.component, "radius")) if kind == "sphere" else 0.0,
-        flagged=flagged if kind == "triangle" else 0,
-        both_side=bool(value(checked.component, "bothSide")) if kind == "triangle" else False,
+        radius=float(value(checked.component, "radius")) if kind == Variant.SPHERE else 0.0,
+        flagged=flagged if kind == Variant.TRIANGLE else 0,
+        both_side=bool(value(checked.component, "bothSide")) if kind == Variant.TRIANGLE else False,
     )
 
 

@@ -84,6 +84,17 @@ class SpringFlags(enum.Enum):
     PER_SPRING = "PerSpring"
 
 
+class Preconditioner(enum.Enum):
+    """A PCGLinearSolver's preconditioner, as the runtime applies it (direct.h)."""
+
+    NONE = "none"
+    JACOBI = "jacobi"  # JacobiPreconditioner: the inverse diagonal
+    BLOCK_JACOBI = "block_jacobi"  # BlockJacobiPreconditioner: inverse 3x3 diagonal blocks
+    SSOR = "ssor"  # SSORPreconditioner
+    # A direct solver's factorisation (also a WarpPreconditioner whose rotations stay the identity).
+    FACTORIZATION = "factorization"
+
+
 class Constant(enum.Enum):
     """Layout constants of the runtime, named rather than copied (their values live in C++)."""
 
@@ -144,6 +155,14 @@ class Function:
 
 
 @dataclass(frozen=True)
+class LinearSystem:
+    """A group's direct solver (its factorisation of this step's system matrix), by group ident:
+    what LinearSolverConstraintCorrection solves with."""
+
+    group: str
+
+
+@dataclass(frozen=True)
 class Aggregate:
     """A runtime struct built from arguments (a spring table, an element split)."""
 
@@ -152,7 +171,7 @@ class Aggregate:
     templates: tuple[TemplateArg, ...] = ()
 
 
-Arg = Union[Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
+Arg = Union[Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
 # str: a DataType name ("Vec3d"); the enums: a kernel's variant, spelt as the runtime's enum class
 TemplateArg = Union[str, int, bool, Constant, SpringDamping, SpringFlags]  # noqa: UP007
 
@@ -218,7 +237,7 @@ def _plain(name: str, arg: Any) -> Arg:
     return arg
 
 
-_ARG_TYPES = (Buffer, Count, Element, Offset, Function, Aggregate, Slot, Env, bool, int, float)
+_ARG_TYPES = (Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float)
 
 
 def bind(statement: Call, values: dict[Slot, Arg]) -> Call:
@@ -387,10 +406,9 @@ class Group:
     assembled: bool = False  # it has an assembled system matrix: components record their blocks
     direct: bool = False  # the step solves with it (implicit; explicit with a non-diagonal mass)
     btd: bool = False  # BTDLinearSolver: the direct solve is the block-tridiagonal Thomas algorithm (6x6)
-    # PCGLinearSolver: iterations, tolerance; preconditioner (0: none, 1: Jacobi, 3: block Jacobi, -1: SSOR)
-    pcg: dict[str, Buffer] = field(default_factory=dict)
+    pcg: dict[str, Buffer] = field(default_factory=dict)  # PCGLinearSolver: iterations, tolerance
     minres: dict[str, Buffer] = field(default_factory=dict)  # MinResLinearSolver: iterations, tolerance
-    preconditioner: int = 0
+    preconditioner: Preconditioner = Preconditioner.NONE
     ssor_omega: Buffer | None = None
     # A PCGLinearSolver's PrecomputedWarpPreconditioner: SOFA's apply leaves the output as it was,
     # so the PCG stops before its first iteration and dv keeps its start (pcg is then empty).
@@ -423,6 +441,11 @@ class Group:
     def calls(self, phases: tuple[str, ...] = (*STEP_PHASES, "init")) -> list[Statement]:
         """The calls of some of the group's phases (default: all of them, init included)."""
         return [c for phase in phases for op in getattr(self, phase) for c in op.calls]
+
+    @property
+    def preconditioned(self) -> bool:
+        """A PCGLinearSolver with an assembled preconditioner."""
+        return self.preconditioner is not Preconditioner.NONE
 
     def offset(self, state: StatePlan) -> int | None:
         """Where an independent state's DOFs start in the assembled system (None: mapped)."""
@@ -616,8 +639,11 @@ class Collision:
     ranks: list[int] = field(default_factory=list)
     row_capacity: int = 0
     static_rows: int = 0  # the scene's own constraint rows, before the contacts'
-    # friction_contact, per model: (correction index or -1, free positions, frames, offsets)
-    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None]] = field(default_factory=list)
+    # friction_contact, per model: (correction index or -1, free positions, frames, offsets, subset
+    # indices: RigidMapping's frames and offsets, or an identity/subset mapping's parent DOFs)
+    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None, Buffer | None]] = field(
+        default_factory=list
+    )
     # friction_contact: the constraint problem's buffers sized by the rows (W, dfree, f, d, scratch),
     # grown with the capacity when a step's contacts outgrow it (lagrangian_fit)
     problem: list[Buffer] = field(default_factory=list)

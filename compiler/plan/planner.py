@@ -47,7 +47,7 @@ from sofac.plan.passes import (
     route_through_mappings,
 )
 from sofac.plan.solvers import new_group, screen_btd, screen_variational
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.datatypes import DATATYPES
 
 # Categories whose components run inside the step and therefore need a lowering.
@@ -127,13 +127,15 @@ class Planner:
             return
         group.forces.append(op)
 
-    def unsupported(self, checked: CheckedComponent, why: str) -> None:
+    def unsupported(self, checked: CheckedComponent, why: str, attribute: str | None = None) -> None:
+        """E222 at the component, or at its `attribute` when the scene writes it."""
         component = checked.component
         if id(component) in self.refused:
             return
+        written = component.attributes.get(attribute) if attribute is not None else None
         self.diags.add(
             "E222",
-            component.loc,
+            written.loc if written is not None else component.loc,
             f"unsupported component {component.type_name} at line {component.loc.line}: {why}",
             "sofac check --allow-unsupported validates such scenes without compiling them",
         )
@@ -144,7 +146,7 @@ class Planner:
         dt = float(self.value_node(root, "dt"))
         gravity = np.asarray(self.value_node(root, "gravity"), dtype=float)
         for checked in self.checked:
-            if checked.spec and checked.spec.role == "gravity":
+            if checked.spec and checked.spec.variant is Variant.GRAVITY:
                 if checked.component.node is root:
                     gravity = np.asarray(self.value(checked.component, "gravity"), dtype=float)
                 else:
@@ -347,7 +349,8 @@ class Planner:
                 "euler": (),
                 "rk2": ("x0", "v0"),
                 "rk4": ("x0", "v0", "dx", "dv"),
-                "implicit": ("r", "p", "z") if group.pcg else ("r", "p"),  # CG vectors (q is df)
+                # The right-hand side b (CG's residual); PCG's direction p and z (CG's p is dx, q is df).
+                "implicit": ("r", "p", "z") if group.pcg else ("r",),
             }[group.scheme]
             if group.inert_preconditioner is not None:
                 names = ("r",)  # b only: no CG iteration

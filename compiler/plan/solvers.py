@@ -9,10 +9,8 @@ from typing import TYPE_CHECKING, Any
 from sofac import registry
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
-from sofac.plan.ir import (
-    Group,
-)
-from sofac.registry import Category
+from sofac.plan.ir import Group, Preconditioner
+from sofac.registry import Category, Variant
 from sofac.registry.components.common import GRAPH_SCATTERED
 
 if TYPE_CHECKING:
@@ -123,12 +121,12 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
         checked_preconditioner = planner.checked.of(preconditioner)
         spec = checked_preconditioner.spec
         lowering = spec.lowering if spec else ""
-        block = {"jacobi": 1, "block_jacobi": 3, "ssor": -1, "warp": 4, "direct": 4}.get(lowering)
+        kind = _PRECONDITIONERS.get(lowering)
         if lowering == "warp" and not warp_is_identity(planner, checked_preconditioner, group):
             return False
         if lowering == "direct" and not direct_preconditioner(planner, checked_preconditioner, group):
             return False
-        if block is None:
+        if kind is None:
             planner.unsupported(
                 planner.checked.of(preconditioner), f"sofac cannot compile {spec.name if spec else '?'} yet"
             )
@@ -145,14 +143,24 @@ def plan_pcg(planner: Planner, linear: CheckedComponent, group: Group) -> bool:
         group.pcg["assemblyCounter"] = planner.buffer(
             component, "assemblyCounter", [rate], "i64", role="state"
         )
-        if block == -1:
+        if kind is Preconditioner.SSOR:
             group.ssor_omega = planner.buffer(
                 preconditioner, "omega", [float(planner.value(preconditioner, "omega"))], role="param"
             )
-        group.preconditioner, group.assembled = block, True
+        group.preconditioner, group.assembled = kind, True
         if all(c is not preconditioner for c in group.preconditioners):  # a warp lists itself
             group.preconditioners.insert(0, preconditioner)
     return True
+
+
+# The preconditioners' lowerings (registry) and how the runtime applies each.
+_PRECONDITIONERS = {
+    "jacobi": Preconditioner.JACOBI,
+    "block_jacobi": Preconditioner.BLOCK_JACOBI,
+    "ssor": Preconditioner.SSOR,
+    "warp": Preconditioner.FACTORIZATION,
+    "direct": Preconditioner.FACTORIZATION,
+}
 
 
 def _assembling_rate(planner: Planner, pcg: CheckedComponent) -> int:
@@ -183,8 +191,8 @@ def direct_preconditioner(planner: Planner, direct: CheckedComponent, group: Gro
     system to the PCG's PreconditionedMatrixFreeSystem, which assembles it (mfact M + bfact B +
     kfact K, projected) when it refreshes; the solver factorises it when it is next applied
     (the assembly invalidates its factorisation) and applies it as a solve."""
-    role = direct.spec.role if direct.spec is not None else ""
-    if role == "svd":
+    role = direct.spec.variant if direct.spec is not None else None
+    if role == Variant.SVD:
         planner.unsupported(direct, "SVDLinearSolver as a PCG preconditioner is not compiled yet")
         return False
     if not assembles_everything(planner, direct):
@@ -242,7 +250,7 @@ def warp_is_identity(planner: Planner, warp: CheckedComponent, group: Group) -> 
     if spec is None or spec.lowering != "direct":
         planner.unsupported(warp, "its linearSolver must be a sparse direct solver")
         return False
-    group.llt = spec.role == "llt"
+    group.llt = spec.variant is Variant.LLT
     group.preconditioners += [warp.component, inner]
     return True
 
@@ -339,7 +347,7 @@ def screen_variational(planner: Planner, group: Group, owner: dict[int, Group]) 
             )
     for checked in planner.checked:
         spec = checked.spec
-        is_mass = checked.category is Category.MASS or (spec is not None and spec.role == "and_mass")
+        is_mass = checked.category is Category.MASS or (spec is not None and spec.variant is Variant.AND_MASS)
         state = planner.state_of(checked) if is_mass else None
         if state is not None and state.mapped and owner.get(id(state.component)) is group:
             planner.unsupported(
@@ -439,9 +447,9 @@ def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group)
 def direct_kind(planner: Planner, linear: CheckedComponent, group: Group) -> None:
     """The factorisation of a direct solver: L L^T (role "llt"), a dense SVD (role "svd", with
     SVDLinearSolver's minSingularValue) or L D L^T."""
-    role = linear.spec.role if linear.spec is not None else ""
-    group.llt = role == "llt"
-    if role == "svd":
+    role = linear.spec.variant if linear.spec is not None else None
+    group.llt = role == Variant.LLT
+    if role == Variant.SVD:
         threshold = planner.value(linear.component, "minSingularValue")
         group.svd_threshold = planner.buffer(
             linear.component,

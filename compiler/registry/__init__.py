@@ -20,7 +20,7 @@ from . import catalogue
 from . import components as _components_pkg
 from .datatypes import DATATYPES, DataType, canonical_datatype, split_template
 from .fields import FieldType
-from .spec import Category, ComponentSpec, Effect, FieldSpec
+from .spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 
 __all__ = [
     "DATATYPES",
@@ -32,6 +32,7 @@ __all__ = [
     "FieldType",
     "NameStatus",
     "Resolution",
+    "Variant",
     "all_components",
     "canonical_datatype",
     "lookup",

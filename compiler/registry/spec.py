@@ -73,6 +73,50 @@ class Effect(str, enum.Enum):
     VISUAL = "visual"
 
 
+class Variant(enum.StrEnum):
+    """A finer kind that later stages tell apart inside a category or a lowering (a StrEnum, so
+    plan data keyed by it prints and dumps as its name)."""
+
+    # Linear solvers: the factorisation a direct solver uses (L D L^T when none is given).
+    LLT = "llt"
+    SVD = "svd"
+    # Topologies: which of SOFA's barycentric mappers they get ("" = a mesh).
+    REGULAR_GRID = "regular_grid"
+    SPARSE_GRID = "sparse_grid"
+    DYNAMIC = "dynamic"
+    # Force fields, masses and data.
+    COROTATIONAL = "corotational"  # an element force field's corotational formulation
+    AND_MASS = "and_mass"  # a force field that is also the mass (HexahedronFEMForceFieldAndMass)
+    GRAVITY = "gravity"
+    NODAL_MASS_DENSITY = "nodal_mass_density"
+    SQUARE = "square"  # SquareDistanceMapping (vs DistanceMapping)
+    DATA_REPOSITORY = "data_repository"  # AddDataRepository
+    VISUAL_STYLE = "visual_style"
+    # Projective constraints: along a line or in a plane.
+    LINE = "line"  # also LineCollisionModel
+    PLANE = "plane"
+    # Collision: the pipeline's parts, the intersection methods and the collision models' elements.
+    PIPELINE = "pipeline"
+    COMPOSITE_PIPELINE = "composite_pipeline"
+    SUB_PIPELINE = "sub_pipeline"
+    BROAD_PHASE = "broad_phase"
+    NARROW_PHASE = "narrow_phase"
+    CONTACT_MANAGER = "contact_manager"
+    MIN_PROXIMITY = "min_proximity"
+    NEW_PROXIMITY = "new_proximity"
+    LOCAL_MIN_DISTANCE = "local_min_distance"
+    TRIANGLE = "triangle"
+    SPHERE = "sphere"
+    POINT = "point"
+    # Lagrangian constraints: the constraint solvers and corrections.
+    LCP = "lcp"
+    BLOCK_GAUSS_SEIDEL = "block_gauss_seidel"
+    NNCG = "nncg"
+    UNBUILT_GAUSS_SEIDEL = "unbuilt_gauss_seidel"
+    LINEAR_SOLVER = "linear_solver"  # LinearSolverConstraintCorrection
+    UNCOUPLED = "uncoupled"
+
+
 @dataclass(frozen=True)
 class FieldSpec:
     """One Data of a component: its name, aliases, type, default and documentation."""
@@ -144,10 +188,8 @@ class ComponentSpec:
     # runtime's kernels in the compiled step; "" = the compiler cannot compile it yet (components
     # with no part in the step need none).
     lowering: str = ""
-    # A finer kind that later stages distinguish inside a category or lowering, e.g. which of SOFA's
-    # barycentric mappers a topology gets ("regular_grid", "sparse_grid", "dynamic"; "" = mesh),
-    # "corotational" vs "linear" element force fields, "gravity" and "nodal_mass_density" data.
-    role: str = ""
+    # A finer kind that later stages distinguish inside a category or lowering (see Variant).
+    variant: Variant | None = None
     # Described only by SOFA's source (registry/catalogue.py): its Data are those the constructors
     # declare, not the ones some components create at run time (MeshSplittingEngine's position1...).
     from_sofa_source: bool = False

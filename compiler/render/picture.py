@@ -40,7 +40,7 @@ import numpy as np
 from sofac.diagnostics import SofacError
 from sofac.front.model import Component, Node
 from sofac.geometry.fem_topology import CELL_KINDS
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 
 Vec3 = tuple[float, float, float]
 RGBA = tuple[float, float, float, float]
@@ -678,7 +678,7 @@ class Renderer:
             layers = self.layers(parent) if isinstance(parent, Node) else Layers()
             for component in node.objects:
                 item = self.checked.components.get(id(component))
-                if item is not None and item.spec is not None and item.spec.role == "visual_style":
+                if item is not None and item.spec is not None and item.spec.variant is Variant.VISUAL_STYLE:
                     words = self.checked.value(component, "displayFlags") or ()
                     layers = _apply_words(layers, [words] if isinstance(words, str) else words)
             self._flags[key] = layers
@@ -1076,7 +1076,7 @@ class _SceneBuilder:
         topology = self.topology_of(source, mapping.links.get("input_topology"))
         cells = self.cells(topology)
         spec = self.checked.of(topology).spec if topology is not None else None
-        mode = mapper_for(spec.role if spec is not None else "")
+        mode = mapper_for(spec.variant if spec is not None else None)
         grid = None
         if mode == "regular_grid" and "resolution" in cells and cells.get("bounds", np.zeros(0)).size >= 6:
             bounds = cells["bounds"]

@@ -32,12 +32,14 @@ namespace sofac::collide {
 
 // Where a collision model's points are corrected: `body` (a constraint correction, in the solver's
 // order; -1: none, as a static obstacle) and, for a rigidly mapped model, each point's frame and
-// rotated offset (the RigidMapping's last apply).
+// rotated offset (the RigidMapping's last apply); for a model mapped by an IdentityMapping or a
+// SubsetMapping with increasing indices, each point's DOF in the corrected state.
 struct LagrangianModel {
     Index body = -1;
     const double* x_free = nullptr;  // the model's free positions (x + dt J v_free when mapped)
     const Index* frames = nullptr;   // rigidly mapped: frame of each point
     const double* offsets = nullptr; // rigidly mapped: rotated offset of each point
+    const Index* subset = nullptr;   // identity or subset mapped: the parent DOF of each point
 };
 
 // One contact (BaseContactLagrangianConstraint::Contact) and its contact points.
@@ -448,8 +450,8 @@ private:
                 for (int k = 0; k < 3; ++k) r.values.push_back(w[k]);
             }
         } else {
-            for (int k = 0; k < n; ++k) {
-                r.dof.push_back(merged_vertex[k]);
+            for (int k = 0; k < n; ++k) {  // (a subset's indices increase: the order is kept)
+                r.dof.push_back(m.subset != nullptr ? m.subset[merged_vertex[k]] : merged_vertex[k]);
                 for (int c3 = 0; c3 < DT::deriv; ++c3) r.values.push_back(c3 < 3 ? merged[k][c3] : 0.0);
             }
         }

@@ -35,13 +35,37 @@ struct Instance {
     std::vector<double> b10_dx;  // /beam/dofs.dx (scratch)
     std::vector<double> b11_df;  // /beam/dofs.df (scratch)
     std::vector<double> b12_r;  // /beam/dofs.r (scratch)
-    std::vector<double> b13_p;  // /beam/dofs.p (scratch)
-    std::vector<double> b14_vertexMass;  // /beam/UniformMass7.vertexMass (param)
-    std::vector<Index> b15_tetrahedra;  // /beam/fem.tetrahedra (data)
-    std::vector<double> b16_youngModulus;  // /beam/fem.youngModulus (param)
-    std::vector<double> b17_poissonRatio;  // /beam/fem.poissonRatio (param)
-    std::vector<double> b18_elements;  // /beam/fem.elements (scratch)
-    std::vector<Index> b19_indices;  // /beam/FixedProjectiveConstraint9.indices (data)
+    std::vector<double> b13_vertexMass;  // /beam/UniformMass7.vertexMass (param)
+    std::vector<Index> b14_tetrahedra;  // /beam/fem.tetrahedra (data)
+    std::vector<double> b15_youngModulus;  // /beam/fem.youngModulus (param)
+    std::vector<double> b16_poissonRatio;  // /beam/fem.poissonRatio (param)
+    std::vector<double> b17_elements;  // /beam/fem.elements (scratch)
+    std::vector<Index> b18_indices;  // /beam/FixedProjectiveConstraint9.indices (data)
+
+    // The buffers in the order Python numbers them (sofac_create, sofac_buffer).
+    auto buffers() {
+        return std::tie(
+            b0_dt,
+            b1_gravity,
+            b2_position,
+            b3_velocity,
+            b4_force,
+            b5_rest_position,
+            b6_acceleration,
+            b7_rayleighStiffness,
+            b8_rayleighMass,
+            b9_vdamping,
+            b10_dx,
+            b11_df,
+            b12_r,
+            b13_vertexMass,
+            b14_tetrahedra,
+            b15_youngModulus,
+            b16_poissonRatio,
+            b17_elements,
+            b18_indices
+        );
+    }
 };
 
 // ---- group g0: EulerImplicitSolver '/beam/odesolver' (beam_direct.scn:6)
@@ -50,18 +74,18 @@ struct Instance {
 void forces_g0(Instance& S) {
     sofac::clear(S.b4_force.data(), Index(S.b4_force.size()));
     // UniformMass '/beam/UniformMass7' (beam_direct.scn:12)
-    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 16, S.b14_vertexMass.data(), 0, S.b1_gravity.data());
+    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 16, S.b13_vertexMass.data(), 0, S.b1_gravity.data());
     // TetrahedronFEMForceField '/beam/fem' (beam_direct.scn:13)
-    sofac::tetra_fem_add_force(S.b15_tetrahedra.data(), 18, S.b2_position.data(), S.b4_force.data(), S.b18_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_force(S.b14_tetrahedra.data(), 18, S.b2_position.data(), S.b4_force.data(), S.b17_elements.data(), sofac::FEM_LARGE);
 }
 
 // A = mfact M + kfact K, assembled (the pattern is recorded once, at creation).
 void assemble_g0([[maybe_unused]] Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double kfact) {
     [[maybe_unused]] auto& A = S.direct_g0.assembler;
     // UniformMass '/beam/UniformMass7' (beam_direct.scn:12)
-    sofac::assemble_mass<sofac::Vec3d>(A, 0, 16, S.b14_vertexMass.data(), 0, mfact);
+    sofac::assemble_mass<sofac::Vec3d>(A, 0, 16, S.b13_vertexMass.data(), 0, mfact);
     // TetrahedronFEMForceField '/beam/fem' (beam_direct.scn:13)
-    sofac::assemble_elements<4, sofac::TETRA_LANES>(A, S.b15_tetrahedra.data(), 18, S.b18_elements.data(), sofac::FEM_LARGE, 0, kfact, sofac::tetra_fem_element_matrices);
+    sofac::assemble_elements<4, sofac::TETRA_LANES>(A, S.b14_tetrahedra.data(), 18, S.b17_elements.data(), sofac::FEM_LARGE, 0, kfact, sofac::tetra_fem_element_matrices);
 }
 
 // df = (mfact M + bfact B + kfact K) dx, through the mappings (dx down with J, df up with J^T); projected
@@ -72,12 +96,12 @@ void mbk_g0(Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double 
     if (!accumulate) sofac::clear(S.b11_df.data(), Index(S.b11_df.size()));
     if (mfact != 0.0) {  // as SOFA's Mass::addMBKdx: no mass pass for a zero factor (rayleighMass = 0)
         // UniformMass '/beam/UniformMass7' (beam_direct.scn:12)
-        sofac::mass_multiply<sofac::Vec3d>(S.b11_df.data(), S.b10_dx.data(), 16, S.b14_vertexMass.data(), 0, mfact);
+        sofac::mass_multiply<sofac::Vec3d>(S.b11_df.data(), S.b10_dx.data(), 16, S.b13_vertexMass.data(), 0, mfact);
     }
     // TetrahedronFEMForceField '/beam/fem' (beam_direct.scn:13)
-    sofac::tetra_fem_add_dforce(S.b15_tetrahedra.data(), 18, S.b10_dx.data(), S.b11_df.data(), kfact, S.b18_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_dforce(S.b14_tetrahedra.data(), 18, S.b10_dx.data(), S.b11_df.data(), kfact, S.b17_elements.data(), sofac::FEM_LARGE);
     if (project) {
-        sofac::project_fixed<sofac::Vec3d>(S.b11_df.data(), S.b19_indices.data(), Index(S.b19_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
+        sofac::project_fixed<sofac::Vec3d>(S.b11_df.data(), S.b18_indices.data(), Index(S.b18_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
     }
 }
 
@@ -85,9 +109,9 @@ void mbk_g0(Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double 
 void energy_g0([[maybe_unused]] const Instance& S, [[maybe_unused]] double& kinetic,
                 [[maybe_unused]] double& potential) {
     // UniformMass '/beam/UniformMass7' (beam_direct.scn:12)
-    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 16, S.b14_vertexMass.data(), 0, S.b1_gravity.data(), &kinetic, &potential);
+    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 16, S.b13_vertexMass.data(), 0, S.b1_gravity.data(), &kinetic, &potential);
     // TetrahedronFEMForceField '/beam/fem' (beam_direct.scn:13)
-    potential += sofac::tetra_fem_energy(S.b15_tetrahedra.data(), 18, S.b2_position.data(), S.b18_elements.data(), sofac::FEM_LARGE);
+    potential += sofac::tetra_fem_energy(S.b14_tetrahedra.data(), 18, S.b2_position.data(), S.b17_elements.data(), sofac::FEM_LARGE);
 }
 
 // The independent states as the solvers see them (their DataTypes, and points per state).
@@ -114,10 +138,10 @@ struct Operations_g0 {
     void forces() const { forces_g0(S); }
     void add_product(double mfact, double kfact, double bfact) const { mbk_g0(S, mfact, kfact, false, true, bfact); }
     void project_rhs() const {
-        sofac::project_fixed<sofac::Vec3d>(S.b12_r.data(), S.b19_indices.data(), Index(S.b19_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
+        sofac::project_fixed<sofac::Vec3d>(S.b12_r.data(), S.b18_indices.data(), Index(S.b18_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
     }
     void project_forces() const {
-        sofac::project_fixed<sofac::Vec3d>(S.b4_force.data(), S.b19_indices.data(), Index(S.b19_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
+        sofac::project_fixed<sofac::Vec3d>(S.b4_force.data(), S.b18_indices.data(), Index(S.b18_indices.size()));  // FixedProjectiveConstraint '/beam/FixedProjectiveConstraint9' (beam_direct.scn:14)
     }
     void solve(double mfact, double kfact, double bfact) const { solve_g0(S, mfact, kfact, bfact); }
     void energy(double& kinetic, double& potential) const { energy_g0(S, kinetic, potential); }
@@ -158,30 +182,11 @@ extern "C" {
 
 SOFAC_EXPORT int sofac_abi_version() { return SOFAC_ABI_VERSION; }
 
-SOFAC_EXPORT int sofac_buffer_count() { return 20; }
+SOFAC_EXPORT int sofac_buffer_count() { return 19; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill(S->b0_dt, data[0], sizes[0]);
-    sofac::fill(S->b1_gravity, data[1], sizes[1]);
-    sofac::fill(S->b2_position, data[2], sizes[2]);
-    sofac::fill(S->b3_velocity, data[3], sizes[3]);
-    sofac::fill(S->b4_force, data[4], sizes[4]);
-    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
-    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
-    sofac::fill(S->b7_rayleighStiffness, data[7], sizes[7]);
-    sofac::fill(S->b8_rayleighMass, data[8], sizes[8]);
-    sofac::fill(S->b9_vdamping, data[9], sizes[9]);
-    sofac::fill(S->b10_dx, data[10], sizes[10]);
-    sofac::fill(S->b11_df, data[11], sizes[11]);
-    sofac::fill(S->b12_r, data[12], sizes[12]);
-    sofac::fill(S->b13_p, data[13], sizes[13]);
-    sofac::fill(S->b14_vertexMass, data[14], sizes[14]);
-    sofac::fill(S->b15_tetrahedra, data[15], sizes[15]);
-    sofac::fill(S->b16_youngModulus, data[16], sizes[16]);
-    sofac::fill(S->b17_poissonRatio, data[17], sizes[17]);
-    sofac::fill(S->b18_elements, data[18], sizes[18]);
-    sofac::fill(S->b19_indices, data[19], sizes[19]);
+    sofac::fill_all(S->buffers(), data, sizes);
     return S;
 }
 
@@ -189,13 +194,13 @@ SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* siz
 SOFAC_EXPORT void sofac_init(void* instance) {
     [[maybe_unused]] auto& S = *static_cast<Instance*>(instance);
     // TetrahedronFEMForceField '/beam/fem' (beam_direct.scn:13)
-    sofac::tetra_fem_init(S.b15_tetrahedra.data(), 18, S.b5_rest_position.data(), S.b16_youngModulus.data(), Index(S.b16_youngModulus.size()), S.b17_poissonRatio.data(), Index(S.b17_poissonRatio.size()), sofac::FEM_LARGE, S.b18_elements.data());
+    sofac::tetra_fem_init(S.b14_tetrahedra.data(), 18, S.b5_rest_position.data(), S.b15_youngModulus.data(), Index(S.b15_youngModulus.size()), S.b16_poissonRatio.data(), Index(S.b16_poissonRatio.size()), sofac::FEM_LARGE, S.b17_elements.data());
     {
         // The projected DOFs, then the assembled system's pattern without their couplings (zero
         // after the projection), then CHOLMOD's symbolic analysis of that pattern.
         auto& D = S.direct_g0;
         D.resize(48);
-        sofac::mark_fixed<sofac::Vec3d>(D.fixed, 0, S.b19_indices.data(), Index(S.b19_indices.size()));
+        sofac::mark_fixed<sofac::Vec3d>(D.fixed, 0, S.b18_indices.data(), Index(S.b18_indices.size()));
         D.assembler.start_pattern();
         assemble_g0(S, 0.0, 0.0);
         D.assembler.finish_pattern(D.matrix, 48, D.fixed);
@@ -207,30 +212,7 @@ SOFAC_EXPORT void sofac_init(void* instance) {
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    auto& S = *static_cast<Instance*>(instance);
-    switch (index) {
-        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
-        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
-        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
-        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
-        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
-        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
-        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
-        case 7: *size = std::int64_t(S.b7_rayleighStiffness.size()); return S.b7_rayleighStiffness.data();
-        case 8: *size = std::int64_t(S.b8_rayleighMass.size()); return S.b8_rayleighMass.data();
-        case 9: *size = std::int64_t(S.b9_vdamping.size()); return S.b9_vdamping.data();
-        case 10: *size = std::int64_t(S.b10_dx.size()); return S.b10_dx.data();
-        case 11: *size = std::int64_t(S.b11_df.size()); return S.b11_df.data();
-        case 12: *size = std::int64_t(S.b12_r.size()); return S.b12_r.data();
-        case 13: *size = std::int64_t(S.b13_p.size()); return S.b13_p.data();
-        case 14: *size = std::int64_t(S.b14_vertexMass.size()); return S.b14_vertexMass.data();
-        case 15: *size = std::int64_t(S.b15_tetrahedra.size()); return S.b15_tetrahedra.data();
-        case 16: *size = std::int64_t(S.b16_youngModulus.size()); return S.b16_youngModulus.data();
-        case 17: *size = std::int64_t(S.b17_poissonRatio.size()); return S.b17_poissonRatio.data();
-        case 18: *size = std::int64_t(S.b18_elements.size()); return S.b18_elements.data();
-        case 19: *size = std::int64_t(S.b19_indices.size()); return S.b19_indices.data();
-        default: *size = 0; return nullptr;
-    }
+    return sofac::buffer_at(static_cast<Instance*>(instance)->buffers(), index, size);
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

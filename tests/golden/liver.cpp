@@ -35,13 +35,41 @@ struct Instance {
     std::vector<double> b14_dx;  // /Liver/dofs.dx (scratch)
     std::vector<double> b15_df;  // /Liver/dofs.df (scratch)
     std::vector<double> b16_r;  // /Liver/dofs.r (scratch)
-    std::vector<double> b17_p;  // /Liver/dofs.p (scratch)
-    std::vector<double> b18_vertexMass;  // /Liver/mass.vertexMass (param)
-    std::vector<Index> b19_tetrahedra;  // /Liver/FEM.tetrahedra (data)
-    std::vector<double> b20_youngModulus;  // /Liver/FEM.youngModulus (param)
-    std::vector<double> b21_poissonRatio;  // /Liver/FEM.poissonRatio (param)
-    std::vector<double> b22_elements;  // /Liver/FEM.elements (scratch)
-    std::vector<Index> b23_indices;  // /Liver/ligaments.indices (data)
+    std::vector<double> b17_vertexMass;  // /Liver/mass.vertexMass (param)
+    std::vector<Index> b18_tetrahedra;  // /Liver/FEM.tetrahedra (data)
+    std::vector<double> b19_youngModulus;  // /Liver/FEM.youngModulus (param)
+    std::vector<double> b20_poissonRatio;  // /Liver/FEM.poissonRatio (param)
+    std::vector<double> b21_elements;  // /Liver/FEM.elements (scratch)
+    std::vector<Index> b22_indices;  // /Liver/ligaments.indices (data)
+
+    // The buffers in the order Python numbers them (sofac_create, sofac_buffer).
+    auto buffers() {
+        return std::tie(
+            b0_dt,
+            b1_gravity,
+            b2_position,
+            b3_velocity,
+            b4_force,
+            b5_rest_position,
+            b6_acceleration,
+            b7_rayleighStiffness,
+            b8_rayleighMass,
+            b9_vdamping,
+            b10_iterations,
+            b11_tolerance,
+            b12_threshold,
+            b13_solves,
+            b14_dx,
+            b15_df,
+            b16_r,
+            b17_vertexMass,
+            b18_tetrahedra,
+            b19_youngModulus,
+            b20_poissonRatio,
+            b21_elements,
+            b22_indices
+        );
+    }
 };
 
 // ---- group g0: EulerImplicitSolver '/Liver/odesolver' (liver.scn:41)
@@ -50,9 +78,9 @@ struct Instance {
 void forces_g0(Instance& S) {
     sofac::clear(S.b4_force.data(), Index(S.b4_force.size()));
     // DiagonalMass '/Liver/mass' (liver.scn:47)
-    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 253, S.b18_vertexMass.data(), 1, S.b1_gravity.data());
+    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 253, S.b17_vertexMass.data(), 1, S.b1_gravity.data());
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_add_force(S.b19_tetrahedra.data(), 876, S.b2_position.data(), S.b4_force.data(), S.b22_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_force(S.b18_tetrahedra.data(), 876, S.b2_position.data(), S.b4_force.data(), S.b21_elements.data(), sofac::FEM_LARGE);
 }
 
 
@@ -64,12 +92,12 @@ void mbk_g0(Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double 
     if (!accumulate) sofac::clear(S.b15_df.data(), Index(S.b15_df.size()));
     if (mfact != 0.0) {  // as SOFA's Mass::addMBKdx: no mass pass for a zero factor (rayleighMass = 0)
         // DiagonalMass '/Liver/mass' (liver.scn:47)
-        sofac::mass_multiply<sofac::Vec3d>(S.b15_df.data(), S.b14_dx.data(), 253, S.b18_vertexMass.data(), 1, mfact);
+        sofac::mass_multiply<sofac::Vec3d>(S.b15_df.data(), S.b14_dx.data(), 253, S.b17_vertexMass.data(), 1, mfact);
     }
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_add_dforce(S.b19_tetrahedra.data(), 876, S.b14_dx.data(), S.b15_df.data(), kfact, S.b22_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_dforce(S.b18_tetrahedra.data(), 876, S.b14_dx.data(), S.b15_df.data(), kfact, S.b21_elements.data(), sofac::FEM_LARGE);
     if (project) {
-        sofac::project_fixed<sofac::Vec3d>(S.b15_df.data(), S.b23_indices.data(), Index(S.b23_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
+        sofac::project_fixed<sofac::Vec3d>(S.b15_df.data(), S.b22_indices.data(), Index(S.b22_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
     }
 }
 
@@ -77,9 +105,9 @@ void mbk_g0(Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double 
 void energy_g0([[maybe_unused]] const Instance& S, [[maybe_unused]] double& kinetic,
                 [[maybe_unused]] double& potential) {
     // DiagonalMass '/Liver/mass' (liver.scn:47)
-    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 253, S.b18_vertexMass.data(), 1, S.b1_gravity.data(), &kinetic, &potential);
+    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 253, S.b17_vertexMass.data(), 1, S.b1_gravity.data(), &kinetic, &potential);
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    potential += sofac::tetra_fem_energy(S.b19_tetrahedra.data(), 876, S.b2_position.data(), S.b22_elements.data(), sofac::FEM_LARGE);
+    potential += sofac::tetra_fem_energy(S.b18_tetrahedra.data(), 876, S.b2_position.data(), S.b21_elements.data(), sofac::FEM_LARGE);
 }
 
 // The independent states as the solvers see them (their DataTypes, and points per state).
@@ -104,10 +132,10 @@ struct Operations_g0 {
     void forces() const { forces_g0(S); }
     void add_product(double mfact, double kfact, double bfact) const { mbk_g0(S, mfact, kfact, false, true, bfact); }
     void project_rhs() const {
-        sofac::project_fixed<sofac::Vec3d>(S.b16_r.data(), S.b23_indices.data(), Index(S.b23_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
+        sofac::project_fixed<sofac::Vec3d>(S.b16_r.data(), S.b22_indices.data(), Index(S.b22_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
     }
     void project_forces() const {
-        sofac::project_fixed<sofac::Vec3d>(S.b4_force.data(), S.b23_indices.data(), Index(S.b23_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
+        sofac::project_fixed<sofac::Vec3d>(S.b4_force.data(), S.b22_indices.data(), Index(S.b22_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
     }
     void solve(double mfact, double kfact, double bfact) const { solve_g0(S, mfact, kfact, bfact); }
     void energy(double& kinetic, double& potential) const { energy_g0(S, kinetic, potential); }
@@ -148,34 +176,11 @@ extern "C" {
 
 SOFAC_EXPORT int sofac_abi_version() { return SOFAC_ABI_VERSION; }
 
-SOFAC_EXPORT int sofac_buffer_count() { return 24; }
+SOFAC_EXPORT int sofac_buffer_count() { return 23; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill(S->b0_dt, data[0], sizes[0]);
-    sofac::fill(S->b1_gravity, data[1], sizes[1]);
-    sofac::fill(S->b2_position, data[2], sizes[2]);
-    sofac::fill(S->b3_velocity, data[3], sizes[3]);
-    sofac::fill(S->b4_force, data[4], sizes[4]);
-    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
-    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
-    sofac::fill(S->b7_rayleighStiffness, data[7], sizes[7]);
-    sofac::fill(S->b8_rayleighMass, data[8], sizes[8]);
-    sofac::fill(S->b9_vdamping, data[9], sizes[9]);
-    sofac::fill(S->b10_iterations, data[10], sizes[10]);
-    sofac::fill(S->b11_tolerance, data[11], sizes[11]);
-    sofac::fill(S->b12_threshold, data[12], sizes[12]);
-    sofac::fill(S->b13_solves, data[13], sizes[13]);
-    sofac::fill(S->b14_dx, data[14], sizes[14]);
-    sofac::fill(S->b15_df, data[15], sizes[15]);
-    sofac::fill(S->b16_r, data[16], sizes[16]);
-    sofac::fill(S->b17_p, data[17], sizes[17]);
-    sofac::fill(S->b18_vertexMass, data[18], sizes[18]);
-    sofac::fill(S->b19_tetrahedra, data[19], sizes[19]);
-    sofac::fill(S->b20_youngModulus, data[20], sizes[20]);
-    sofac::fill(S->b21_poissonRatio, data[21], sizes[21]);
-    sofac::fill(S->b22_elements, data[22], sizes[22]);
-    sofac::fill(S->b23_indices, data[23], sizes[23]);
+    sofac::fill_all(S->buffers(), data, sizes);
     return S;
 }
 
@@ -183,41 +188,14 @@ SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* siz
 SOFAC_EXPORT void sofac_init(void* instance) {
     [[maybe_unused]] auto& S = *static_cast<Instance*>(instance);
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_init(S.b19_tetrahedra.data(), 876, S.b5_rest_position.data(), S.b20_youngModulus.data(), Index(S.b20_youngModulus.size()), S.b21_poissonRatio.data(), Index(S.b21_poissonRatio.size()), sofac::FEM_LARGE, S.b22_elements.data());
+    sofac::tetra_fem_init(S.b18_tetrahedra.data(), 876, S.b5_rest_position.data(), S.b19_youngModulus.data(), Index(S.b19_youngModulus.size()), S.b20_poissonRatio.data(), Index(S.b20_poissonRatio.size()), sofac::FEM_LARGE, S.b21_elements.data());
 }
 
 
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    auto& S = *static_cast<Instance*>(instance);
-    switch (index) {
-        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
-        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
-        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
-        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
-        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
-        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
-        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
-        case 7: *size = std::int64_t(S.b7_rayleighStiffness.size()); return S.b7_rayleighStiffness.data();
-        case 8: *size = std::int64_t(S.b8_rayleighMass.size()); return S.b8_rayleighMass.data();
-        case 9: *size = std::int64_t(S.b9_vdamping.size()); return S.b9_vdamping.data();
-        case 10: *size = std::int64_t(S.b10_iterations.size()); return S.b10_iterations.data();
-        case 11: *size = std::int64_t(S.b11_tolerance.size()); return S.b11_tolerance.data();
-        case 12: *size = std::int64_t(S.b12_threshold.size()); return S.b12_threshold.data();
-        case 13: *size = std::int64_t(S.b13_solves.size()); return S.b13_solves.data();
-        case 14: *size = std::int64_t(S.b14_dx.size()); return S.b14_dx.data();
-        case 15: *size = std::int64_t(S.b15_df.size()); return S.b15_df.data();
-        case 16: *size = std::int64_t(S.b16_r.size()); return S.b16_r.data();
-        case 17: *size = std::int64_t(S.b17_p.size()); return S.b17_p.data();
-        case 18: *size = std::int64_t(S.b18_vertexMass.size()); return S.b18_vertexMass.data();
-        case 19: *size = std::int64_t(S.b19_tetrahedra.size()); return S.b19_tetrahedra.data();
-        case 20: *size = std::int64_t(S.b20_youngModulus.size()); return S.b20_youngModulus.data();
-        case 21: *size = std::int64_t(S.b21_poissonRatio.size()); return S.b21_poissonRatio.data();
-        case 22: *size = std::int64_t(S.b22_elements.size()); return S.b22_elements.data();
-        case 23: *size = std::int64_t(S.b23_indices.size()); return S.b23_indices.data();
-        default: *size = 0; return nullptr;
-    }
+    return sofac::buffer_at(static_cast<Instance*>(instance)->buffers(), index, size);
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

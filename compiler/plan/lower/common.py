@@ -30,7 +30,7 @@ from sofac.plan.ir import (
     kernel,
     origin_of,
 )
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -99,7 +99,7 @@ def _topology_cells(
     if topology is None:
         return None
     spec = planner.checked.of(topology).spec
-    if spec is not None and spec.role == "sparse_grid" and not sparse_grid_ok:
+    if spec is not None and spec.variant is Variant.SPARSE_GRID and not sparse_grid_ok:
         planner.unsupported(
             checked,
             "on a SparseGridTopology it is not compiled yet (HexahedronFEMForceField(AndMass) and "
@@ -123,7 +123,7 @@ def _sparse_grid_coefficients(planner: Planner, checked: CheckedComponent) -> np
 
     topology = _topology_of(planner, checked)
     spec = planner.checked.of(topology).spec if topology is not None else None
-    if topology is None or spec is None or spec.role != "sparse_grid":
+    if topology is None or spec is None or spec.variant is not Variant.SPARSE_GRID:
         return None
     computed = planner.value(topology, "cell_coefficients")  # SparseGridRamificationTopology's own
     if computed is not None:
@@ -443,7 +443,7 @@ def _matrix_solver(group: Group) -> str:
     """The linear solver of an assembled group, as messages name it."""
     if group.assembled_cg:
         return "a CGLinearSolver on an assembled matrix"
-    if group.preconditioner:
+    if group.preconditioned:
         return "a PCGLinearSolver's assembled preconditioner"
     return "a sparse direct solver"
 
@@ -579,6 +579,6 @@ def _nodal_mass_density(planner: Planner, checked: CheckedComponent) -> Componen
     for node in (checked.component.node, *checked.component.node.ancestors()):
         for candidate in node.objects:
             spec = planner.checked.of(candidate).spec
-            if spec is not None and spec.role == "nodal_mass_density":
+            if spec is not None and spec.variant is Variant.NODAL_MASS_DENSITY:
                 return candidate
     return None

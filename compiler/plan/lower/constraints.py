@@ -29,6 +29,7 @@ from sofac.plan.ir import (
     Element,
     Env,
     Group,
+    LinearSystem,
     MappingOp,
     Op,
     StatePlan,
@@ -37,7 +38,7 @@ from sofac.plan.ir import (
     kernel,
     origin_of,
 )
-from sofac.registry import Category
+from sofac.registry import Category, Variant
 from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
 from sofac.registry.spec import Effect
 
@@ -109,8 +110,8 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
     settings = {}
     method = "block_gauss_seidel"
     if solver is not None and solver.spec is not None:
-        method = solver.spec.role
-        names = _LCP_SETTINGS if method == "lcp" else _GENERIC_SETTINGS
+        method = solver.spec.variant
+        names = _LCP_SETTINGS if method == Variant.LCP else _GENERIC_SETTINGS
         for name in names:
             value = planner.value(solver.component, name)
             settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
@@ -161,8 +162,15 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
         planner.ignored.append((checked.component, "its state has no ODE solver: it never moves"))
         return
     assert checked.spec is not None
-    kind = checked.spec.role
-    if kind == "linear_solver" and (group.scheme != "implicit" or group.linear_solver is None):
+    kind = checked.spec.variant
+    if kind == Variant.LINEAR_SOLVER and planner.value(checked.component, "wire_optimization"):
+        planner.unsupported(
+            checked,
+            "wire_optimization=1 (constraints reordered along a wire) is not compiled; remove it",
+            "wire_optimization",
+        )
+        return
+    if kind == Variant.LINEAR_SOLVER and (group.scheme != "implicit" or group.linear_solver is None):
         planner.unsupported(
             checked,
             "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
@@ -434,8 +442,19 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
             return
         states.append(state)
     point, a, b = (int(planner.value(component, n)) for n in ("sliding_point", "axis_1", "axis_2"))
-    if states[0] is states[1] or a == b:
-        planner.unsupported(checked, "object1 = object2, or axis_1 = axis_2, is not compiled yet")
+    axis = states[1].x.initial.reshape(-1, 3)
+    if a == b or (max(a, b) < len(axis) and np.array_equal(axis[a], axis[b])):
+        attribute = component.attributes.get("axis_2") or component.attributes.get("axis_1")
+        planner.diags.add(
+            "E207",
+            attribute.loc if attribute is not None else component.loc,
+            f"{component.type_name}: axis_1={a} and axis_2={b} of object2 are at the same position "
+            f"{axis[a].tolist() if a < len(axis) else ''}: the sliding axis has zero length",
+            "give axis_1 and axis_2 two points of object2 at different positions",
+        )
+        return
+    if states[0] is states[1]:
+        planner.unsupported(checked, "object1 = object2 is not compiled yet")
         return
     first = phase.capacity
     phase.capacity += 4
@@ -541,7 +560,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             phase.kept = planner.buffer(
                 planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
             )
-    if lagrangian is not None and phase.method == "lcp" and solver is not None:
+    if lagrangian is not None and phase.method == Variant.LCP and solver is not None:
         why = _lcp_refusal(planner, solver, phase, lagrangian)
         if why:
             planner.unsupported(solver, why)
@@ -550,7 +569,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
         return
-    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == "lcp"):
+    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == Variant.LCP):
         if solver is not None:
             planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
         return
@@ -597,11 +616,10 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         assert checked is not None
         state = correction.state
         compiled = ("Vec3d", "Rigid3d") if lagrangian is not None else ("Vec3d", "Rigid3d", "Vec1d")
-        if correction.kind != "uncoupled" or state.datatype.name not in compiled:
+        if state.datatype.name not in compiled:
             planner.unsupported(
                 checked,
-                "with constraint rows, UncoupledConstraintCorrection on Vec3d or Rigid3d (Vec1d without "
-                "contacts) is compiled",
+                "with constraint rows, a correction on Vec3d or Rigid3d (Vec1d without contacts) is compiled",
             )
             continue
         group = correction.group
@@ -612,6 +630,9 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             continue
         component = checked.component
         J = _jacobian_rows(planner, state, entries)
+        if correction.kind == Variant.LINEAR_SOLVER:
+            _linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
+            continue
         comp = _values(planner, component, "compliance", np.float64)
         if not state.datatype.rigid and 0 < len(comp) != state.size:
             # SOFA's init: a compliance not one per DOF becomes one per DOF, each the
@@ -650,17 +671,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         else:
             add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
         phase.compliance.append(Op(correction.origin, [add]))
-        lam = planner.buffer(
-            component, "lambda", np.zeros_like(state.v.initial), columns=state.v.columns, role="scratch"
-        )
-        dx = planner.buffer(
-            component,
-            "constraint_dx",
-            np.zeros_like(state.v.initial),
-            columns=state.v.columns,
-            role="scratch",
-        )
-        moved = (state.x, state.v, lam, dx)
+        moved = _moved_vectors(planner, component, state)
         if lagrangian is not None:
             correct = call(
                 kernel("lagrangian_correct", t),
@@ -679,7 +690,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                 kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
             )
         phase.correction.append(Op(correction.origin, [correct]))
-    if phase.method == "lcp":  # LCPConstraintSolver on the contacts' rows
+    if phase.method == Variant.LCP:  # LCPConstraintSolver on the contacts' rows
         names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
         lcp_settings = [Element(phase.settings[name]) for name in names]
         if solver is not None and not planner.value(solver.component, "build_lcp"):
@@ -701,7 +712,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
         default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
         settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    if phase.method == "unbuilt_gauss_seidel":
+    if phase.method == Variant.UNBUILT_GAUSS_SEIDEL:
         _unbuilt_solve(
             planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
         )
@@ -736,6 +747,131 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             ],
         )
     )
+
+
+def _moved_vectors(planner: Planner, component: Component, state: StatePlan) -> tuple[Buffer, ...]:
+    """What a correction writes: x, v, and its lambda (J^T f) and constraint_dx vectors."""
+    zeros = np.zeros_like(state.v.initial)
+    lam = planner.buffer(component, "lambda", zeros, columns=state.v.columns, role="scratch")
+    dx = planner.buffer(component, "constraint_dx", zeros, columns=state.v.columns, role="scratch")
+    return (state.x, state.v, lam, dx)
+
+
+def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group) -> LinearSystem | None:
+    """The factorisation a LinearSolverConstraintCorrection solves with: its `linearSolver` link,
+    else the first linear solver of its node (SOFA's Local search), which must be the direct
+    solver factorising its group's system this step (the group's own, or its PCG's preconditioner)."""
+    linked = checked.links.get("linearSolver")
+    solver = (
+        linked
+        if isinstance(linked, Component)
+        else next(
+            (
+                c
+                for c in checked.component.node.objects
+                if planner.checked.of(c).category is Category.LINEAR_SOLVER
+            ),
+            None,
+        )
+    )
+    spec = planner.checked.of(solver).spec if solver is not None else None
+    own = group.direct and solver is group.linear_solver
+    preconditioner = group.preconditioner == 4 and any(c is solver for c in group.preconditioners)
+    if (
+        solver is None
+        or spec is None
+        or spec.lowering != "direct"
+        or not (own or preconditioner)
+        or group.btd
+    ):
+        name = solver.type_name if solver is not None else "none"
+        planner.unsupported(
+            checked,
+            f"with constraint rows, its linear solver ({name}) must be the sparse direct solver its ODE "
+            "solver's system is factorised by (the group's SparseLDLSolver..., or a PCGLinearSolver's "
+            'direct preconditioner): link it with linearSolver="@<the direct solver>"',
+            "linearSolver",
+        )
+        return None
+    if len(group.states) != 1:
+        planner.unsupported(checked, "with constraint rows, it is compiled for an ODE solver of one state")
+        return None
+    return LinearSystem(group.ident)
+
+
+def _linear_solver_correction(
+    planner: Planner,
+    phase: ConstraintPhase,
+    correction: Correction,
+    body: int,
+    J: Aggregate,
+    lagrangian: bool,
+    problem: tuple[Buffer, Buffer, int],
+) -> None:
+    """LinearSolverConstraintCorrection on rows (runtime/sofac/linear_correction.h): W += dt J A^-1 J^T
+    (+ regularizationTerm), then dx = A^-1 J^T f, x = x_free + dt dx, v = v_free + dx
+    (EulerImplicitSolver's position and velocity integration factors)."""
+    checked = correction.checked
+    assert checked is not None
+    solver = getattr(planner, "constraint_solver", None)
+    unbuilt = phase.method == Variant.UNBUILT_GAUSS_SEIDEL or (
+        phase.method == Variant.LCP
+        and solver is not None
+        and not planner.value(solver.component, "build_lcp")
+    )
+    if unbuilt:
+        planner.unsupported(
+            checked, "under an unbuilt constraint solver it is not compiled yet (a built W is)"
+        )
+        return
+    system = _linear_system_of(planner, checked, correction.group)
+    if system is None:
+        return
+    W, f, n = problem
+    state, component = correction.state, checked.component
+    dt = float(planner.dt.initial[0])
+    regularization = Element(
+        planner.buffer(
+            component,
+            "regularizationTerm",
+            [float(planner.value(component, "regularizationTerm"))],
+            role="param",
+        )
+    )
+    t = state.datatype.name
+    if lagrangian:
+        add = call(
+            kernel("lagrangian_linear_add_compliance", t),
+            Env.LAGRANGIAN,
+            body,
+            W,
+            J,
+            system,
+            0,
+            dt,
+            regularization,
+        )
+    else:
+        add = call(kernel("linear_add_compliance", t), W, n, J, system, 0, dt, regularization)
+    phase.compliance.append(Op(correction.origin, [add]))
+    moved = _moved_vectors(planner, component, state)
+    if lagrangian:
+        correct = call(
+            kernel("lagrangian_linear_correct", t),
+            Env.LAGRANGIAN,
+            body,
+            *moved,
+            J,
+            f,
+            state.size,
+            system,
+            0,
+            dt,
+            1.0,
+        )
+    else:
+        correct = call(kernel("linear_correct", t), *moved, J, f, state.size, system, 0, dt, 1.0)
+    phase.correction.append(Op(correction.origin, [correct]))
 
 
 def _lcp_unbuilt(
@@ -789,8 +925,7 @@ def _lcp_refusal(
     if not value(solver.component, "build_lcp"):
         if (mu > 0) != (collision.mu > 0):
             return (
-                "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 "
-                "or both > 0"
+                "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 or both > 0"
             )
         return ""
     if mu <= 0 or collision.mu <= 0:
@@ -815,23 +950,29 @@ def _contact_bodies(
         state = model.state
         if not state.mapped:
             body = index.get(id(state), -1)
-            collision.bodies.append((body, state.x, None, None))
+            collision.bodies.append((body, state.x, None, None, None))
             if body >= 0:
                 reached.add(body)
             continue
         mapping = _mapping_of_state(planner, state)
         body = index.get(id(mapping.parent), -1) if mapping is not None else -1
-        if mapping is None or not _rigidly_mapped(planner, state) or state.ident not in free_x:
+        subset = _increasing_subset(planner, mapping) if mapping is not None else None
+        rigid = _rigidly_mapped(planner, state)
+        if mapping is None or not (rigid or subset is not None) or state.ident not in free_x:
             planner.unsupported(
                 planner.checked.of(state.component),
-                "Lagrangian contact on a collision state mapped other than by one RigidMapping is not "
+                "Lagrangian contact on a collision state mapped other than by one RigidMapping, "
+                "IdentityMapping or SubsetMapping (increasing indices) from an independent state is not "
                 "compiled yet",
             )
-            collision.bodies.append((-1, state.x, None, None))
+            collision.bodies.append((-1, state.x, None, None, None))
             continue
-        frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
-        assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
-        collision.bodies.append((body, free_x[state.ident], frames, offsets))
+        if subset is not None:
+            collision.bodies.append((body, free_x[state.ident], None, None, subset))
+        else:
+            frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
+            assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
+            collision.bodies.append((body, free_x[state.ident], frames, offsets, None))
         if body >= 0:
             reached.add(body)
     return reached
@@ -898,6 +1039,21 @@ def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
         and parent_state.datatype.name == "Rigid3d"
         and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
     )
+
+
+def _increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
+    """An IdentityMapping or SubsetMapping between states of one DataType, from an independent
+    state, with strictly increasing indices (a contact row's DOFs keep their order): its indices."""
+    jacobian = mapping.jacobian
+    indices = jacobian.args[2] if jacobian.kernel == "subset_apply" else None
+    if (
+        not isinstance(indices, Buffer)
+        or mapping.parent.mapped
+        or mapping.parent.datatype.name != mapping.child.datatype.name
+    ):
+        return None
+    values = np.asarray(indices.initial, dtype=np.int64).ravel()
+    return indices if values.size == 0 or bool(np.all(np.diff(values) > 0)) else None
 
 
 def _mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:

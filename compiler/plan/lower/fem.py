@@ -38,6 +38,7 @@ from sofac.plan.lower.common import (
     _written_float,
 )
 from sofac.plan.lower.masses import lower_hexa_mass
+from sofac.registry import Variant
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -189,7 +190,8 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
     else:
         force = _call(f"{prefix}_add_force", elements, count, state.x, state.f, data, method, *split)
     group.forces.append(Op(origin, [force]))
-    and_mass = checked.spec.role == "and_mass"  # HexahedronFEMForceFieldAndMass: its weight after its force
+    # HexahedronFEMForceFieldAndMass: its weight after its force
+    and_mass = checked.spec.variant is Variant.AND_MASS
     if and_mass and not lower_hexa_mass(
         planner, checked, state, group, elements, count, data, method, coefficient_buffer
     ):
@@ -365,7 +367,7 @@ def lower_element_fem(planner: Planner, checked: CheckedComponent, owner: dict[i
     if float(planner.value(component, "rayleighStiffness") or 0.0) != 0.0:
         planner.unsupported(checked, "a component-level rayleighStiffness is not compiled yet")
         return
-    corotational = checked.spec is not None and checked.spec.role == "corotational"
+    corotational = checked.spec is not None and checked.spec.variant is Variant.COROTATIONAL
     method = 0
     if corotational:
         name = planner.value(component, "rotationMethod")

@@ -37,6 +37,7 @@ from sofac.plan.lower.common import (
     _topology_cells,
     _topology_of,
 )
+from sofac.registry import Variant
 
 if TYPE_CHECKING:
     from sofac.geometry.barycentric import RegularGrid
@@ -70,7 +71,7 @@ def lower_distance_mapping(planner: Planner, checked: CheckedComponent, owner: d
             checked, "applyRestPosition=false (rest positions left unmapped) is not compiled yet"
         )
         return
-    kind = 1 if checked.spec is not None and checked.spec.role == "square" else 0
+    kind = 1 if checked.spec is not None and checked.spec.variant is Variant.SQUARE else 0
     lengths = np.zeros(count)
     if kind == 0:
         given = planner.value(component, "restLengths")
@@ -500,7 +501,7 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
     # The input topology's class decides which of SOFA's mappers embeds the points.
     topology = _topology_of(planner, probe)
     topology_spec = planner.checked.of(topology).spec if topology is not None else None
-    mode = mapper_for(topology_spec.role if topology_spec else "")
+    mode = mapper_for(topology_spec.variant if topology_spec else None)
     grid = None
     if mode == "regular_grid" and topology is not None:
         bounds = np.asarray(planner.value(topology, "bounds"), dtype=float)

@@ -181,7 +181,7 @@ def lower_mesh_matrix_mass(planner: Planner, checked: CheckedComponent, owner: d
     cells = _topology_cells(planner, checked) or {}
     topology = _topology_of(planner, checked)
     spec = planner.checked.of(topology).spec if topology is not None else None
-    if spec is not None and mapper_for(spec.role) == "dynamic":
+    if spec is not None and mapper_for(spec.variant) == "dynamic":
         cells.pop("edges", None)  # a dynamic container builds its whole edge array from its elements
     density = planner.value(component, "massDensity") if component.get("massDensity") is not None else None
     try:

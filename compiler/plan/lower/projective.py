@@ -29,6 +29,7 @@ from sofac.plan.lower.common import (
     _projected_target,
     _unit_vector,
 )
+from sofac.registry import Variant
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -95,7 +96,7 @@ def lower_line_or_plane(planner: Planner, checked: CheckedComponent, owner: dict
             f"{_matrix_free_hint(group)}",
         )
         return
-    line = checked.spec is not None and checked.spec.role == "line"
+    line = checked.spec is not None and checked.spec.variant is Variant.LINE
     width = min(state.datatype.spatial_dim, 3)  # the runtime's DT::spatial
     direction = _unit_vector(
         planner, component, "direction" if line else "normal", width, 0 if line else None

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, Int, Link, LinkList, Options, Real, Reals, Text
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
     COLLISION_MODEL_FIELDS,
     MUST_BE_NONNEGATIVE,
@@ -30,7 +30,7 @@ _COMPOSITE_FIELDS = (
 
 COLLISION_PIPELINE = ComponentSpec(
     name="CollisionPipeline",
-    role="pipeline",
+    variant=Variant.PIPELINE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="The collision pipeline: reset, broad phase, narrow phase, contact responses, using the "
@@ -48,7 +48,7 @@ COLLISION_PIPELINE = ComponentSpec(
 
 COMPOSITE_COLLISION_PIPELINE = ComponentSpec(
     name="CompositeCollisionPipeline",
-    role="composite_pipeline",
+    variant=Variant.COMPOSITE_PIPELINE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Runs several SubCollisionPipelines, phase by phase, in link order.",
@@ -59,7 +59,7 @@ COMPOSITE_COLLISION_PIPELINE = ComponentSpec(
 
 SUB_COLLISION_PIPELINE = ComponentSpec(
     name="SubCollisionPipeline",
-    role="sub_pipeline",
+    variant=Variant.SUB_PIPELINE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="One collision pipeline over an explicit list of collision models (run by a "
@@ -78,7 +78,7 @@ SUB_COLLISION_PIPELINE = ComponentSpec(
 
 BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
     name="BruteForceBroadPhase",
-    role="broad_phase",
+    variant=Variant.BROAD_PHASE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Broad phase testing the bounding boxes of every pair of collision models.",
@@ -89,7 +89,7 @@ BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
 
 BVH_NARROW_PHASE = ComponentSpec(
     name="BVHNarrowPhase",
-    role="narrow_phase",
+    variant=Variant.NARROW_PHASE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Narrow phase traversing the bounding-volume hierarchies of candidate pairs.",
@@ -101,7 +101,7 @@ _MULTITHREADING = "components of the MultiThreading plugin are not supported (us
 
 PARALLEL_BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
     name="ParallelBruteForceBroadPhase",
-    role="broad_phase",
+    variant=Variant.BROAD_PHASE,
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
     doc="MultiThreading plugin: parallel BruteForceBroadPhase.",
@@ -115,7 +115,7 @@ PARALLEL_BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
 
 PARALLEL_BVH_NARROW_PHASE = ComponentSpec(
     name="ParallelBVHNarrowPhase",
-    role="narrow_phase",
+    variant=Variant.NARROW_PHASE,
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
     doc="MultiThreading plugin: parallel BVHNarrowPhase.",
@@ -126,7 +126,7 @@ PARALLEL_BVH_NARROW_PHASE = ComponentSpec(
 
 BRUTE_FORCE_DETECTION = ComponentSpec(
     name="BruteForceDetection",
-    role="broad_phase",
+    variant=Variant.BROAD_PHASE,
     category=Category.COLLISION_PIPELINE,
     module=_ALGORITHM,
     doc="Deprecated: adds a BruteForceBroadPhase and a BVHNarrowPhase to its node.",
@@ -147,7 +147,7 @@ _PROXIMITY = (
 
 MIN_PROXIMITY_INTERSECTION = ComponentSpec(
     name="MinProximityIntersection",
-    role="min_proximity",
+    variant=Variant.MIN_PROXIMITY,
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests between element pairs closer than alarmDistance.",
@@ -165,7 +165,7 @@ MIN_PROXIMITY_INTERSECTION = ComponentSpec(
 
 NEW_PROXIMITY_INTERSECTION = ComponentSpec(
     name="NewProximityIntersection",
-    role="new_proximity",
+    variant=Variant.NEW_PROXIMITY,
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests based on triangle-triangle distances.",
@@ -188,7 +188,7 @@ LOCAL_MIN_DISTANCE = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests filtered by local minimum distance cones (used with constraint-based contacts).",
-    role="local_min_distance",
+    variant=Variant.LOCAL_MIN_DISTANCE,
     supported=True,
     effects=_COLLISION,
     fields=(
@@ -228,7 +228,7 @@ _RESPONSE_FIELDS = (
 
 COLLISION_RESPONSE = ComponentSpec(
     name="CollisionResponse",
-    role="contact_manager",
+    variant=Variant.CONTACT_MANAGER,
     category=Category.COLLISION_PIPELINE,
     module=_RESPONSE,
     doc="Contact manager: creates a response (e.g. penalty springs) per colliding pair of models.",
@@ -244,7 +244,7 @@ RULE_BASED_CONTACT_MANAGER = ComponentSpec(
     module=_RESPONSE,
     doc="Contact manager choosing the response per pair of model groups from rules.",
     former_names=("RuleBasedCollisionResponse",),
-    role="contact_manager",
+    variant=Variant.CONTACT_MANAGER,
     supported=True,
     effects=_COLLISION,
     fields=(
@@ -259,7 +259,7 @@ _FREE_POSITION = FieldSpec("displayFreePosition", Bool(), False)
 
 SPHERE_COLLISION_MODEL = ComponentSpec(
     name="SphereCollisionModel",
-    role="sphere",
+    variant=Variant.SPHERE,
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="One sphere per DOF of the node's state (centres), radius from listRadius or radius.",
@@ -278,7 +278,7 @@ SPHERE_COLLISION_MODEL = ComponentSpec(
 
 TRIANGLE_COLLISION_MODEL = ComponentSpec(
     name="TriangleCollisionModel",
-    role="triangle",
+    variant=Variant.TRIANGLE,
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The triangles of the node's topology.",
@@ -306,7 +306,7 @@ TRIANGLE_COLLISION_MODEL = ComponentSpec(
 
 LINE_COLLISION_MODEL = ComponentSpec(
     name="LineCollisionModel",
-    role="line",
+    variant=Variant.LINE,
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The edges of the node's topology.",
@@ -320,7 +320,7 @@ LINE_COLLISION_MODEL = ComponentSpec(
 
 POINT_COLLISION_MODEL = ComponentSpec(
     name="PointCollisionModel",
-    role="point",
+    variant=Variant.POINT,
     category=Category.COLLISION_MODEL,
     module=_GEOMETRY,
     doc="The points of the node's state.",

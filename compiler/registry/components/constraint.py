@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, Bools, Coords, Int, Ints, Real, Reals, Text
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import PAIR_LINKS, PROJECTIVE_FIELDS
 
 _MODULE = "Sofa.Component.Constraint.Projective"
@@ -63,7 +63,7 @@ PARTIAL_FIXED_PROJECTIVE_CONSTRAINT = ComponentSpec(
 LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="LineProjectiveConstraint",
     lowering="line_or_plane",
-    role="line",
+    variant=Variant.LINE,
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a line (they may only slide along it).",
@@ -84,7 +84,7 @@ LINE_PROJECTIVE_CONSTRAINT = ComponentSpec(
 PLANE_PROJECTIVE_CONSTRAINT = ComponentSpec(
     name="PlaneProjectiveConstraint",
     lowering="line_or_plane",
-    role="plane",
+    variant=Variant.PLANE,
     category=Category.PROJECTIVE_CONSTRAINT,
     module=_MODULE,
     doc="Projects the selected points onto a plane (they may only move within it).",

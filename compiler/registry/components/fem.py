@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..fields import Bool, Color, Coords, Enum, Int, Ints, Options, Real, Reals, Text
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
     ELASTICITY_FIELDS,
     ELEMENT_TEMPLATES,
@@ -175,7 +175,7 @@ HEXAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
 HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
     name="HexahedronFEMForceFieldAndMass",
     lowering="hexa_fem",
-    role="and_mass",
+    variant=Variant.AND_MASS,
     category=Category.MASS,
     module=_MODULE,
     doc="HexahedronFEMForceField plus the consistent (or lumped) mass of the same elements.",
@@ -291,7 +291,7 @@ _ELEMENT_FEM_FIELDS = (
 
 COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
     name="CorotationalFEMForceField",
-    role="corotational",
+    variant=Variant.COROTATIONAL,
     lowering="element_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,

@@ -18,7 +18,7 @@ from ..fields import (
     Springs,
     Text,
 )
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
     FORCEFIELD_FIELDS,
     MUST_BE_NONNEGATIVE,
@@ -464,7 +464,7 @@ UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
 
 GRAVITY = ComponentSpec(
     name="Gravity",
-    role="gravity",
+    variant=Variant.GRAVITY,
     category=Category.CONTEXT,
     module=_LOAD_MODULE,
     doc="Sets the gravity of its node's subtree (re-applied after the root's values are copied down).",

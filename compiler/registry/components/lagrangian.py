@@ -8,7 +8,7 @@ Unilateral model does not yet, and is refused clearly.
 from __future__ import annotations
 
 from ..fields import Bool, Coords, Int, Ints, Link, LinkList, Real, Reals
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
     ANIMATION_LOOP_FIELDS,
     MSTATE_LINK,
@@ -61,7 +61,7 @@ LCP_CONSTRAINT_SOLVER = ComponentSpec(
     doc="Solves the contact LCP (with friction) by projected Gauss-Seidel.",
     supported=True,
     lowering="constraint_solver",
-    role="lcp",
+    variant=Variant.LCP,
     effects=_SOLVE,
     fields=(
         FieldSpec("displayDebug", Bool(), False),
@@ -111,7 +111,7 @@ BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER = ComponentSpec(
     former_names=("GenericConstraintSolver",),
     supported=True,
     lowering="constraint_solver",
-    role="block_gauss_seidel",
+    variant=Variant.BLOCK_GAUSS_SEIDEL,
     effects=_SOLVE,
     fields=_BUILT_SOLVER_FIELDS,
 )
@@ -123,7 +123,7 @@ NNCG_CONSTRAINT_SOLVER = ComponentSpec(
     doc="Non-smooth non-linear conjugate gradient constraint solver.",
     supported=True,
     lowering="constraint_solver",
-    role="nncg",
+    variant=Variant.NNCG,
     effects=_SOLVE,
     fields=_BUILT_SOLVER_FIELDS,
 )
@@ -135,7 +135,7 @@ UNBUILT_GAUSS_SEIDEL_CONSTRAINT_SOLVER = ComponentSpec(
     doc="Gauss-Seidel constraint solver without assembling the compliance matrix.",
     supported=True,
     lowering="constraint_solver",
-    role="unbuilt_gauss_seidel",
+    variant=Variant.UNBUILT_GAUSS_SEIDEL,
     effects=_SOLVE,
     fields=_GENERIC_SOLVER_FIELDS,
 )
@@ -152,7 +152,7 @@ LINEAR_SOLVER_CONSTRAINT_CORRECTION = ComponentSpec(
     default_template="Vec3d",
     supported=True,
     lowering="constraint_correction",
-    role="linear_solver",
+    variant=Variant.LINEAR_SOLVER,
     effects=_SOLVE,
     fields=(
         FieldSpec("wire_optimization", Bool(), False, "reorder constraints along a wire-like topology"),
@@ -173,7 +173,7 @@ UNCOUPLED_CONSTRAINT_CORRECTION = ComponentSpec(
     default_template="Vec1d",
     supported=True,
     lowering="constraint_correction",
-    role="uncoupled",
+    variant=Variant.UNCOUPLED,
     effects=_SOLVE,
     fields=(
         FieldSpec("compliance", Reals(), doc="compliance per DOF (Rigid3d: 7 values)"),

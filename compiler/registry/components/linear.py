@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, Int, IntVector, Link, LinkList, Real
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
     CRS_BLOCKS,
     CRS_MAT3,
@@ -130,7 +130,7 @@ SPARSE_LDL_SOLVER = ComponentSpec(
 SPARSE_CHOLESKY_SOLVER = ComponentSpec(
     name="SparseCholeskySolver",
     lowering="direct",
-    role="llt",  # factors L L^T (CHOLMOD's L L^T), where SparseLDLSolver factors L D L^T
+    variant=Variant.LLT,  # factors L L^T (CHOLMOD's L L^T), where SparseLDLSolver factors L D L^T
     category=Category.LINEAR_SOLVER,
     module="CSparseSolvers",
     doc="Direct sparse Cholesky (L L^T) factorisation. Moved out of SOFA's main repository into the "
@@ -163,11 +163,11 @@ SPARSE_LU_SOLVER = ComponentSpec(
 )
 
 
-def _eigen(name: str, what: str, role: str = "") -> ComponentSpec:
+def _eigen(name: str, what: str, variant: Variant | None = None) -> ComponentSpec:
     return ComponentSpec(
         name=name,
         lowering="direct",
-        role=role,
+        variant=variant,
         category=Category.LINEAR_SOLVER,
         module=_DIRECT,
         doc=f"Direct sparse {what} factorisation (Eigen) of the assembled matrix.",
@@ -203,7 +203,7 @@ ASYNC_SPARSE_LDL_SOLVER = ComponentSpec(
 CHOLESKY_SOLVER = ComponentSpec(
     name="CholeskySolver",
     lowering="direct",
-    role="llt",
+    variant=Variant.LLT,
     category=Category.LINEAR_SOLVER,
     module=_DIRECT,
     doc="Dense Cholesky (L L^T) factorisation of the system matrix; sofac factors the same matrix "
@@ -232,7 +232,7 @@ LU_LINEAR_SOLVER = ComponentSpec(
 EIGEN_CHOLMOD_SUPERNODAL_LLT = ComponentSpec(
     name="EigenCholmodSupernodalLLT",
     lowering="direct",
-    role="llt",
+    variant=Variant.LLT,
     category=Category.LINEAR_SOLVER,
     module="SofaCHOLMOD",
     doc="CHOLMOD's supernodal L L^T (SofaCHOLMOD plugin): sofac's direct solvers factor L L^T with "
@@ -249,7 +249,7 @@ EIGEN_CHOLMOD_SUPERNODAL_LLT = ComponentSpec(
 )
 
 EIGEN_SIMPLICIAL_LDLT = _eigen("EigenSimplicialLDLT", "L D L^T")
-EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T", role="llt")
+EIGEN_SIMPLICIAL_LLT = _eigen("EigenSimplicialLLT", "Cholesky L L^T", variant=Variant.LLT)
 EIGEN_SPARSE_LU = _eigen("EigenSparseLU", "LU")
 EIGEN_SPARSE_QR = _eigen("EigenSparseQR", "QR")
 
@@ -282,7 +282,7 @@ SVD_LINEAR_SOLVER = ComponentSpec(
     default_template=FULL_MATRIX,
     former_names=("SVDLinear", "SVD"),
     lowering="direct",
-    role="svd",
+    variant=Variant.SVD,
     supported=True,
     effects=_SOLVE,
     fields=(

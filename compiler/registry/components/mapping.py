@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, Color, Coords, FileName, Int, Ints, Link, LinkList, Options, Real, Reals
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import GEOMETRIC_STIFFNESS, MAPPING_FIELDS, MUST_BE_NONNEGATIVE, TOPOLOGY_LINK
 
 _LINEAR = "Sofa.Component.Mapping.Linear"
@@ -154,7 +154,7 @@ DISTANCE_MAPPING = ComponentSpec(
 SQUARE_DISTANCE_MAPPING = ComponentSpec(
     name="SquareDistanceMapping",
     lowering="distance_mapping",
-    role="square",
+    variant=Variant.SQUARE,
     category=Category.MAPPING,
     module=_NONLINEAR,
     doc="One scalar per edge of the topology: its squared length.",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, FileName, Ints, IntVector, Link, MassValue, Real, Reals
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import ELEMENT_TEMPLATES, MASS_FIELDS, MUST_BE_POSITIVE, TOPOLOGY_LINK
 
 _MASS_EFFECTS = frozenset({Effect.INERTIA, Effect.GRAVITY})
@@ -129,7 +129,7 @@ FEM_MASS = ComponentSpec(
 
 NODAL_MASS_DENSITY = ComponentSpec(
     name="NodalMassDensity",
-    role="nodal_mass_density",
+    variant=Variant.NODAL_MASS_DENSITY,
     category=Category.UTILITY,
     module=_MODULE,
     doc="A mass density value per node, read by FEMMass (a node beyond the list takes its last value).",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, Color, Coords, FileName, Int, Ints, IntVector, Link, Real, Reals, Text
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import MUST_BE_AT_LEAST_ONE, MUST_BE_NONNEGATIVE, MUST_BE_POSITIVE
 
 _CONSTANT = "Sofa.Component.Topology.Container.Constant"
@@ -91,7 +91,7 @@ GRID_TOPOLOGY = ComponentSpec(
 
 REGULAR_GRID_TOPOLOGY = ComponentSpec(
     name="RegularGridTopology",
-    role="regular_grid",
+    variant=Variant.REGULAR_GRID,
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Regular grid between min and max: points (index x + nx (y + ny z)), edges, all grid quads, "
@@ -131,7 +131,7 @@ _SPARSE_GRID_FIELDS = (
 
 SPARSE_GRID_TOPOLOGY = ComponentSpec(
     name="SparseGridTopology",
-    role="sparse_grid",
+    variant=Variant.SPARSE_GRID,
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Hexahedral cells of a regular grid that intersect or lie inside a closed surface mesh.",
@@ -144,7 +144,7 @@ SPARSE_GRID_TOPOLOGY = ComponentSpec(
 
 SPARSE_GRID_RAMIFICATION_TOPOLOGY = ComponentSpec(
     name="SparseGridRamificationTopology",
-    role="sparse_grid",
+    variant=Variant.SPARSE_GRID,
     category=Category.TOPOLOGY,
     module=_GRID,
     doc="Sparse grid that duplicates cells crossed by several disconnected parts of the surface.",
@@ -228,7 +228,8 @@ _KIND_ELEMENTS = {
 def _container(kind: str) -> ComponentSpec:
     return ComponentSpec(
         name=f"{kind}SetTopologyContainer",
-        role="dynamic",  # SOFA's barycentric mapper for dynamic containers; edges built from elements
+        # SOFA's barycentric mapper for dynamic containers; edges built from elements
+        variant=Variant.DYNAMIC,
         category=Category.TOPOLOGY,
         module=_DYNAMIC,
         doc=f"Dynamic topology container of {_KIND_ELEMENTS[kind]} (and their sub-elements); static "

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from ..fields import Bool, FileName, Ints, Real, Reals, Text, Words
-from ..spec import Category, ComponentSpec, FieldSpec
+from ..spec import Category, ComponentSpec, FieldSpec, Variant
 from .common import ANIMATION_LOOP_FIELDS, TASK_SCHEDULER_FIELDS
 
 DEFAULT_ANIMATION_LOOP = ComponentSpec(
@@ -69,7 +69,7 @@ ADD_DATA_REPOSITORY = ComponentSpec(
     module="Sofa.Component.SceneUtility",
     doc="Adds a directory (relative to the scene's) to the data file search path, after the others.",
     supported=True,
-    role="data_repository",
+    variant=Variant.DATA_REPOSITORY,
     fields=(FieldSpec("path", Text(), doc="directory to add"),),
 )
 

@@ -18,7 +18,7 @@ from ..fields import (
     Text,
     Words,
 )
-from ..spec import Category, ComponentSpec, Effect, FieldSpec
+from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import MUST_BE_POSITIVE, VISUAL_MODEL_FIELDS
 
 _VISUAL = frozenset({Effect.VISUAL})
@@ -136,7 +136,7 @@ OGL_MODEL = ComponentSpec(
 
 VISUAL_STYLE = ComponentSpec(
     name="VisualStyle",
-    role="visual_style",
+    variant=Variant.VISUAL_STYLE,
     category=Category.RENDERING,
     module=_VISUAL_MODULE,
     doc="Display flags of its subtree (showVisual, showBehaviorModels, showForceFields, "
