@@ -637,7 +637,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         if not state.datatype.rigid and 0 < len(comp) != state.size:
             # SOFA's init: a compliance not one per DOF becomes one per DOF, each the
             # defaultCompliance if set, else the compliance's first value
-            given = component.attributes.get("defaultCompliance")
+            given = component.get("defaultCompliance") is not None
             first = float(planner.value(component, "defaultCompliance")) if given else float(comp[0])
             comp = np.full(state.size, first)
         if state.datatype.rigid and len(comp) != 7:
