@@ -165,13 +165,17 @@ def test_lagrangian_contact_scenes_do_not_allocate_in_a_step(
     # FrictionContactConstraint under FreeMotionAnimationLoop (runtime/sofac/lagrangian_contact.h):
     # the detection's buffers, every pair's traversal stack (reserved at the first detection), the
     # contacts, their rows and Jacobians in buffers reserved at init; a particle resting on a floor
-    # (BGS) and a torus and a cube in a box whose contacts come and go (LCP, 3 to 30 a step).
+    # (BGS) and a torus and a cube in a box whose contacts come and go (LCP, 3 to 30 a step); 425
+    # particles landing, more contacts than the rows reserved: the first step grows them (doubled,
+    # once), the steps after it allocate nothing.
     sys.path.insert(0, str(REPO / "tests"))
+    from stability.test_lagrangian_stability import grids_scene
     from test_lagrangian_contact import FLAT, scene
 
     scenes = [
         scene(tmp_path, FLAT, (0.3, 0.06, 0.2)),
         shared_dir / "corpus/sofa/Component/Collision/Response/FrictionContact.scn",
+        grids_scene(tmp_path / "grids.scn"),
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

@@ -124,7 +124,8 @@ def test_the_effects_and_schedule_list_the_contact_rows(tmp_path: Path) -> None:
 
     plan = plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=0.4))
     schedule = format_schedule(plan)
-    assert "constraint rows: 384 (at most: 0 of the scene's constraints, then up to 128 contacts" in schedule
+    assert "constraint rows: 384 (reserved: 0 of the scene's constraints, then 128 contacts" in schedule
+    assert "more contacts double the reserve" in schedule
     text = format_effects(plan)
     assert "local_min_distance::triangle_point, FrictionContactConstraint mu=0.4: 3 constraint row(s)" in text
 
@@ -181,3 +182,25 @@ def test_lagrangian_regression_scene_passes(shared_dir: Path, name: str) -> None
     )
     assert result.status is Status.PASS, (result.status, result.message, result.error)
     assert result.error is not None and result.error <= result.epsilon
+
+
+def test_one_compliance_for_many_points_is_each_point_s(tmp_path: Path) -> None:
+    # SOFA's UncoupledConstraintCorrection::init: a compliance that is not one per DOF becomes one
+    # per DOF, each its first value (defaultCompliance when that is set)
+    path = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
+    first = f'position="{0.3:.17g}'
+    text = path.read_text().replace(first, 'position="0.5 0.1 0.2  ' + first[len('position="') :])
+    assert text != path.read_text()
+    path.write_text(text)
+    plan = plan_of(path)
+    (compliance,) = [b for b in plan.buffers if b.key.endswith("UncoupledConstraintCorrection5.compliance")]
+    assert compliance.initial.tolist() == [1.0 / MASS, 1.0 / MASS]
+    path.write_text(
+        text.replace(
+            "<UncoupledConstraintCorrection ", '<UncoupledConstraintCorrection defaultCompliance="3" '
+        )
+    )
+    (compliance,) = [
+        b for b in plan_of(path).buffers if b.key.endswith("UncoupledConstraintCorrection5.compliance")
+    ]
+    assert compliance.initial.tolist() == [3.0, 3.0]

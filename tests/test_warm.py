@@ -167,3 +167,17 @@ def test_sofac_run_is_warm_the_second_time(tmp_path: Path, capsys: pytest.Captur
         outputs.append(capsys.readouterr().out.splitlines())
     assert "(warm record)" not in outputs[0][0] and "(warm record)" in outputs[1][0]
     assert outputs[0][1:] == outputs[1][1:]  # the same states after 3 steps
+
+
+def test_a_record_keeps_the_contact_reports_and_the_growable_buffers() -> None:
+    # a warm load warns about contacts as a cold one, and takes its grown views again (RunSpec)
+    from sofac.simulation.runspec import BufferSpec, RunSpec
+
+    buffers = tuple(BufferSpec(f"/.b{i}", "f64", "state", np.zeros(i + 1)) for i in range(3))
+    spec = RunSpec(
+        buffers, (), (), (), None, frozenset(), {}, 1, "", False,
+        contact_reports=(("/CollisionPipeline3", 1),), growable=(0, 2),
+    )  # fmt: skip
+    meta = json.loads(json.dumps({"spec": warm._spec_to_json(spec)}))["spec"]
+    back = warm._spec_from_json(meta, [b.initial for b in buffers])
+    assert back.contact_reports == spec.contact_reports and back.growable == spec.growable

@@ -488,6 +488,10 @@ class _CollisionView:
                 pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets, subset)]
                 self.setup.append(f"C.lagrangian[{i}] = {{{body}, {', '.join(pointers)}}};")
             self.setup.append(f"C.rank = {{{', '.join(str(r) for r in collision.ranks)}}};")
+        self.fit = ""  # friction_contact: the problem's buffers grown with the rows (lagrangian_fit)
+        if self.lagrangian and collision.problem:
+            vectors = ", ".join(f"S.{b.ident}" for b in collision.problem)
+            self.fit = f"sofac::lagrangian_fit(S.lagrangian, S.lagrangian_retired, {vectors});"
         self.positions = "".join(f"\n        {_ptr(m.state.x)}," for m in models)
         assert collision.report is not None
         self.report = _ptr(collision.report)

@@ -60,8 +60,8 @@ _TESTS[Variant.LOCAL_MIN_DISTANCE] = {
     ("line", "line"),
     ("triangle", "point"),
 }
-# Lagrangian contacts a step can hold (their rows are reserved in the constraint problem); past
-# it, contacts are dropped and counted in the pipeline's report.
+# Lagrangian contacts whose rows are reserved in the constraint problem at creation; a step with more
+# doubles the reserve (lagrangian_contact.h, FrictionContacts::fit), a growth in the pipeline's report.
 _CONTACT_CAPACITY = 128
 _RESPONSES = {"PenalityContactForceField": "penalty", "FrictionContactConstraint": "friction_contact"}
 # MinProximityIntersection's switches: the pairs each one removes.

@@ -530,7 +530,7 @@ class ConstraintPhase:
     corrections: list[Correction] = field(default_factory=list)
     frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)
     saved: dict[str, tuple[Buffer, Buffer]] = field(default_factory=dict)  # frozen state ident -> (x, v)
-    capacity: int = 0  # constraint rows the phase can hold
+    capacity: int = 0  # constraint rows reserved (contacts' rows grow past it: CollisionPlan.problem)
     # Row blocks in row order: (first row, runtime Resolution, parameter, offset of its kept forces
     # in ``kept`` or -1, upper bound (stoppers' max, else 0)), and the forces kept across steps
     # (bilateral warm start).
@@ -644,6 +644,9 @@ class Collision:
     bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None, Buffer | None]] = field(
         default_factory=list
     )
+    # friction_contact: the constraint problem's buffers sized by the rows (W, dfree, f, d, scratch),
+    # grown with the capacity when a step's contacts outgrow it (lagrangian_fit)
+    problem: list[Buffer] = field(default_factory=list)
 
 
 @dataclass

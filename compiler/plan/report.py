@@ -98,14 +98,14 @@ def format_schedule(plan: Plan) -> str:
 
 
 def _contact_rows(plan: Plan) -> str:
-    """How many of the phase's rows its Lagrangian contacts may take, and where they come from."""
+    """How many of the phase's rows its Lagrangian contacts are reserved, and where they come from."""
     for collision in plan.collisions:
         if collision.response == "friction_contact" and collision.pairs:
             per = 3 if collision.mu > 0 else 1
             return (
-                f" (at most: {collision.static_rows} of the scene's constraints, then up to "
+                f" (reserved: {collision.static_rows} of the scene's constraints, then "
                 f"{collision.row_capacity // per} contacts of {per} row(s) from {collision.origin}, "
-                "detected each step)"
+                "detected each step; more contacts double the reserve, a growth in its contactReport)"
             )
     return ""
 

@@ -303,6 +303,18 @@ class Compiled:
         return Simulation(self)
 
 
+def _put(view: np.ndarray, values: np.ndarray) -> None:
+    """``view[:] = values``; for a buffer the step grew since ``values`` were taken (see
+    ``Simulation._refit``), the values over its first entries and zeros after them."""
+    if view.shape == values.shape:
+        np.copyto(view, values)
+        return
+    flat, given = view.reshape(-1), np.asarray(values).reshape(-1)
+    n = min(flat.size, given.size)
+    flat[:n] = given[:n]
+    flat[n:] = 0
+
+
 class Simulation:
     """A running instance of a compiled scene."""
 
@@ -434,6 +446,7 @@ class Simulation:
             if self.keep_last_finite:
                 self._take_snapshot()
             done = self._step_saving(count) if self._saving else int(self._native.step(count))
+            self._refit()
             self._steps += done
             remaining -= count
             if self._touching is not None and self._touching[0] >= 0:
@@ -473,7 +486,9 @@ class Simulation:
                 start = float(self._native.time)
                 for energy_file, out in outs:
                     energy_file.before(out, start)
-                if int(self._native.step(1)) < 1:
+                stepped = int(self._native.step(1))
+                self._refit()
+                if stepped < 1:
                     break
                 done += 1
                 for energy_file, out in outs:
@@ -485,7 +500,8 @@ class Simulation:
     def _report_contacts(self) -> None:
         """A ContactWarning for each contact counter that grew since it was last reported."""
         what = (
-            "contact buffers outgrew their reserved capacity (the step allocated)",
+            "time(s) contact buffers outgrew the capacity reserved at init and were grown (that step "
+            "allocated; no contact was dropped)",
             "detection outputs were degenerate (NaN dropped, or a zero distance given the normal (1, 0, 0))",
             "times a model moved farther in one step than the detection's reach while near a partner: "
             "contacts may have been missed (tunnelling); reduce dt or raise alarmDistance",
@@ -532,12 +548,27 @@ class Simulation:
         self._energy_guard = _EnergyGuard(float(factor), float(scale), energy.total)
 
     # --- the divergence guard ------------------------------------------------------------------
+    def _refit(self) -> None:
+        """After a step: the views of the buffers it grew (``RunSpec.growable``: the Lagrangian
+        contacts' constraint problem, past its reserved rows) taken again, in every list holding
+        them (views taken before by the caller stay readable, with the values before the growth)."""
+        for i in self.spec.growable:
+            old = self._views[i]
+            view = self._native.buffer(i, False)
+            if view.size == old.size:
+                continue
+            self._views[i] = view
+            self._carried = [view if v is old else v for v in self._carried]
+
     def _take_snapshot(self) -> None:
         if self._snapshot is None:
             self._snapshot = [view.copy() for view in self._carried]
         else:
-            for copy, view in zip(self._snapshot, self._carried, strict=True):
-                np.copyto(copy, view)
+            for k, (copy, view) in enumerate(zip(self._snapshot, self._carried, strict=True)):
+                if copy.shape == view.shape:
+                    np.copyto(copy, view)
+                else:  # a buffer the step grew (_refit)
+                    self._snapshot[k] = view.copy()
         self._snapshot_step = self._steps
         self._snapshot_time = self.time
 
@@ -560,12 +591,13 @@ class Simulation:
             return [view.copy() for view in self._carried], steps, float(self._native.time)
 
         for view, copy in zip(self._carried, self._snapshot, strict=True):
-            np.copyto(view, copy)
+            _put(view, copy)
         self._native.time = self._snapshot_time
         steps = self._snapshot_step
         kept = copies() if good() else None
         start = kept
         while steps < failing_steps and int(self._native.step(1)) == 1:
+            self._refit()
             steps += 1
             if steps < failing_steps and kept is not None and kept[1] == steps - 1 and good():
                 kept = copies()
@@ -574,7 +606,7 @@ class Simulation:
             for view, copy in zip(self._carried, failing, strict=True)
         )
         for view, copy in zip(self._carried, failing, strict=True):
-            np.copyto(view, copy)
+            _put(view, copy)
         self._native.time = failing_time
         self._kept = kept if faithful else start
 
@@ -605,7 +637,7 @@ class Simulation:
         copies, step, time = self._kept
         with self._lock:
             for view, copy in zip(self._carried, copies, strict=True):
-                np.copyto(view, copy)
+                _put(view, copy)
             self._native.time = time
             self._steps = step
         return step
@@ -754,7 +786,7 @@ class Simulation:
         self._param_guard.check()
         for buffer, view in zip(self.spec.buffers, self._views, strict=True):
             if buffer.role in ("state", "scratch"):
-                view[:] = buffer.initial
+                _put(view, buffer.initial)
         self._native.time = 0.0
         self._steps = 0
         self._limited_seen = 0

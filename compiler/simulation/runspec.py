@@ -86,6 +86,9 @@ class RunSpec:
     rules: dict[str, ParamRule] = field(default_factory=dict)  # parameter key -> its field's rule
     # Compiled contacts: (pipeline origin, buffer index of its contactReport), per pipeline.
     contact_reports: tuple[tuple[str, int], ...] = ()
+    # Buffers the step may grow (Lagrangian contacts' constraint problem past its reserved rows):
+    # their views are taken again after a step that grew them.
+    growable: tuple[int, ...] = ()
 
     def index(self, key: str) -> int:
         return next(i for i, b in enumerate(self.buffers) if b.key == key)
@@ -153,6 +156,7 @@ def run_spec(scene_plan: Plan) -> RunSpec:
         contact_reports=tuple(
             (c.origin, index[id(c.report)]) for c in scene_plan.collisions if c.report is not None
         ),
+        growable=tuple(index[id(b)] for c in scene_plan.collisions for b in c.problem),
     )
 
 

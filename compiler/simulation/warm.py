@@ -39,7 +39,7 @@ from sofac.simulation.runspec import BufferSpec, ContactSpec, EnergyFileSpec, Ru
 
 # 2: the scene's warnings are kept, so that a warm load issues them too; 3: the host module's
 # cache entry is kept, so that a warm load does not compute its key (which runs the compiler)
-FORMAT = 3
+FORMAT = 4
 # Environment variables that change what a scene compiles to (see build.py and datafiles.py).
 ENVIRONMENT = (build.COMPILER_ENV, build.OPT_ENV, "SOFAC_DATA_PATH")
 
@@ -234,6 +234,8 @@ def _spec_to_json(spec: RunSpec) -> dict[str, Any]:
         "rigid_model": spec.rigid_model,
         "interactive": spec.interactive,
         "rules": {key: dataclasses.asdict(rule) for key, rule in spec.rules.items()},
+        "contact_reports": [list(r) for r in spec.contact_reports],
+        "growable": list(spec.growable),
     }
 
 
@@ -254,4 +256,6 @@ def _spec_from_json(meta: dict[str, Any], arrays: list[np.ndarray]) -> RunSpec:
         str(meta["rigid_model"]),
         bool(meta["interactive"]),
         {key: ParamRule(**rule) for key, rule in meta["rules"].items()},
+        contact_reports=tuple((str(origin), int(i)) for origin, i in meta["contact_reports"]),
+        growable=tuple(int(i) for i in meta["growable"]),
     )

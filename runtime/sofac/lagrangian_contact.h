@@ -16,8 +16,8 @@
 //   jacobian():  each corrected state's rows: its static rows, then its contact rows carried through
 //                BarycentricMapping::applyJT and RigidMapping::applyJT as SOFA accumulates them.
 //
-// Memory: buffers are reserved at setup for `capacity` rows; past it the extra contacts are dropped
-// and counted (overflow()), never an overrun.
+// Memory: buffers are reserved at setup for `capacity` rows; a step with more rows doubles it (fit(),
+// counted among the growths), never an overrun nor a dropped contact.
 #pragma once
 
 #include <algorithm>
@@ -76,32 +76,49 @@ public:
     // After resize(): the response's settings, the rows the problem can hold, the static rows.
     void setup_lagrangian(double mu, Index capacity, Index static_rows, Index bodies) {
         mu_ = mu;
-        capacity_ = capacity;
         static_rows_ = static_rows;
         lagrangian.resize(models.size());
         rank.assign(pairs.size(), 0);
         object_.resize(pairs.size());
-        for (auto& o : object_) o.previous.reserve(static_cast<std::size_t>(capacity));
-        previous_forces_.reserve(static_cast<std::size_t>(capacity));
-        ids_.reserve(static_cast<std::size_t>(capacity));
         kept_.resize(pairs.size());
         for (std::size_t i = 0; i < pairs.size(); ++i) {  // as many as the pair's outputs may be
             const PenaltyPair& p = pairs[i];
             const Index most = std::max(models[p.model[0]].elements, models[p.model[1]].elements);
             kept_[i].reserve(4 * static_cast<std::size_t>(most));
         }
-        contacts_.reserve(static_cast<std::size_t>(capacity));
         scratch_points_.reserve(1);
         order_.reserve(pairs.size());
-        blocks_.reserve(static_cast<std::size_t>(capacity));
         rows_.resize(static_cast<std::size_t>(bodies));
-        for (auto& r : rows_) {
-            r.row_index.reserve(static_cast<std::size_t>(capacity));
-            r.start.reserve(static_cast<std::size_t>(capacity) + 1);
-            r.dof.reserve(4 * static_cast<std::size_t>(capacity));
-            r.values.reserve(24 * static_cast<std::size_t>(capacity));
-        }
+        reserve(capacity);
     }
+
+    // After respond(): when this step's rows outgrow the capacity, the capacity doubles (as many
+    // times as needed) and every buffer sized by it grows with it, this pipeline's and the
+    // constraint problem's (W, dfree, f, d, the solvers' scratch), counted as one growth. The
+    // problem's old storage goes to `retired` (the instance's: views taken of it before stay
+    // readable, with the values before the growth); buffers already large enough (grown before a
+    // reset) are kept. A step that does not grow allocates nothing.
+    void fit(std::vector<std::vector<double>>& retired, std::vector<double>& W, std::vector<double>& dfree,
+             std::vector<double>& f, std::vector<double>& d, std::vector<double>& scratch) {
+        if (rows_total_ <= capacity_) return;
+        Index capacity = std::max<Index>(capacity_, 1);
+        while (capacity < rows_total_) capacity *= 2;
+        reserve(capacity);
+        const auto grow = [&](std::vector<double>& v, Index size) {
+            if (v.size() >= static_cast<std::size_t>(size)) return;
+            std::vector<double> bigger(static_cast<std::size_t>(size), 0.0);
+            std::copy(v.begin(), v.end(), bigger.begin());
+            v.swap(bigger);
+            retired.push_back(std::move(bigger));
+        };
+        grow(W, capacity * capacity);
+        grow(dfree, capacity);
+        grow(f, capacity);
+        grow(d, capacity);
+        grow(scratch, 3 * capacity);
+        ++row_growths_;
+    }
+    Index capacity() const { return capacity_; }
 
     std::vector<LagrangianModel> lagrangian;
     std::vector<Index> rank;  // per pair: the depth-first index of the node its constraint goes to
@@ -142,10 +159,6 @@ public:
             }
             const double d0 = contact_distance() + m1.contact_distance + m2.contact_distance;
             for (const std::size_t i : kept) {
-                if (row + lines > capacity_) {
-                    ++overflow_;
-                    continue;
-                }
                 const DetectionOutput& o = p.outputs[i];
                 LagrangianContact c;
                 c.pair = index;
@@ -315,13 +328,29 @@ public:
     Index block_count() const { return Index(blocks_.size()); }
     Index rows() const { return n_; }
     Index contact_count() const { return Index(contacts_.size()); }
-    // The detection's growths, and the contacts dropped past the reserved rows.
-    Index growths() const { return PenaltyContacts::growths() + overflow_; }
-    Index overflow() const { return overflow_; }
+    // The detection's growths, and the times the rows outgrew their capacity (fit()).
+    Index growths() const { return PenaltyContacts::growths() + row_growths_; }
     const std::vector<LagrangianContact>& contacts() const { return contacts_; }
     double mu() const { return mu_; }
 
 private:
+    // The buffers sized by the rows: reserved for `capacity` rows (contacts of one row or more).
+    void reserve(Index capacity) {
+        capacity_ = capacity;
+        const auto rows = static_cast<std::size_t>(capacity);
+        for (auto& o : object_) o.previous.reserve(rows);
+        previous_forces_.reserve(rows);
+        ids_.reserve(rows);
+        contacts_.reserve(rows);
+        blocks_.reserve(rows);
+        for (auto& r : rows_) {
+            r.row_index.reserve(rows);
+            r.start.reserve(rows + 1);
+            r.dof.reserve(4 * rows);
+            r.values.reserve(24 * rows);
+        }
+    }
+
     // The contact point of side s: SOFA's mappers' addPoint.
     void place(LagrangianContact& c, int s, Index model, Index element, const V3& at, const double* const* x) {
         const PenaltyModel& m = models[model];
@@ -439,7 +468,7 @@ private:
     std::vector<double> previous_forces_;
     std::vector<long> ids_;
     double mu_ = 0.8;
-    Index capacity_ = 0, static_rows_ = 0, rows_total_ = 0, n_ = 0, overflow_ = 0;
+    Index capacity_ = 0, static_rows_ = 0, rows_total_ = 0, n_ = 0, row_growths_ = 0;
     std::vector<std::vector<std::size_t>> kept_;
     std::vector<LagrangianContact> contacts_;
     std::vector<Index> order_;
@@ -455,6 +484,13 @@ namespace sofac {
 using LagrangianPipeline = std::unique_ptr<collide::FrictionContacts>;
 
 // The constraint problem's rows this step (static, then contacts); W, dfree, f, d zeroed.
+// After the response: the rows' capacity grown to this step's rows if they outgrew it (see fit()).
+inline void lagrangian_fit(LagrangianPipeline& L, std::vector<std::vector<double>>& retired, std::vector<double>& W,
+                           std::vector<double>& dfree, std::vector<double>& f, std::vector<double>& d,
+                           std::vector<double>& scratch) {
+    L->fit(retired, W, dfree, f, d, scratch);
+}
+
 inline void lagrangian_begin(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d) {
     L->begin(W, dfree, f, d);
 }

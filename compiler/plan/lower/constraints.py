@@ -582,6 +582,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
     d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
     scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
     if lagrangian is not None:
+        lagrangian.problem = [W, dfree, f, d, scratch]
         clear = call("lagrangian_begin", Env.LAGRANGIAN, W, dfree, f, d)
     else:
         clear = call("constraint_clear", W, dfree, f, d, n)
@@ -633,6 +634,12 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             _linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
             continue
         comp = _values(planner, component, "compliance", np.float64)
+        if not state.datatype.rigid and 0 < len(comp) != state.size:
+            # SOFA's init: a compliance not one per DOF becomes one per DOF, each the
+            # defaultCompliance if set, else the compliance's first value
+            given = component.get("defaultCompliance") is not None
+            first = float(planner.value(component, "defaultCompliance")) if given else float(comp[0])
+            comp = np.full(state.size, first)
         if state.datatype.rigid and len(comp) != 7:
             found = _rigid_compliance(planner, checked, group, state)
             if found is None:
