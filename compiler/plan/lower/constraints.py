@@ -32,6 +32,7 @@ from sofac.plan.ir import (
     LinearSystem,
     MappingOp,
     Op,
+    Preconditioner,
     StatePlan,
     bind,
     call,
@@ -776,7 +777,9 @@ def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group)
     )
     spec = planner.checked.of(solver).spec if solver is not None else None
     own = group.direct and solver is group.linear_solver
-    preconditioner = group.preconditioner == 4 and any(c is solver for c in group.preconditioners)
+    preconditioner = group.preconditioner is Preconditioner.FACTORIZATION and any(
+        c is solver for c in group.preconditioners
+    )
     if (
         solver is None
         or spec is None
