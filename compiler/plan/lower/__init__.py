@@ -6,15 +6,14 @@ from __future__ import annotations
 
 from sofac.plan.lower.beams import lower_beam_fem, lower_beam_linear_mapping
 from sofac.plan.lower.common import Lowering
-from sofac.plan.lower.constraints import (
+from sofac.plan.lower.constraint_models import (
     lower_bilateral,
-    lower_constraint_correction,
-    lower_constraint_solver,
     lower_fixed_lagrangian,
     lower_sliding,
     lower_stopper,
     lower_uniform,
 )
+from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (

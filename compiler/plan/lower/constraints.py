@@ -18,26 +18,29 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
 from sofac.plan.ir import (
-    CHILD,
-    PARENT,
     Aggregate,
     Buffer,
-    Call,
     Collision,
     ConstraintPhase,
     Correction,
     Element,
     Env,
     Group,
-    LinearSystem,
-    MappingOp,
     Op,
-    Preconditioner,
     StatePlan,
-    bind,
     call,
     kernel,
     origin_of,
+)
+from sofac.plan.lower.corrections import (
+    carry_through_rigid_mappings,
+    increasing_subset,
+    linear_solver_correction,
+    mapped_free_motion,
+    mapping_of_state,
+    moved_vectors,
+    rigid_compliance,
+    rigidly_mapped,
 )
 from sofac.registry import Category, Variant
 from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
@@ -193,297 +196,10 @@ STOPPER_1 = 4
 _ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
 
 
-def _values(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
+def values_of(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
     """A list field's values (empty when unset)."""
     value = planner.value(component, name)
     return np.asarray(value if value is not None else [], dtype=dtype).ravel()
-
-
-def _phase_for(
-    planner: Planner, checked: CheckedComponent, datatype: str | None = None
-) -> ConstraintPhase | None:
-    """The constraint phase a constraint model's rows go to; None once it is refused (no
-    FreeMotionAnimationLoop, or not the ``datatype`` it is compiled for)."""
-    phase = constraint_phase(planner)
-    if phase is None:
-        planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
-        return None
-    if datatype is not None and (checked.datatype is None or checked.datatype.name != datatype):
-        planner.unsupported(checked, f"it is compiled for {datatype} only")
-        return None
-    return phase
-
-
-def _has_end_time(planner: Planner, checked: CheckedComponent) -> bool:
-    """A constraint with an endTime is refused (its rows would stop at that time)."""
-    if float(planner.value(checked.component, "endTime")) >= 0.0:
-        planner.unsupported(checked, "a constraint with an endTime is not compiled yet")
-        return True
-    return False
-
-
-def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """BilateralLagrangianConstraint<Vec3d>: three rows per pair of points, -e_k on object1's point
-    and +e_k on object2's (buildConstraintMatrix), the violation x2_free - x1_free (- rest)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
-        return
-    if planner.value(component, "activate") is False:
-        planner.ignored.append((component, "activate=0: no constraint"))
-        return
-    if _has_end_time(planner, checked):
-        return
-    states = []
-    for name in ("object1", "object2"):
-        linked = checked.links.get(name)
-        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
-        if state is None:
-            planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
-            return
-        if state.mapped and not _rigidly_mapped(planner, state):
-            planner.unsupported(
-                checked,
-                f"constraint rows through mappings other than one RigidMapping are not compiled yet ({name})",
-            )
-            return
-        states.append(state)
-    if states[0] is states[1]:
-        planner.unsupported(checked, "object1 and object2 are the same state: not compiled yet")
-        return
-    first_points, second_points = (
-        _values(planner, component, name, np.int64) for name in ("first_point", "second_point")
-    )
-    pairs = min(len(first_points), len(second_points))
-    if pairs == 0:
-        planner.ignored.append((component, "no pair of points: no constraint row"))
-        return
-    first_row = phase.capacity
-    phase.capacity += 3 * pairs
-    if phase.kept is None:
-        phase.kept = planner.buffer(
-            planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
-        )
-    kept_offset = len(phase.kept.initial)
-    phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
-    load = float(planner.value(component, "load"))
-    for p in range(pairs):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p, 0.0))
-        for k in range(3):
-            unit = tuple(1.0 if c == k else 0.0 for c in range(3))
-            row = first_row + 3 * p + k
-            phase.entries.setdefault(states[0].ident, []).append(
-                (row, int(first_points[p]), tuple(-u for u in unit))
-            )
-            phase.entries.setdefault(states[1].ident, []).append((row, int(second_points[p]), unit))
-    rest = planner.value(component, "rest_vector")
-    rest = np.asarray(rest if rest is not None else [], dtype=float).reshape(-1, 3)
-    m1 = planner.buffer(component, "first_point", first_points[:pairs], "i64")
-    m2 = planner.buffer(component, "second_point", second_points[:pairs], "i64")
-    rest_buffer = planner.buffer(component, "rest_vector", rest, columns=3)
-    planner.pending_violations.append(  # type: ignore[attr-defined]
-        (
-            origin_of(component),
-            first_row,
-            states[0],
-            states[1],
-            m1,
-            m2,
-            pairs,
-            rest_buffer,
-            len(rest),
-        )
-    )
-
-
-def _constrained_state(planner: Planner, checked: CheckedComponent) -> StatePlan | None:
-    """The state a one-state constraint acts on: its `mstate` link, else its node's state."""
-    linked = checked.links.get("mstate")
-    component = (
-        linked if isinstance(linked, Component) else planner.checked.node_state(checked.component.node)
-    )
-    return planner.states.get(id(component)) if component is not None else None
-
-
-def _kept_forces(planner: Planner, phase: ConstraintPhase, count: int) -> int:
-    """Room for `count` more kept forces (the resolutions' warm start); returns its offset."""
-    if phase.kept is None:
-        phase.kept = planner.buffer(
-            planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
-        )
-    offset = len(phase.kept.initial)
-    phase.kept.initial = np.zeros(offset + count)
-    return offset
-
-
-def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """FixedLagrangianConstraint<Vec3d>: rows +e_x, +e_y, +e_z on each fixed DOF (indices, or every
-    DOF with fixAll), violation x_free - rest_position, one BilateralConstraintResolution3Dof per DOF
-    with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
-        return
-    if _has_end_time(planner, checked):
-        return
-    state = _constrained_state(planner, checked)
-    if state is None:
-        planner.unsupported(checked, "it needs a compiled MechanicalObject in its node (or mstate)")
-        return
-    if state.mapped or state.rest is None:
-        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
-        return
-    if planner.value(component, "fixAll"):
-        indices = np.arange(state.size, dtype=np.int64)
-    else:
-        indices = _values(planner, component, "indices", np.int64)
-    count = len(indices)
-    if count == 0:
-        planner.ignored.append((component, "no index: no constraint row"))
-        return
-    first_row = phase.capacity
-    phase.capacity += 3 * count
-    kept_offset = _kept_forces(planner, phase, 3 * count)
-    for p, dof in enumerate(indices):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
-        for k in range(3):
-            unit = tuple(1.0 if c == k else 0.0 for c in range(3))
-            phase.entries.setdefault(state.ident, []).append((first_row + 3 * p + k, int(dof), unit))
-    fixed = planner.buffer(component, "fixed_indices", indices, "i64")
-    no_rest = planner.buffer(component, "no_rest_vector", np.zeros((0, 3)), columns=3)
-    # x_free[i] - rest[i]: the bilateral violation with object1 the rest positions, object2 the state
-    planner.pending_violations.append(  # type: ignore[attr-defined]
-        (origin_of(component), first_row, state.rest, state, fixed, fixed, count, no_rest, 0)
-    )
-
-
-def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """StopperLagrangianConstraint<Vec1d>: one row +1 on DOF `index`, violation x_free[index], its
-    resolution keeping the free displacement in [min, max] (StopperLagrangianConstraintResolution1Dof)."""
-    phase = _phase_for(planner, checked)
-    component = checked.component
-    if phase is None:
-        return
-    if _has_end_time(planner, checked):
-        return
-    state = _constrained_state(planner, checked)
-    if state is None or state.datatype.name != "Vec1d":
-        planner.unsupported(checked, "it needs a compiled Vec1d MechanicalObject in its node (or mstate)")
-        return
-    if state.mapped:
-        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
-        return
-    index = int(planner.value(component, "index"))
-    row = phase.capacity
-    phase.capacity += 1
-    low, high = float(planner.value(component, "min")), float(planner.value(component, "max"))
-    _kept_forces(planner, phase, 0)  # (no warm start, but the solve takes the kept forces' buffer)
-    phase.blocks.append((row, STOPPER_1, low, -1, high))
-    phase.entries.setdefault(state.ident, []).append((row, index, (1.0,)))
-    planner.pending_stoppers.append((origin_of(component), row, state, index))  # type: ignore[attr-defined]
-
-
-def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """UniformLagrangianConstraint<Vec1d>: a row +1 on every coordinate of every DOF, violation
-    x_free (- rest_position with constrainToRestPos), one BilateralConstraintResolution per row
-    (iterative) without kept forces."""
-    phase = _phase_for(planner, checked)
-    component = checked.component
-    if phase is None:
-        return
-    if _has_end_time(planner, checked):
-        return
-    if not planner.value(component, "iterative"):
-        planner.unsupported(
-            checked, "iterative=0 (one BilateralConstraintResolutionNDof) is not compiled yet"
-        )
-        return
-    state = _constrained_state(planner, checked)
-    if state is None or state.datatype.name != "Vec1d":
-        planner.unsupported(checked, "it needs a compiled Vec1d MechanicalObject in its node (or mstate)")
-        return
-    if state.mapped or state.rest is None:
-        planner.unsupported(checked, "constraint rows on a mapped state are not compiled yet")
-        return
-    width = state.datatype.deriv_size
-    count = state.size * width
-    if count == 0:
-        planner.ignored.append((component, "no DOF: no constraint row"))
-        return
-    first = phase.capacity
-    phase.capacity += count
-    _kept_forces(planner, phase, 0)
-    for i in range(state.size):
-        for j in range(width):
-            row = first + width * i + j
-            phase.blocks.append((row, BILATERAL_1, 1.0, -1, 0.0))
-            unit = tuple(1.0 if c == j else 0.0 for c in range(width))
-            phase.entries.setdefault(state.ident, []).append((row, i, unit))
-    rest = state.rest if planner.value(component, "constrainToRestPos") else Env.NONE
-    planner.pending_coordinates.append((origin_of(component), first, state, rest, count))  # type: ignore[attr-defined]
-
-
-def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    """SlidingLagrangianConstraint<Vec3d>: object1's point slides on object2's segment axis_1-axis_2.
-    Four rows built each step from the free positions (runtime sliding_rows): two bilateral across
-    the axis, two unilateral at its ends (SOFA's BilateralConstraintResolution and
-    UnilateralConstraintResolution, no kept forces)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
-        return
-    if _has_end_time(planner, checked):
-        return
-    states = []
-    for name in ("object1", "object2"):
-        linked = checked.links.get(name)
-        state = planner.states.get(id(linked)) if isinstance(linked, Component) else None
-        if state is None or state.mapped:
-            planner.unsupported(checked, f"its {name} is not a compiled unmapped MechanicalObject")
-            return
-        states.append(state)
-    point, a, b = (int(planner.value(component, n)) for n in ("sliding_point", "axis_1", "axis_2"))
-    axis = states[1].x.initial.reshape(-1, 3)
-    if a == b or (max(a, b) < len(axis) and np.array_equal(axis[a], axis[b])):
-        attribute = component.attributes.get("axis_2") or component.attributes.get("axis_1")
-        planner.diags.add(
-            "E207",
-            attribute.loc if attribute is not None else component.loc,
-            f"{component.type_name}: axis_1={a} and axis_2={b} of object2 are at the same position "
-            f"{axis[a].tolist() if a < len(axis) else ''}: the sliding axis has zero length",
-            "give axis_1 and axis_2 two points of object2 at different positions",
-        )
-        return
-    if states[0] is states[1]:
-        planner.unsupported(checked, "object1 = object2 is not compiled yet")
-        return
-    first = phase.capacity
-    phase.capacity += 4
-    _kept_forces(planner, phase, 0)
-    for row, kind in enumerate((BILATERAL_1, BILATERAL_1, UNILATERAL_1, UNILATERAL_1)):
-        phase.blocks.append((first + row, kind, 1.0, -1, 0.0))
-    rows = list(range(first, first + 4))
-    low, high = min(a, b), max(a, b)
-    layouts = (
-        ([0, 1, 2, 3, 4], [point] * 4, 13),
-        ([0, 2, 4, 5, 6], [low, high, low, high, a, b], 18),
-    )
-    aggregates = []
-    for state, (starts, dofs, size) in zip(states, layouts, strict=True):
-        values = planner.buffer(state.component, "sliding_J_values", np.zeros(size), role="scratch")
-        buffers = (
-            planner.buffer(state.component, "sliding_J_rows", rows, "i64"),
-            planner.buffer(state.component, "sliding_J_starts", starts, "i64"),
-            planner.buffer(state.component, "sliding_J_dofs", dofs, "i64"),
-            values,
-        )
-        aggregates.append((state, Aggregate("JacobianRows", (4, *buffers)), values))
-    degenerate = planner.buffer(component, "degenerate_segments", np.zeros(1), role="state")
-    planner.pending_sliding.append(  # type: ignore[attr-defined]
-        (checked, first, aggregates, point, a, b, degenerate)
-    )
-    for state in states:
-        phase.entries.setdefault(state.ident, [])
 
 
 def _sliding_rows(planner: Planner, phase: ConstraintPhase, dfree: Buffer) -> None:
@@ -508,7 +224,7 @@ def _jacobian_rows(
 ) -> Aggregate:
     """A state's J as SOFA's MatrixDeriv holds it: rows ascending, each row's DOFs ascending, the
     values of one (row, DOF) summed (addCol). A rigid state's rows come from its mapped points
-    (``_carry_through_rigid_mappings``), their values computed each step."""
+    (``carry_through_rigid_mappings``), their values computed each step."""
     if state.ident in getattr(planner, "rigid_rows", {}):
         return planner.rigid_rows[state.ident]  # type: ignore[attr-defined]
     merged: dict[tuple[int, int], list[float]] = {}
@@ -589,7 +305,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         clear = call("constraint_clear", W, dfree, f, d, n)
     phase.rows.append(Op(phase.loop, [clear]))
     contact_states = {m.state.ident for m in lagrangian.models} if lagrangian is not None else set()
-    free_x = _mapped_free_motion(planner, phase, contact_states)
+    free_x = mapped_free_motion(planner, phase, contact_states)
     for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
         # object1 given as a Buffer: constant positions (FixedLagrangianConstraint's rest positions)
         x1 = s1 if isinstance(s1, Buffer) else free_x.get(s1.ident, s1.x)
@@ -603,7 +319,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         phase.violation.append(Op(origin, [call("stopper_violation", dfree, row, state.x, index)]))
     if lagrangian is not None:
         phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
-    _carry_through_rigid_mappings(planner, phase)
+    carry_through_rigid_mappings(planner, phase)
     _sliding_rows(planner, phase, dfree)
     bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
     unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
@@ -632,9 +348,9 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         component = checked.component
         J = _jacobian_rows(planner, state, entries)
         if correction.kind == Variant.LINEAR_SOLVER:
-            _linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
+            linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
             continue
-        comp = _values(planner, component, "compliance", np.float64)
+        comp = values_of(planner, component, "compliance", np.float64)
         if not state.datatype.rigid and 0 < len(comp) != state.size:
             # SOFA's init: a compliance not one per DOF becomes one per DOF, each the
             # defaultCompliance if set, else the compliance's first value
@@ -642,7 +358,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             first = float(planner.value(component, "defaultCompliance")) if given else float(comp[0])
             comp = np.full(state.size, first)
         if state.datatype.rigid and len(comp) != 7:
-            found = _rigid_compliance(planner, checked, group, state)
+            found = rigid_compliance(planner, checked, group, state)
             if found is None:
                 continue
             comp = found
@@ -672,7 +388,7 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
         else:
             add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
         phase.compliance.append(Op(correction.origin, [add]))
-        moved = _moved_vectors(planner, component, state)
+        moved = moved_vectors(planner, component, state)
         if lagrangian is not None:
             correct = call(
                 kernel("lagrangian_correct", t),
@@ -748,133 +464,6 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
             ],
         )
     )
-
-
-def _moved_vectors(planner: Planner, component: Component, state: StatePlan) -> tuple[Buffer, ...]:
-    """What a correction writes: x, v, and its lambda (J^T f) and constraint_dx vectors."""
-    zeros = np.zeros_like(state.v.initial)
-    lam = planner.buffer(component, "lambda", zeros, columns=state.v.columns, role="scratch")
-    dx = planner.buffer(component, "constraint_dx", zeros, columns=state.v.columns, role="scratch")
-    return (state.x, state.v, lam, dx)
-
-
-def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group) -> LinearSystem | None:
-    """The factorisation a LinearSolverConstraintCorrection solves with: its `linearSolver` link,
-    else the first linear solver of its node (SOFA's Local search), which must be the direct
-    solver factorising its group's system this step (the group's own, or its PCG's preconditioner)."""
-    linked = checked.links.get("linearSolver")
-    solver = (
-        linked
-        if isinstance(linked, Component)
-        else next(
-            (
-                c
-                for c in checked.component.node.objects
-                if planner.checked.of(c).category is Category.LINEAR_SOLVER
-            ),
-            None,
-        )
-    )
-    spec = planner.checked.of(solver).spec if solver is not None else None
-    own = group.direct and solver is group.linear_solver
-    preconditioner = group.preconditioner is Preconditioner.FACTORIZATION and any(
-        c is solver for c in group.preconditioners
-    )
-    if (
-        solver is None
-        or spec is None
-        or spec.lowering != "direct"
-        or not (own or preconditioner)
-        or group.btd
-    ):
-        name = solver.type_name if solver is not None else "none"
-        planner.unsupported(
-            checked,
-            f"with constraint rows, its linear solver ({name}) must be the sparse direct solver its ODE "
-            "solver's system is factorised by (the group's SparseLDLSolver..., or a PCGLinearSolver's "
-            'direct preconditioner): link it with linearSolver="@<the direct solver>"',
-            "linearSolver",
-        )
-        return None
-    if len(group.states) != 1:
-        planner.unsupported(checked, "with constraint rows, it is compiled for an ODE solver of one state")
-        return None
-    return LinearSystem(group.ident)
-
-
-def _linear_solver_correction(
-    planner: Planner,
-    phase: ConstraintPhase,
-    correction: Correction,
-    body: int,
-    J: Aggregate,
-    lagrangian: bool,
-    problem: tuple[Buffer, Buffer, int],
-) -> None:
-    """LinearSolverConstraintCorrection on rows (runtime/sofac/linear_correction.h): W += dt J A^-1 J^T
-    (+ regularizationTerm), then dx = A^-1 J^T f, x = x_free + dt dx, v = v_free + dx
-    (EulerImplicitSolver's position and velocity integration factors)."""
-    checked = correction.checked
-    assert checked is not None
-    solver = getattr(planner, "constraint_solver", None)
-    unbuilt = phase.method == Variant.UNBUILT_GAUSS_SEIDEL or (
-        phase.method == Variant.LCP
-        and solver is not None
-        and not planner.value(solver.component, "build_lcp")
-    )
-    if unbuilt:
-        planner.unsupported(
-            checked, "under an unbuilt constraint solver it is not compiled yet (a built W is)"
-        )
-        return
-    system = _linear_system_of(planner, checked, correction.group)
-    if system is None:
-        return
-    W, f, n = problem
-    state, component = correction.state, checked.component
-    dt = float(planner.dt.initial[0])
-    regularization = Element(
-        planner.buffer(
-            component,
-            "regularizationTerm",
-            [float(planner.value(component, "regularizationTerm"))],
-            role="param",
-        )
-    )
-    t = state.datatype.name
-    if lagrangian:
-        add = call(
-            kernel("lagrangian_linear_add_compliance", t),
-            Env.LAGRANGIAN,
-            body,
-            W,
-            J,
-            system,
-            0,
-            dt,
-            regularization,
-        )
-    else:
-        add = call(kernel("linear_add_compliance", t), W, n, J, system, 0, dt, regularization)
-    phase.compliance.append(Op(correction.origin, [add]))
-    moved = _moved_vectors(planner, component, state)
-    if lagrangian:
-        correct = call(
-            kernel("lagrangian_linear_correct", t),
-            Env.LAGRANGIAN,
-            body,
-            *moved,
-            J,
-            f,
-            state.size,
-            system,
-            0,
-            dt,
-            1.0,
-        )
-    else:
-        correct = call(kernel("linear_correct", t), *moved, J, f, state.size, system, 0, dt, 1.0)
-    phase.correction.append(Op(correction.origin, [correct]))
 
 
 def _lcp_unbuilt(
@@ -957,10 +546,10 @@ def _contact_bodies(
             if body >= 0:
                 reached.add(body)
             continue
-        mapping = _mapping_of_state(planner, state)
+        mapping = mapping_of_state(planner, state)
         body = index.get(id(mapping.parent), -1) if mapping is not None else -1
-        subset = _increasing_subset(planner, mapping) if mapping is not None else None
-        rigid = _rigidly_mapped(planner, state)
+        subset = increasing_subset(planner, mapping) if mapping is not None else None
+        rigid = rigidly_mapped(planner, state)
         if mapping is None or not (rigid or subset is not None) or state.ident not in free_x:
             planner.unsupported(
                 planner.checked.of(state.component),
@@ -1026,189 +615,6 @@ def _unbuilt_solve(
     else:
         solve = call(kernel("solve_unbuilt", t, len(phase.blocks)), *arguments)
     phase.solve.append(Op(phase.solver, [solve]))
-
-
-def _rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
-    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
-    mapping = planner.checked.mapping_of(state.component)
-    spec = mapping.spec if mapping is not None else None
-    parent = mapping.links.get("input") if mapping is not None else None
-    parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
-    return (
-        spec is not None
-        and spec.lowering == "rigid_mapping"
-        and parent_state is not None
-        and not parent_state.mapped
-        and parent_state.datatype.name == "Rigid3d"
-        and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
-    )
-
-
-def _increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
-    """An IdentityMapping or SubsetMapping between states of one DataType, from an independent
-    state, with strictly increasing indices (a contact row's DOFs keep their order): its indices."""
-    jacobian = mapping.jacobian
-    indices = jacobian.args[2] if jacobian.kernel == "subset_apply" else None
-    if (
-        not isinstance(indices, Buffer)
-        or mapping.parent.mapped
-        or mapping.parent.datatype.name != mapping.child.datatype.name
-    ):
-        return None
-    values = np.asarray(indices.initial, dtype=np.int64).ravel()
-    return indices if values.size == 0 or bool(np.all(np.diff(values) > 0)) else None
-
-
-def _mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
-    for group in planner.constraint_groups:  # type: ignore[attr-defined]
-        for mapping in group.mappings:
-            if mapping.child is state:
-                return mapping
-    return None
-
-
-def _mapped_free_motion(
-    planner: Planner, phase: ConstraintPhase, also: set[str] | None = None
-) -> dict[str, Buffer]:
-    """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
-    the parent (propagateDx, with the mapping's rotated points of the last apply), then
-    x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
-    free: dict[str, Buffer] = {}
-    for state in planner.states.values():
-        if not state.mapped or (state.ident not in phase.entries and state.ident not in (also or set())):
-            continue
-        mapping = _mapping_of_state(planner, state)
-        if mapping is None:
-            continue
-        zeros_v, zeros_x = np.zeros_like(state.v.initial), np.zeros_like(state.x.initial)
-        v_free = planner.buffer(
-            state.component, "freeVelocity", zeros_v, columns=state.v.columns, role="scratch"
-        )
-        x_free = planner.buffer(
-            state.component, "freePosition", zeros_x, columns=state.x.columns, role="scratch"
-        )
-        jacobian = bind(mapping.jacobian, {PARENT: mapping.parent.v, CHILD: v_free})
-        t = state.datatype.name
-        advance = call(kernel("advance", t), x_free, state.x, v_free, Element(planner.dt), state.size)
-        phase.rows.append(Op(mapping.origin, [jacobian, advance]))
-        free[state.ident] = x_free
-    return free
-
-
-def _carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> None:
-    """RigidMapping::applyJT on the constraint matrix: a mapped point's entry n on a row becomes its
-    frame's (n, r x n), r the point's rotated offset; rows keep their index."""
-    planner.rigid_rows = {}  # type: ignore[attr-defined]
-    by_parent: dict[str, list[tuple[int, int, int, tuple[float, ...], MappingOp]]] = {}
-    for state in planner.states.values():
-        if not state.mapped or state.ident not in phase.entries:
-            continue
-        mapping = _mapping_of_state(planner, state)
-        if mapping is None:
-            continue
-        frames = mapping.jacobian.args[2]
-        assert isinstance(frames, Buffer)
-        for row, point, values in phase.entries[state.ident]:
-            frame = int(frames.initial[point])
-            by_parent.setdefault(mapping.parent.ident, []).append((row, frame, point, values, mapping))
-    for parent_ident, items in by_parent.items():
-        parent = next(s for s in planner.states.values() if s.ident == parent_ident)
-        keys = [(row, frame) for row, frame, _, _, _ in items]
-        if (
-            len(set(keys)) != len(keys)
-            or parent_ident in phase.entries
-            or len({id(i[4]) for i in items}) != 1
-        ):
-            planner.unsupported(
-                planner.checked.of(parent.component),
-                "constraint rows from several mapped states, or several entries of one row on one frame, "
-                "are not compiled yet",
-            )
-            continue
-        order = sorted(range(len(items)), key=lambda i: keys[i])
-        rows = sorted({row for row, _ in keys})
-        starts, dofs, points, directions = [0], [], [], []
-        for row in rows:
-            for i in order:
-                if items[i][0] == row:
-                    dofs.append(items[i][1])
-                    points.append(items[i][2])
-                    directions.extend(items[i][3])
-            starts.append(len(dofs))
-        mapping = items[0][4]
-        offsets = mapping.jacobian.args[3]
-        assert isinstance(offsets, Buffer)
-        values = planner.buffer(
-            parent.component, "J_values", np.zeros(6 * len(dofs)), columns=6, role="scratch"
-        )
-        buffers = (
-            planner.buffer(parent.component, "J_rows", rows, "i64"),
-            planner.buffer(parent.component, "J_starts", starts, "i64"),
-            planner.buffer(parent.component, "J_dofs", dofs, "i64"),
-            values,
-        )
-        point_buffer = planner.buffer(parent.component, "J_points", points, "i64")
-        direction_buffer = planner.buffer(parent.component, "J_directions", directions, columns=3)
-        kernel_call = call(
-            "rigid_constraint_jacobian", values, point_buffer, direction_buffer, offsets, len(dofs)
-        )
-        phase.rows.append(Op(mapping.origin, [kernel_call]))
-        planner.rigid_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))  # type: ignore[attr-defined]
-        phase.entries[parent_ident] = []  # rows known: the correction finds them
-
-
-def _invert3(m: list[float]) -> list[float]:
-    """SOFA's type::invertMatrix for 3x3, operation for operation (runtime invert3)."""
-    det = (
-        m[0] * m[4] * m[8]
-        + m[3] * m[7] * m[2]
-        + m[6] * m[1] * m[5]
-        - m[0] * m[7] * m[5]
-        - m[3] * m[1] * m[8]
-        - m[6] * m[4] * m[2]
-    )
-    out = [0.0] * 9
-    out[0] = (m[4] * m[8] - m[7] * m[5]) / det
-    out[3] = (m[5] * m[6] - m[8] * m[3]) / det
-    out[6] = (m[3] * m[7] - m[6] * m[4]) / det
-    out[1] = (m[7] * m[2] - m[1] * m[8]) / det
-    out[4] = (m[8] * m[0] - m[2] * m[6]) / det
-    out[7] = (m[6] * m[1] - m[0] * m[7]) / det
-    out[2] = (m[1] * m[5] - m[4] * m[2]) / det
-    out[5] = (m[2] * m[3] - m[5] * m[0]) / det
-    out[8] = (m[0] * m[4] - m[3] * m[1]) / det
-    return out
-
-
-def _rigid_compliance(
-    planner: Planner, checked: CheckedComponent, group: Group, state: StatePlan
-) -> np.ndarray | None:
-    """UncoupledConstraintCorrection<Rigid3d>::init without 7 compliance values: 1/m and the inverse
-    of inertia * m from the node's UniformMass (or defaultCompliance and a unit mass's inverse)."""
-    component = checked.component
-    use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
-    dt = float(planner.dt.initial[0])
-    ode_factor = 1.0 if use_ode else dt * dt
-    if component.get("defaultCompliance") is not None:
-        first = float(planner.value(component, "defaultCompliance"))
-        inertia_mass = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
-    else:
-        masses = [
-            c.args[3]
-            for op in group.mass_dx
-            for c in op.calls
-            if isinstance(c, Call) and c.kernel == "mass_multiply" and c.args[0] is state.df
-        ]
-        mass = masses[0].initial if len(masses) == 1 and isinstance(masses[0], Buffer) else None
-        if mass is None or len(mass) != 10:
-            planner.unsupported(
-                checked, "its compliance needs the state's one UniformMass (or compliance, defaultCompliance)"
-            )
-            return None
-        first = ode_factor / float(mass[0])
-        inertia_mass = [float(v) for v in mass[1:10]]
-    inverse = _invert3(inertia_mass)
-    return np.array([first, *(ode_factor * inverse[i] for i in (0, 1, 2, 4, 5, 8))])
 
 
 def finish_constraint_phase(planner: Planner, groups: list[Group]) -> ConstraintPhase | None:

@@ -1,0 +1,348 @@
+"""Constraint corrections with rows: how a constraint's force moves the DOFs it acts on.
+
+LinearSolverConstraintCorrection's compliance W = J A⁻¹ Jᵀ from the group's own factorisation,
+rows carried up rigid, identity and subset mappings to the independent DOFs, and the compliance of
+a rigid body (UncoupledConstraintCorrection on Rigid3d). Used by plan/lower/constraints.py.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from sofac.check.checker import CheckedComponent
+from sofac.front.model import Component
+from sofac.plan.ir import (
+    CHILD,
+    PARENT,
+    Aggregate,
+    Buffer,
+    Call,
+    ConstraintPhase,
+    Correction,
+    Element,
+    Env,
+    Group,
+    LinearSystem,
+    MappingOp,
+    Op,
+    Preconditioner,
+    StatePlan,
+    bind,
+    call,
+    kernel,
+)
+from sofac.registry import Category, Variant
+
+if TYPE_CHECKING:
+    from sofac.plan.planner import Planner
+
+
+def moved_vectors(planner: Planner, component: Component, state: StatePlan) -> tuple[Buffer, ...]:
+    """What a correction writes: x, v, and its lambda (J^T f) and constraint_dx vectors."""
+    zeros = np.zeros_like(state.v.initial)
+    lam = planner.buffer(component, "lambda", zeros, columns=state.v.columns, role="scratch")
+    dx = planner.buffer(component, "constraint_dx", zeros, columns=state.v.columns, role="scratch")
+    return (state.x, state.v, lam, dx)
+
+
+def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group) -> LinearSystem | None:
+    """The factorisation a LinearSolverConstraintCorrection solves with: its `linearSolver` link,
+    else the first linear solver of its node (SOFA's Local search), which must be the direct
+    solver factorising its group's system this step (the group's own, or its PCG's preconditioner)."""
+    linked = checked.links.get("linearSolver")
+    solver = (
+        linked
+        if isinstance(linked, Component)
+        else next(
+            (
+                c
+                for c in checked.component.node.objects
+                if planner.checked.of(c).category is Category.LINEAR_SOLVER
+            ),
+            None,
+        )
+    )
+    spec = planner.checked.of(solver).spec if solver is not None else None
+    own = group.direct and solver is group.linear_solver
+    preconditioner = group.preconditioner is Preconditioner.FACTORIZATION and any(
+        c is solver for c in group.preconditioners
+    )
+    if (
+        solver is None
+        or spec is None
+        or spec.lowering != "direct"
+        or not (own or preconditioner)
+        or group.btd
+    ):
+        name = solver.type_name if solver is not None else "none"
+        planner.unsupported(
+            checked,
+            f"with constraint rows, its linear solver ({name}) must be the sparse direct solver its ODE "
+            "solver's system is factorised by (the group's SparseLDLSolver..., or a PCGLinearSolver's "
+            'direct preconditioner): link it with linearSolver="@<the direct solver>"',
+            "linearSolver",
+        )
+        return None
+    if len(group.states) != 1:
+        planner.unsupported(checked, "with constraint rows, it is compiled for an ODE solver of one state")
+        return None
+    return LinearSystem(group.ident)
+
+
+def linear_solver_correction(
+    planner: Planner,
+    phase: ConstraintPhase,
+    correction: Correction,
+    body: int,
+    J: Aggregate,
+    lagrangian: bool,
+    problem: tuple[Buffer, Buffer, int],
+) -> None:
+    """LinearSolverConstraintCorrection on rows (runtime/sofac/linear_correction.h): W += dt J A^-1 J^T
+    (+ regularizationTerm), then dx = A^-1 J^T f, x = x_free + dt dx, v = v_free + dx
+    (EulerImplicitSolver's position and velocity integration factors)."""
+    checked = correction.checked
+    assert checked is not None
+    solver = getattr(planner, "constraint_solver", None)
+    unbuilt = phase.method == Variant.UNBUILT_GAUSS_SEIDEL or (
+        phase.method == Variant.LCP
+        and solver is not None
+        and not planner.value(solver.component, "build_lcp")
+    )
+    if unbuilt:
+        planner.unsupported(
+            checked, "under an unbuilt constraint solver it is not compiled yet (a built W is)"
+        )
+        return
+    system = _linear_system_of(planner, checked, correction.group)
+    if system is None:
+        return
+    W, f, n = problem
+    state, component = correction.state, checked.component
+    dt = float(planner.dt.initial[0])
+    regularization = Element(
+        planner.buffer(
+            component,
+            "regularizationTerm",
+            [float(planner.value(component, "regularizationTerm"))],
+            role="param",
+        )
+    )
+    t = state.datatype.name
+    if lagrangian:
+        add = call(
+            kernel("lagrangian_linear_add_compliance", t),
+            Env.LAGRANGIAN,
+            body,
+            W,
+            J,
+            system,
+            0,
+            dt,
+            regularization,
+        )
+    else:
+        add = call(kernel("linear_add_compliance", t), W, n, J, system, 0, dt, regularization)
+    phase.compliance.append(Op(correction.origin, [add]))
+    moved = moved_vectors(planner, component, state)
+    if lagrangian:
+        correct = call(
+            kernel("lagrangian_linear_correct", t),
+            Env.LAGRANGIAN,
+            body,
+            *moved,
+            J,
+            f,
+            state.size,
+            system,
+            0,
+            dt,
+            1.0,
+        )
+    else:
+        correct = call(kernel("linear_correct", t), *moved, J, f, state.size, system, 0, dt, 1.0)
+    phase.correction.append(Op(correction.origin, [correct]))
+
+
+def rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
+    mapping = planner.checked.mapping_of(state.component)
+    spec = mapping.spec if mapping is not None else None
+    parent = mapping.links.get("input") if mapping is not None else None
+    parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
+    return (
+        spec is not None
+        and spec.lowering == "rigid_mapping"
+        and parent_state is not None
+        and not parent_state.mapped
+        and parent_state.datatype.name == "Rigid3d"
+        and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
+    )
+
+
+def increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
+    """An IdentityMapping or SubsetMapping between states of one DataType, from an independent
+    state, with strictly increasing indices (a contact row's DOFs keep their order): its indices."""
+    jacobian = mapping.jacobian
+    indices = jacobian.args[2] if jacobian.kernel == "subset_apply" else None
+    if (
+        not isinstance(indices, Buffer)
+        or mapping.parent.mapped
+        or mapping.parent.datatype.name != mapping.child.datatype.name
+    ):
+        return None
+    values = np.asarray(indices.initial, dtype=np.int64).ravel()
+    return indices if values.size == 0 or bool(np.all(np.diff(values) > 0)) else None
+
+
+def mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
+    for group in planner.constraint_groups:  # type: ignore[attr-defined]
+        for mapping in group.mappings:
+            if mapping.child is state:
+                return mapping
+    return None
+
+
+def mapped_free_motion(
+    planner: Planner, phase: ConstraintPhase, also: set[str] | None = None
+) -> dict[str, Buffer]:
+    """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
+    the parent (propagateDx, with the mapping's rotated points of the last apply), then
+    x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
+    free: dict[str, Buffer] = {}
+    for state in planner.states.values():
+        if not state.mapped or (state.ident not in phase.entries and state.ident not in (also or set())):
+            continue
+        mapping = mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        zeros_v, zeros_x = np.zeros_like(state.v.initial), np.zeros_like(state.x.initial)
+        v_free = planner.buffer(
+            state.component, "freeVelocity", zeros_v, columns=state.v.columns, role="scratch"
+        )
+        x_free = planner.buffer(
+            state.component, "freePosition", zeros_x, columns=state.x.columns, role="scratch"
+        )
+        jacobian = bind(mapping.jacobian, {PARENT: mapping.parent.v, CHILD: v_free})
+        t = state.datatype.name
+        advance = call(kernel("advance", t), x_free, state.x, v_free, Element(planner.dt), state.size)
+        phase.rows.append(Op(mapping.origin, [jacobian, advance]))
+        free[state.ident] = x_free
+    return free
+
+
+def carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> None:
+    """RigidMapping::applyJT on the constraint matrix: a mapped point's entry n on a row becomes its
+    frame's (n, r x n), r the point's rotated offset; rows keep their index."""
+    planner.rigid_rows = {}  # type: ignore[attr-defined]
+    by_parent: dict[str, list[tuple[int, int, int, tuple[float, ...], MappingOp]]] = {}
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = mapping_of_state(planner, state)
+        if mapping is None:
+            continue
+        frames = mapping.jacobian.args[2]
+        assert isinstance(frames, Buffer)
+        for row, point, values in phase.entries[state.ident]:
+            frame = int(frames.initial[point])
+            by_parent.setdefault(mapping.parent.ident, []).append((row, frame, point, values, mapping))
+    for parent_ident, items in by_parent.items():
+        parent = next(s for s in planner.states.values() if s.ident == parent_ident)
+        keys = [(row, frame) for row, frame, _, _, _ in items]
+        if (
+            len(set(keys)) != len(keys)
+            or parent_ident in phase.entries
+            or len({id(i[4]) for i in items}) != 1
+        ):
+            planner.unsupported(
+                planner.checked.of(parent.component),
+                "constraint rows from several mapped states, or several entries of one row on one frame, "
+                "are not compiled yet",
+            )
+            continue
+        order = sorted(range(len(items)), key=lambda i: keys[i])
+        rows = sorted({row for row, _ in keys})
+        starts, dofs, points, directions = [0], [], [], []
+        for row in rows:
+            for i in order:
+                if items[i][0] == row:
+                    dofs.append(items[i][1])
+                    points.append(items[i][2])
+                    directions.extend(items[i][3])
+            starts.append(len(dofs))
+        mapping = items[0][4]
+        offsets = mapping.jacobian.args[3]
+        assert isinstance(offsets, Buffer)
+        values = planner.buffer(
+            parent.component, "J_values", np.zeros(6 * len(dofs)), columns=6, role="scratch"
+        )
+        buffers = (
+            planner.buffer(parent.component, "J_rows", rows, "i64"),
+            planner.buffer(parent.component, "J_starts", starts, "i64"),
+            planner.buffer(parent.component, "J_dofs", dofs, "i64"),
+            values,
+        )
+        point_buffer = planner.buffer(parent.component, "J_points", points, "i64")
+        direction_buffer = planner.buffer(parent.component, "J_directions", directions, columns=3)
+        kernel_call = call(
+            "rigid_constraint_jacobian", values, point_buffer, direction_buffer, offsets, len(dofs)
+        )
+        phase.rows.append(Op(mapping.origin, [kernel_call]))
+        planner.rigid_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))  # type: ignore[attr-defined]
+        phase.entries[parent_ident] = []  # rows known: the correction finds them
+
+
+def _invert3(m: list[float]) -> list[float]:
+    """SOFA's type::invertMatrix for 3x3, operation for operation (runtime invert3)."""
+    det = (
+        m[0] * m[4] * m[8]
+        + m[3] * m[7] * m[2]
+        + m[6] * m[1] * m[5]
+        - m[0] * m[7] * m[5]
+        - m[3] * m[1] * m[8]
+        - m[6] * m[4] * m[2]
+    )
+    out = [0.0] * 9
+    out[0] = (m[4] * m[8] - m[7] * m[5]) / det
+    out[3] = (m[5] * m[6] - m[8] * m[3]) / det
+    out[6] = (m[3] * m[7] - m[6] * m[4]) / det
+    out[1] = (m[7] * m[2] - m[1] * m[8]) / det
+    out[4] = (m[8] * m[0] - m[2] * m[6]) / det
+    out[7] = (m[6] * m[1] - m[0] * m[7]) / det
+    out[2] = (m[1] * m[5] - m[4] * m[2]) / det
+    out[5] = (m[2] * m[3] - m[5] * m[0]) / det
+    out[8] = (m[0] * m[4] - m[3] * m[1]) / det
+    return out
+
+
+def rigid_compliance(
+    planner: Planner, checked: CheckedComponent, group: Group, state: StatePlan
+) -> np.ndarray | None:
+    """UncoupledConstraintCorrection<Rigid3d>::init without 7 compliance values: 1/m and the inverse
+    of inertia * m from the node's UniformMass (or defaultCompliance and a unit mass's inverse)."""
+    component = checked.component
+    use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
+    dt = float(planner.dt.initial[0])
+    ode_factor = 1.0 if use_ode else dt * dt
+    if component.get("defaultCompliance") is not None:
+        first = float(planner.value(component, "defaultCompliance"))
+        inertia_mass = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    else:
+        masses = [
+            c.args[3]
+            for op in group.mass_dx
+            for c in op.calls
+            if isinstance(c, Call) and c.kernel == "mass_multiply" and c.args[0] is state.df
+        ]
+        mass = masses[0].initial if len(masses) == 1 and isinstance(masses[0], Buffer) else None
+        if mass is None or len(mass) != 10:
+            planner.unsupported(
+                checked, "its compliance needs the state's one UniformMass (or compliance, defaultCompliance)"
+            )
+            return None
+        first = ode_factor / float(mass[0])
+        inertia_mass = [float(v) for v in mass[1:10]]
+    inverse = _invert3(inertia_mass)
+    return np.array([first, *(ode_factor * inverse[i] for i in (0, 1, 2, 4, 5, 8))])
