@@ -486,7 +486,9 @@ class _CollisionView:
         self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
         self.setup.append("}")
         # points mapped only when near: their parent, enclosure's growth, saved positions, models
-        self.lazy = [(_comment(z.origin), statement(z.previous), statement(z.current)) for z in collision.lazy]
+        self.lazy = [
+            (_comment(z.origin), statement(z.previous), statement(z.current)) for z in collision.lazy
+        ]
         for number, lazy in enumerate(collision.lazy):
             self.setup.append(f"// {_comment(lazy.origin)}: mapped when near")
             self.setup.append(

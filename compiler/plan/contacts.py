@@ -22,6 +22,7 @@ from sofac.registry import Category, Variant
 from .ir import (
     CHILD,
     PARENT,
+    REPORT_FIELDS,
     Buffer,
     Call,
     Collision,
@@ -33,7 +34,6 @@ from .ir import (
     LazyPoints,
     MappingOp,
     Op,
-    REPORT_FIELDS,
     Statement,
     bind,
     buffers_of,
