@@ -227,6 +227,30 @@ def test_collision_points_are_mapped_only_when_near_with_the_eager_trajectory(tm
     assert lazy.energy() == eager.energy()
 
 
+def test_contact_forces_on_a_state_of_several_models_reach_its_parent(tmp_path: Path) -> None:
+    """The liver's surface with a PointCollisionModel and then a TriangleCollisionModel (which has
+    no pair: MinProximity has no triangle-triangle test): the points' contacts hold it up, so it
+    lands and rests as with the point model alone, bit for bit. (The J^T of such a state once
+    waited for its last model to be in contact: the liver fell through the floor.)"""
+    scene = tmp_path / "liver.scn"
+    scene.write_text(
+        (REPO / "scenes" / "liver_on_floor.scn")
+        .read_text()
+        .replace(
+            '<PointCollisionModel contactStiffness="1"/>',
+            '<MeshTopology src="@../../surfaceLoader"/> <PointCollisionModel contactStiffness="1"/> '
+            '<TriangleCollisionModel contactStiffness="1"/>',
+        )
+    )
+    roots = (REPO / "scenes",)
+    two, one = sofac.load(scene, data_roots=roots), sofac.load(REPO / "scenes" / "liver_on_floor.scn")
+    two.step(400)
+    one.step(400)
+    lowest = two["/Liver/dofs"].position[:, 1].min()
+    assert abs(lowest - (-0.12 + 0.005)) < 1e-3  # on the floor, kept off it by the contact distance
+    assert np.array_equal(two["/Liver/dofs"].position, one["/Liver/dofs"].position)
+
+
 LIVER_FIRST_CONTACT_STEP = 69  # from 0.48 m, measured on main before the points were mapped when near
 
 
