@@ -148,12 +148,18 @@ def test_contact_scenes_do_not_allocate_in_a_step(shim: Path, shared_dir: Path, 
         .replace('"-0.5 0 0"', '"-0.2 0 0"')
         .replace('"0.5 0.01 0"', '"0.2 0.01 0"')
     )
+    far = tmp_path / "liver_far_floor.scn"
+    far.write_text((REPO / "scenes" / "liver_on_floor.scn").read_text().replace(" -0.12 ", " -10000 "))
+    for mesh in ("liver.msh", "liver-surface.obj"):
+        shutil.copy(REPO / "scenes" / mesh, tmp_path / mesh)
     scenes = [
         data / "contact_particle_floor.scn",  # a static partner: in the particle's group (CG)
         touching,  # two simulated models: explicit, at the step's start
         data / "contact_sphere_floor.scn",
         # a chain of tori held by contacts: NewProximity triangle-triangle, barycentric contact points
         shared_dir / "corpus/sofa/Component/SolidMechanics/Spring/MeshSpringForceField.scn",
+        REPO / "scenes" / "liver_on_floor.scn",  # collision points mapped when near; lands at step 20
+        far,  # its floor 10 km down: detections that leave the points unmapped
     ]
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}

@@ -293,9 +293,11 @@ class _MappingView:
         fixed = {Slot("parent", vector="dx"): parent.dx, Slot("parent", vector="df"): parent.df}
         usable = geometric is not None and parent.dx is not None and parent.df is not None
         self.geometric_df = _bound(geometric, fixed) if usable else ""  # type: ignore[arg-type]
-        # J and J^T of a state only contacts read: only while its model is in contact.
-        touching = mapping.while_in_contact
-        self.when = f"if (S.contacts[{touching[0]}]->in_contact({touching[1]})) " if touching else ""
+        # J and J^T of a state only contacts read: only while one of its models is in contact (and
+        # x and v too when its pipeline maps them when near).
+        touching = " || ".join(f"S.contacts[{p}]->in_contact({m})" for p, m in mapping.while_in_contact)
+        self.when = f"if ({touching}) " if touching else ""
+        self.propagate = [self.when + line for line in self.apply] if mapping.mapped_when_near else self.apply
 
 
 def _mapping_slots(mapping: MappingOp, vector: str) -> dict[Slot, Arg]:
@@ -342,7 +344,11 @@ class _GroupView:
             view.when = when.get(id(state), "")
         self.mappings = [_MappingView(m) for m in group.mappings]
         self.transposes = [_MappingView(m) for m in reversed(group.mappings) if m.transpose]
-        self.on_read = [_MappingView(m) for m in group.on_read]
+        # Mapped on read: the collision points mapped when near, then the states the step leaves
+        # out (parents before children: those may hang below the first, never above).
+        self.on_read = [_MappingView(m) for m in group.mappings if m.mapped_when_near] + [
+            _MappingView(m) for m in group.on_read
+        ]
         self.projections = [_ProjectionView(p) for p in group.projections]
         # an assembled system matrix: assemble_<g>, its pattern at init
         self.matrix = group.direct or group.preconditioned or group.assembled_cg
@@ -479,6 +485,17 @@ class _CollisionView:
         self.setup.append(f"    const Index* row = {table} + 7 * k;")
         self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
         self.setup.append("}")
+        # points mapped only when near: their parent, enclosure's growth, saved positions, models
+        self.lazy = [
+            (_comment(z.origin), statement(z.previous), statement(z.current)) for z in collision.lazy
+        ]
+        for number, lazy in enumerate(collision.lazy):
+            self.setup.append(f"// {_comment(lazy.origin)}: mapped when near")
+            self.setup.append(
+                f"C.add_lazy_points({_ptr(lazy.parent)}, {lazy.parent_points}, {lazy.spread!r}, "
+                f"{lazy.rounding!r}, {_ptr(lazy.saved)});"
+            )
+            self.setup.extend(f"C.set_lazy({model}, {number});" for model in lazy.models)
         self.setup.append("C.finish_setup();")
         if self.lagrangian:
             rows, static = collision.row_capacity + collision.static_rows, collision.static_rows
@@ -571,7 +588,7 @@ def generate_source(plan: Plan) -> str:
         if plan.constraints
         else [],
         any_direct=any(g.direct or g.preconditioned for g in plan.groups),
-        on_read=any(g.on_read for g in plan.groups),
+        on_read=any(g.on_read or any(m.mapped_when_near for m in g.mappings) for g in plan.groups),
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),
         headers=_headers(plan),
         dt=plan.dt,

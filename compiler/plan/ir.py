@@ -320,9 +320,12 @@ class MappingOp:
     # Assembler::kMapped) from INPUT_OFFSET (the parent's); None: J is not assembled yet.
     assembly: list[Call] | None = None
     inputs: tuple[StatePlan, ...] = ()  # a multi-mapping's other parents (Slot("parent", input=1)...)
-    # A collision model's state that only its contacts read: J and J^T of forces and products run
-    # only while the model is in contact, (pipeline, model); positions are mapped every step.
-    while_in_contact: tuple[int, int] | None = None
+    # A collision models' state that only their contacts read: J and J^T of forces and products run
+    # only while one of its models, (pipeline, model) each, is in contact.
+    while_in_contact: tuple[tuple[int, int], ...] = ()
+    # ... and its x and v too (the pipeline maps x when a pair may meet, Python maps it on read:
+    # Collision.lazy).
+    mapped_when_near: bool = False
 
 
 @dataclass
@@ -580,6 +583,25 @@ class CollisionModel:
     node_rank: int = 0  # depth-first index of its node (where a Lagrangian contact is placed)
 
 
+@dataclass
+class LazyPoints:
+    """The points of a pipeline's collision models that nothing but their contacts reads, mapped
+    by a linear mapping (each point a weighted sum of parent points): mapped only when a pair may
+    meet. Before each detection the parent's box, grown by ``spread`` times its extent and
+    ``rounding`` times its largest coordinate, encloses them (runtime penalty.h, LazyPoints); while
+    no pair of enclosures can meet, the detection is skipped without mapping them."""
+
+    origin: str  # the mapping
+    models: list[int]  # the pipeline's models on these points
+    parent_points: int
+    spread: float  # the largest sum of a point's negative weights
+    rounding: float  # |sum of weights - 1| and the sums' rounding, relative to the coordinates
+    current: Call  # the points from the parent's positions
+    previous: Call  # the points from ``saved``
+    parent: Buffer  # the parent's positions
+    saved: Buffer  # scratch: the parent's positions at the last detection that did not map them
+
+
 @dataclass(frozen=True)
 class ElementTest:
     """An element test of runtime/sofac/proximity.h, ``<method>::<kind>_<kind>``, with its flags
@@ -605,7 +627,15 @@ class ContactPair:
     id_bound: int  # the outputs' ids are below it (the de-duplication's table)
 
 
-REPORT_FIELDS = ("contacts", "growths", "degenerate", "detection_seconds", "response_seconds", "fast_motions")
+REPORT_FIELDS = (
+    "contacts",
+    "growths",
+    "degenerate",
+    "detection_seconds",
+    "response_seconds",
+    "fast_motions",
+    "unmapped_detections",
+)
 
 
 @dataclass
@@ -625,7 +655,8 @@ class Collision:
     # What the steps found, as ``<pipeline>.contactReport`` (REPORT_FIELDS): the last step's
     # contacts; since the instance was created or reset, buffers that outgrew their capacity,
     # degenerate outputs (NaN dropped or zero distance), the seconds spent in detection and in
-    # response, and the pairs a model came near after moving farther than the detection's reach.
+    # response, the pairs a model came near after moving farther than the detection's reach, and
+    # the detections that left the points mapped when near (``lazy``) unmapped.
     report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
@@ -647,6 +678,7 @@ class Collision:
     # friction_contact: the constraint problem's buffers sized by the rows (W, dfree, f, d, scratch),
     # grown with the capacity when a step's contacts outgrow it (lagrangian_fit)
     problem: list[Buffer] = field(default_factory=list)
+    lazy: list[LazyPoints] = field(default_factory=list)  # penalty: points mapped only when near
 
 
 @dataclass

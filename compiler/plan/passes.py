@@ -131,6 +131,17 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
                 effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, {where}"))
                 continue
             effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, penalty {where}"))
+        for lazy in collision.lazy:
+            names = ", ".join(models[i].origin for i in lazy.models)
+            effects.append(
+                (
+                    "mapped when near",
+                    lazy.origin,
+                    f"only {names} read its points: mapped by the step while in contact, by the "
+                    "detection when a pair may meet (the parent's box, grown by the mapping's "
+                    f"overshoot {lazy.spread:.3g} x its extent, against the partners'), and when read",
+                )
+            )
         reasons: dict[str, list[str]] = {}
         for first, second, why in collision.left_out:
             reasons.setdefault(why, []).append(f"{first} / {second}")

@@ -50,7 +50,7 @@ class StateSpec:
     x: int  # buffer indices
     v: int
     f: int
-    computed_on_read: bool  # left out of the step, mapped when Python reads it
+    computed_on_read: bool  # left out of the step (or mapped only when near), mapped when Python reads it
     solver: int  # index into RunSpec.solvers of the solver integrating it, -1 for none
 
 
@@ -111,6 +111,7 @@ def run_spec(scene_plan: Plan) -> RunSpec:
     )
     solver_of = {id(s): i for i, g in enumerate(scene_plan.groups) for s in g.states}
     unread = {id(s) for g in scene_plan.groups for s in g.unread}
+    unread |= {id(m.child) for g in scene_plan.groups for m in g.mappings if m.mapped_when_near}
     states = tuple(
         StateSpec(
             s.path,

@@ -45,6 +45,7 @@ struct PenaltyModel {
     std::vector<double> external; // point / sphere models: the explicit contact forces of this step
     SphereModel sphere{};         // sphere models: the radii (the response reads them)
     Box root{};                   // this step's root box, from the points (the pre-test)
+    Index lazy = -1;              // its points' LazyPoints, if they are mapped only when near
     std::vector<Index> used;      // triangle / line models: the points their elements use, if not all
     Box last_root{};              // the root box of the previous detection
     Box swept{};                  // the union of that box and this step's
@@ -52,6 +53,23 @@ struct PenaltyModel {
     // Contact-point states under this model's node, in creation order: 2 * pair + side.
     std::vector<Index> children;
     std::vector<double> element_k;  // add_k's blocks, element by element
+};
+
+// The points of collision models that nothing but their contacts reads, output of a linear mapping
+// (each point a weighted sum of parent points, compiler/plan/contacts.py): the step maps them only
+// while one of their models is in contact, the detection only when a pair may meet (skip_unmapped).
+struct LazyPoints {
+    const double* parent = nullptr;  // the parent's positions
+    Index parent_points = 0;
+    // Every mapped point lies in the parent's box grown on each axis by spread x its extent (the
+    // weights' negative parts) + rounding x its largest |coordinate| (weights summing to 1 only up
+    // to rounding, and the sums' own rounding), both from the weights at compile time.
+    double spread = 0.0, rounding = 0.0;
+    double* saved = nullptr;     // the parent's positions at the last detection that did not map them
+    bool unmapped = false;       // that was the last detection: its models' last_root are enclosures
+    bool current = false;        // this detection: mapped at the end of the last step (in contact)
+    Box enclosure{};             // this detection's enclosure of the points
+    std::vector<Index> models;   // the pipeline's models on these points
 };
 
 // One model pair the broad phase can produce (the compile-time table), with its response.
@@ -124,7 +142,12 @@ public:
             PenaltyModel& m = models[i];
             m.tree.resize(m.elements, depth_);
             if (m.kind == ContactSide::kTriangle) m.normals.assign(static_cast<std::size_t>(3 * m.elements), 0.0);
-            if (m.kind == ContactSide::kPoint || m.kind == ContactSide::kSphere)
+            // point / sphere models of a pair of two simulated models: their explicit contact forces
+            // (nothing writes them otherwise, and add_force adds them only when they exist)
+            const bool explicit_forces = std::any_of(pairs.begin(), pairs.end(), [&](const PenaltyPair& p) {
+                return p.root && (p.model[0] == static_cast<Index>(i) || p.model[1] == static_cast<Index>(i));
+            });
+            if (explicit_forces && (m.kind == ContactSide::kPoint || m.kind == ContactSide::kSphere))
                 m.external.assign(static_cast<std::size_t>(3 * m.points), 0.0);
             m.children.reserve(2 * pairs.size());
             broad_[i] = BroadPhaseModel{&m.tree, m.contact_distance};
@@ -179,6 +202,97 @@ public:
 
     // Whether the pre-test of this step skipped the detection (no pair can meet).
     bool skipped() const { return skip_; }
+
+    // Lazily mapped points (LazyPoints) from `parent` (`parent_points` points); `saved` holds as
+    // many. Their models follow with set_lazy.
+    Index add_lazy_points(const double* parent, Index parent_points, double spread, double rounding, double* saved) {
+        LazyPoints& l = lazy.emplace_back();
+        l.parent = parent;
+        l.parent_points = parent_points;
+        l.spread = spread;
+        l.rounding = rounding;
+        l.saved = saved;
+        return static_cast<Index>(lazy.size()) - 1;
+    }
+    void set_lazy(Index model, Index points) {
+        models[model].lazy = points;
+        lazy[points].models.push_back(model);
+    }
+
+    // Before begin_detection, with lazily mapped points: whether this step's detection is skipped
+    // without mapping them. Each model gets its root box as begin_detection makes it, except the
+    // models on lazy points not mapped since their parent last moved (none of their models in
+    // contact), which get an enclosure: the parent's box grown by the points' spread and rounding,
+    // then by the model's contact distance, holding every box the mapped points would give. When
+    // no pair of the table meets at the broad phase's reach, nor (after a first detection) any
+    // pair's swept boxes (this box and the last detection's, as the motion watch makes them), the
+    // exact pre-test would have skipped the detection and counted no fast motion: it is skipped the
+    // same way, and the parents' positions kept (`saved`) for the next detection's motion watch.
+    // Otherwise nothing is decided: the caller maps the points (after restore_roots when the last
+    // detection left them unmapped) and runs begin_detection, the same detection as without laziness.
+    bool skip_unmapped(const double* const* x) {
+        if (!stacks_reserved_) return false;  // the first detection builds the trees
+        for (std::size_t k = 0; k < lazy.size(); ++k) {
+            LazyPoints& l = lazy[k];
+            l.current = lazy_current(static_cast<Index>(k));
+            if (!l.current && !enclose(l)) return false;
+        }
+        for (std::size_t i = 0; i < models.size(); ++i) {
+            PenaltyModel& m = models[i];
+            if (!m.tree.built() || m.tree.empty()) continue;
+            if (!m.moving) {
+                m.root = m.tree.root().box;
+            } else if (m.lazy >= 0 && !lazy[static_cast<std::size_t>(m.lazy)].current) {
+                const Box& e = lazy[static_cast<std::size_t>(m.lazy)].enclosure;
+                for (int c = 0; c < 3; ++c) {
+                    m.root.min[c] = e.min[c] - m.contact_distance;
+                    m.root.max[c] = e.max[c] + m.contact_distance;
+                }
+            } else if (!points_box(m, x[i], m.root)) {
+                return false;
+            }
+        }
+        const Index n = static_cast<Index>(models.size());
+        for (const PenaltyPair& p : pairs) {
+            const Index i = std::max(p.model[0], p.model[1]), j = std::min(p.model[0], p.model[1]);
+            const PenaltyModel& a = models[i];
+            const PenaltyModel& b = models[j];
+            if (a.tree.empty() || b.tree.empty()) continue;
+            if (i == j) return false;  // a root box always meets itself
+            const double reach = alarm_distance_ + a.contact_distance + b.contact_distance;
+            if (rule[i * n + j] != kNever && boxes_meet(a.root, b.root, reach)) return false;
+            if (watching_ && boxes_meet(union_of(a.root, a.last_root), union_of(b.root, b.last_root), reach))
+                return false;
+        }
+        for (LazyPoints& l : lazy) {
+            if (l.current) continue;
+            std::copy(l.parent, l.parent + 3 * l.parent_points, l.saved);
+            l.unmapped = true;
+        }
+        skip_ = true;
+        ++unmapped_detections_;
+        return true;
+    }
+
+    // Whether lazy points are mapped already: at the end of the last step, as the step maps them
+    // while one of their models is in contact.
+    bool lazy_current(Index points) const {
+        for (const Index model : lazy[static_cast<std::size_t>(points)].models)
+            if (in_contact(model)) return true;
+        return false;
+    }
+
+    // Whether the last detection left lazy points unmapped; restore_roots then gives their models
+    // the root boxes that detection would have made, from the points mapped from `saved` (`x`).
+    bool unmapped_before(Index points) const { return lazy[static_cast<std::size_t>(points)].unmapped; }
+    void restore_roots(Index points, const double* const* x) {
+        LazyPoints& l = lazy[static_cast<std::size_t>(points)];
+        for (const Index i : l.models) {
+            PenaltyModel& m = models[static_cast<std::size_t>(i)];
+            if (m.tree.built() && !m.tree.empty() && m.moving) points_box(m, x[i], m.last_root);
+        }
+        l.unmapped = false;
+    }
 
     // A model's tree on its current points (`update` builds it from the view the caller made).
     bool needs_update(Index model) const {
@@ -410,6 +524,8 @@ public:
     // Steps x pairs where a model moved farther than the detection's reach near its partner: the
     // detection at the start of each step may have missed a contact in between (tunnelling).
     Index fast_motions() const { return fast_motions_; }
+    // Detections skipped without mapping the lazy points (skip_unmapped).
+    Index unmapped_detections() const { return unmapped_detections_; }
 
     // Outputs SOFA would have made of NaN (dropped) or of a zero distance (normal (1, 0, 0)).
     Index degenerate_outputs() const {
@@ -422,6 +538,7 @@ public:
     std::vector<PenaltyPair> pairs;
     std::vector<std::int8_t> rule;  // n x n PairRule
     std::vector<Index> pair_of;  // n x n index into pairs, -1: none
+    std::vector<LazyPoints> lazy;
 
 private:
     // Points per element of a model: 3 (triangles), 2 (lines), 1 (points, spheres).
@@ -474,8 +591,21 @@ private:
         const bool all = m.used.empty();  // point models: element i is point i
         const Index count = !all ? static_cast<Index>(m.used.size()) : (m.kind == ContactSide::kPoint ? m.elements : m.points);
         if (count == 0) return true;
-        const Index first = all ? 0 : m.used[0];
-        V3 lo{{x[3 * first], x[3 * first + 1], x[3 * first + 2]}}, hi = lo;
+        V3 lo, hi;
+        finite = min_max(x, all ? nullptr : m.used.data(), count, lo, hi);
+        for (int c = 0; c < 3; ++c) {
+            box.min[c] = lo[c] - d;
+            box.max[c] = hi[c] + d;
+        }
+        return finite;
+    }
+
+    // lo, hi: the smallest and largest coordinates of `count` points of `x` (those of `subset`, or
+    // the first ones), in their order; false if one is NaN.
+    static bool min_max(const double* x, const Index* subset, Index count, V3& lo, V3& hi) {
+        const Index first = subset ? subset[0] : 0;
+        lo = V3{{x[3 * first], x[3 * first + 1], x[3 * first + 2]}};
+        hi = lo;
         int nan = 0;
         const auto fold = [&](const double* p) {  // branch-free: min / max and a NaN flag per point
             for (int c = 0; c < 3; ++c) {
@@ -484,16 +614,36 @@ private:
                 hi[c] = p[c] > hi[c] ? p[c] : hi[c];
             }
         };
-        if (all)
-            for (Index k = 1; k < count; ++k) fold(x + 3 * k);
+        if (subset)
+            for (Index k = 1; k < count; ++k) fold(x + 3 * subset[k]);
         else
-            for (Index k = 1; k < count; ++k) fold(x + 3 * m.used[static_cast<std::size_t>(k)]);
-        finite = nan == 0 && lo[0] == lo[0] && lo[1] == lo[1] && lo[2] == lo[2];
+            for (Index k = 1; k < count; ++k) fold(x + 3 * k);
+        return nan == 0 && lo[0] == lo[0] && lo[1] == lo[1] && lo[2] == lo[2];
+    }
+
+    // Lazy points' enclosure from their parent's positions (see LazyPoints); false if it is not
+    // finite (a NaN or an overflow: the caller then maps the points and the exact path decides).
+    static bool enclose(LazyPoints& l) {
+        if (l.parent_points == 0) return false;
+        V3 lo, hi;
+        if (!min_max(l.parent, nullptr, l.parent_points, lo, hi)) return false;
         for (int c = 0; c < 3; ++c) {
-            box.min[c] = lo[c] - d;
-            box.max[c] = hi[c] + d;
+            const double grow = l.spread * (hi[c] - lo[c]) + l.rounding * std::max(std::abs(lo[c]), std::abs(hi[c]));
+            l.enclosure.min[c] = lo[c] - grow;
+            l.enclosure.max[c] = hi[c] + grow;
+            if (!std::isfinite(l.enclosure.min[c]) || !std::isfinite(l.enclosure.max[c])) return false;
         }
-        return finite;
+        return true;
+    }
+
+    // The box of a model swept from its last root box to this one (watch_fast_motion).
+    static Box union_of(const Box& now, const Box& last) {
+        Box swept = now;
+        for (int c = 0; c < 3; ++c) {
+            swept.min[c] = std::min(now.min[c], last.min[c]);
+            swept.max[c] = std::max(now.max[c], last.max[c]);
+        }
+        return swept;
     }
 
     // Before each detection: how far each model's root box moved since the previous one, and the
@@ -503,16 +653,12 @@ private:
         for (PenaltyModel& m : models) {
             if (!m.tree.built() || m.tree.empty()) continue;
             const Box& now = from_points ? m.root : m.tree.root().box;
-            m.swept = now;
+            m.swept = watching_ ? union_of(now, m.last_root) : now;
             m.motion = 0.0;
-            if (watching_) {
-                for (int c = 0; c < 3; ++c) {
+            if (watching_)
+                for (int c = 0; c < 3; ++c)
                     m.motion = std::max({m.motion, std::abs(now.min[c] - m.last_root.min[c]),
                                          std::abs(now.max[c] - m.last_root.max[c])});
-                    m.swept.min[c] = std::min(now.min[c], m.last_root.min[c]);
-                    m.swept.max[c] = std::max(now.max[c], m.last_root.max[c]);
-                }
-            }
             m.last_root = now;
         }
         if (watching_) {
@@ -597,6 +743,7 @@ private:
     bool stacks_reserved_ = false;
     bool skip_ = false;  // this step's pre-test found no pair that can meet
     Index fast_motions_ = 0;
+    Index unmapped_detections_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;
     std::vector<Index> broad_pairs_;
