@@ -10,16 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
+from lagrangian_scenes import CONTACT, DT, G, contact_root, static_floor
 from sofac.check.checker import check_file
 from sofac.diagnostics import SceneError
 from sofac.plan.ir import Plan
 from sofac.plan.planner import plan_scene
 from sofac.regress.suite import Status, run_regression
 
-G = 9.81
-DT = 0.01
 MASS = 2.0
-CONTACT = 0.05
 
 
 def scene(
@@ -32,16 +30,9 @@ def scene(
 ) -> Path:
     """A particle (mass 2, compliance 1/m) above a static floor of two triangles, no damping."""
     points = " ".join(f"{v:.17g}" for v in floor.ravel())
-    text = f"""<?xml version="1.0"?>
-<Node name="root" dt="{DT}" gravity="0 -{G} 0">
-    <FreeMotionAnimationLoop />
-    {solver}
-    <CollisionPipeline depth="6" />
-    <BruteForceBroadPhase/>
-    <BVHNarrowPhase/>
-    <LocalMinDistance alarmDistance="0.2" contactDistance="{CONTACT}" />
-    <CollisionResponse response="FrictionContactConstraint" responseParams="mu={mu}" />
-    <Node name="Particle">
+    text = (
+        contact_root(solver, mu)
+        + f"""    <Node name="Particle">
         <EulerImplicitSolver rayleighStiffness="0" rayleighMass="0" />
         <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-20" />
         <MechanicalObject name="dofs" position="{start[0]:.17g} {start[1]:.17g} {start[2]:.17g}" />
@@ -49,13 +40,10 @@ def scene(
         <UncoupledConstraintCorrection compliance="{1.0 / MASS}" />
         <PointCollisionModel />
     </Node>
-    <Node name="Floor">
-        <MechanicalObject name="dofs" position="{points}" />
-        <MeshTopology triangles="0 2 1  0 3 2" />
-        <TriangleCollisionModel simulated="0" moving="0" />
-    </Node>
-</Node>
 """
+        + static_floor(points)
+        + "</Node>\n"
+    )
     path = tmp_path / "contact.scn"
     path.write_text(text)
     return path

@@ -20,14 +20,12 @@ import sofac
 from kernel_shim import build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
+from lagrangian_scenes import CONTACT, DT, G, contact_root, static_floor
 from sofac.check.checker import check_file
 from sofac.diagnostics import SceneError
 from sofac.plan.planner import plan_scene
 
-G = 9.81
-DT = 0.01
 MASS = 2.0
-CONTACT = 0.05
 
 SHIM = r"""
 #include "sofac/linear_correction.h"
@@ -125,16 +123,9 @@ def test_compliance_and_correction_match_numpy(lib: ctypes.CDLL, fixed_point: in
 
 def particle_scene(tmp_path: Path, correction: str, *, linear: str = "<SparseLDLSolver/>") -> Path:
     """A particle (mass 2) above a static floor of two triangles, no damping, its correction given."""
-    text = f"""<?xml version="1.0"?>
-<Node name="root" dt="{DT}" gravity="0 -{G} 0">
-    <FreeMotionAnimationLoop />
-    <BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="100"/>
-    <CollisionPipeline depth="6" />
-    <BruteForceBroadPhase/>
-    <BVHNarrowPhase/>
-    <LocalMinDistance alarmDistance="0.2" contactDistance="{CONTACT}" />
-    <CollisionResponse response="FrictionContactConstraint" responseParams="mu=0" />
-    <Node name="Particle">
+    text = (
+        contact_root('<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="100"/>')
+        + f"""    <Node name="Particle">
         <EulerImplicitSolver rayleighStiffness="0" rayleighMass="0" />
         {linear}
         <MechanicalObject name="dofs" position="0.3 0.1 0.2" />
@@ -142,13 +133,10 @@ def particle_scene(tmp_path: Path, correction: str, *, linear: str = "<SparseLDL
         {correction}
         <PointCollisionModel />
     </Node>
-    <Node name="Floor">
-        <MechanicalObject name="dofs" position="-1 0 -1  1 0 -1  1 0 1  -1 0 1" />
-        <MeshTopology triangles="0 2 1  0 3 2" />
-        <TriangleCollisionModel simulated="0" moving="0" />
-    </Node>
-</Node>
 """
+        + static_floor("-1 0 -1  1 0 -1  1 0 1  -1 0 1")
+        + "</Node>\n"
+    )
     path = tmp_path / f"particle_{abs(hash(correction + linear))}.scn"
     path.write_text(text)
     return path

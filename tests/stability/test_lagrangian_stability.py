@@ -15,30 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
+from lagrangian_scenes import CONTACT, DT, G, contact_root, static_floor
 from sofac.simulation.loader import ContactWarning
 
-G = 9.81
-DT = 0.01
-CONTACT = 0.05  # LocalMinDistance's contactDistance: the rest height above the floor
 MASS = 0.01  # each particle's
 
 
 def _header(mu: float, solver: str) -> str:
-    return f"""<?xml version="1.0"?>
-<Node name="root" dt="{DT}" gravity="0 -{G} 0">
-    <FreeMotionAnimationLoop />
-    {solver}
-    <CollisionPipeline depth="6" />
-    <BruteForceBroadPhase/>
-    <BVHNarrowPhase/>
-    <LocalMinDistance alarmDistance="0.2" contactDistance="{CONTACT}" />
-    <CollisionResponse response="FrictionContactConstraint" responseParams="mu={mu}" />
-    <Node name="Floor">
-        <MechanicalObject position="-3 0 -3  3 0 -3  3 0 3  -3 0 3" />
-        <MeshTopology triangles="0 2 1  0 3 2" />
-        <TriangleCollisionModel simulated="0" moving="0" />
-    </Node>
-"""
+    return contact_root(solver, mu) + static_floor("-3 0 -3  3 0 -3  3 0 3  -3 0 3")
 
 
 def _particles(name: str, points: np.ndarray, mass: float) -> str:
