@@ -41,31 +41,6 @@ struct Instance {
     std::vector<double> b16_poissonRatio;  // /beam/fem.poissonRatio (param)
     std::vector<double> b17_elements;  // /beam/fem.elements (scratch)
     std::vector<Index> b18_indices;  // /beam/FixedProjectiveConstraint9.indices (data)
-
-    // The buffers in the order Python numbers them (sofac_create, sofac_buffer).
-    auto buffers() {
-        return std::tie(
-            b0_dt,
-            b1_gravity,
-            b2_position,
-            b3_velocity,
-            b4_force,
-            b5_rest_position,
-            b6_acceleration,
-            b7_rayleighStiffness,
-            b8_rayleighMass,
-            b9_vdamping,
-            b10_dx,
-            b11_df,
-            b12_r,
-            b13_vertexMass,
-            b14_tetrahedra,
-            b15_youngModulus,
-            b16_poissonRatio,
-            b17_elements,
-            b18_indices
-        );
-    }
 };
 
 // ---- group g0: EulerImplicitSolver '/beam/odesolver' (beam_direct.scn:6)
@@ -186,7 +161,25 @@ SOFAC_EXPORT int sofac_buffer_count() { return 19; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill_all(S->buffers(), data, sizes);
+    sofac::fill(S->b0_dt, data[0], sizes[0]);
+    sofac::fill(S->b1_gravity, data[1], sizes[1]);
+    sofac::fill(S->b2_position, data[2], sizes[2]);
+    sofac::fill(S->b3_velocity, data[3], sizes[3]);
+    sofac::fill(S->b4_force, data[4], sizes[4]);
+    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
+    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
+    sofac::fill(S->b7_rayleighStiffness, data[7], sizes[7]);
+    sofac::fill(S->b8_rayleighMass, data[8], sizes[8]);
+    sofac::fill(S->b9_vdamping, data[9], sizes[9]);
+    sofac::fill(S->b10_dx, data[10], sizes[10]);
+    sofac::fill(S->b11_df, data[11], sizes[11]);
+    sofac::fill(S->b12_r, data[12], sizes[12]);
+    sofac::fill(S->b13_vertexMass, data[13], sizes[13]);
+    sofac::fill(S->b14_tetrahedra, data[14], sizes[14]);
+    sofac::fill(S->b15_youngModulus, data[15], sizes[15]);
+    sofac::fill(S->b16_poissonRatio, data[16], sizes[16]);
+    sofac::fill(S->b17_elements, data[17], sizes[17]);
+    sofac::fill(S->b18_indices, data[18], sizes[18]);
     return S;
 }
 
@@ -212,7 +205,29 @@ SOFAC_EXPORT void sofac_init(void* instance) {
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    return sofac::buffer_at(static_cast<Instance*>(instance)->buffers(), index, size);
+    auto& S = *static_cast<Instance*>(instance);
+    switch (index) {
+        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
+        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
+        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
+        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
+        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
+        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
+        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
+        case 7: *size = std::int64_t(S.b7_rayleighStiffness.size()); return S.b7_rayleighStiffness.data();
+        case 8: *size = std::int64_t(S.b8_rayleighMass.size()); return S.b8_rayleighMass.data();
+        case 9: *size = std::int64_t(S.b9_vdamping.size()); return S.b9_vdamping.data();
+        case 10: *size = std::int64_t(S.b10_dx.size()); return S.b10_dx.data();
+        case 11: *size = std::int64_t(S.b11_df.size()); return S.b11_df.data();
+        case 12: *size = std::int64_t(S.b12_r.size()); return S.b12_r.data();
+        case 13: *size = std::int64_t(S.b13_vertexMass.size()); return S.b13_vertexMass.data();
+        case 14: *size = std::int64_t(S.b14_tetrahedra.size()); return S.b14_tetrahedra.data();
+        case 15: *size = std::int64_t(S.b15_youngModulus.size()); return S.b15_youngModulus.data();
+        case 16: *size = std::int64_t(S.b16_poissonRatio.size()); return S.b16_poissonRatio.data();
+        case 17: *size = std::int64_t(S.b17_elements.size()); return S.b17_elements.data();
+        case 18: *size = std::int64_t(S.b18_indices.size()); return S.b18_indices.data();
+        default: *size = 0; return nullptr;
+    }
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

@@ -49,45 +49,6 @@ struct Instance {
     std::vector<double> b33_initialPoints;  // /rigidBody/rigidParticles/Map23.initialPoints (data)
     std::vector<Index> b34_rigidIndexPerPoint;  // /rigidBody/rigidParticles/Map23.rigidIndexPerPoint (data)
     std::vector<double> b35_offsets;  // /rigidBody/rigidParticles/Map23.offsets (scratch)
-
-    // The buffers in the order Python numbers them (sofac_create, sofac_buffer).
-    auto buffers() {
-        return std::tie(
-            b0_dt,
-            b1_gravity,
-            b2_position,
-            b3_velocity,
-            b4_force,
-            b6_acceleration,
-            b7_position,
-            b8_velocity,
-            b9_force,
-            b11_acceleration,
-            b12_position,
-            b13_velocity,
-            b14_force,
-            b16_indices1,
-            b17_indices2,
-            b18_stiffness,
-            b19_damping,
-            b20_lengths,
-            b21_elongationOnly,
-            b22_enabled,
-            b23_vertexMass,
-            b24_indices,
-            b25_indices1,
-            b26_indices2,
-            b27_stiffness,
-            b28_damping,
-            b29_lengths,
-            b30_elongationOnly,
-            b31_enabled,
-            b32_vertexMass,
-            b33_initialPoints,
-            b34_rigidIndexPerPoint,
-            b35_offsets
-        );
-    }
 };
 
 // ---- group g0: EulerExplicitSolver '/S' (hybrid_pendulum.scn:49)
@@ -170,7 +131,39 @@ SOFAC_EXPORT int sofac_buffer_count() { return 33; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill_all(S->buffers(), data, sizes);
+    sofac::fill(S->b0_dt, data[0], sizes[0]);
+    sofac::fill(S->b1_gravity, data[1], sizes[1]);
+    sofac::fill(S->b2_position, data[2], sizes[2]);
+    sofac::fill(S->b3_velocity, data[3], sizes[3]);
+    sofac::fill(S->b4_force, data[4], sizes[4]);
+    sofac::fill(S->b6_acceleration, data[5], sizes[5]);
+    sofac::fill(S->b7_position, data[6], sizes[6]);
+    sofac::fill(S->b8_velocity, data[7], sizes[7]);
+    sofac::fill(S->b9_force, data[8], sizes[8]);
+    sofac::fill(S->b11_acceleration, data[9], sizes[9]);
+    sofac::fill(S->b12_position, data[10], sizes[10]);
+    sofac::fill(S->b13_velocity, data[11], sizes[11]);
+    sofac::fill(S->b14_force, data[12], sizes[12]);
+    sofac::fill(S->b16_indices1, data[13], sizes[13]);
+    sofac::fill(S->b17_indices2, data[14], sizes[14]);
+    sofac::fill(S->b18_stiffness, data[15], sizes[15]);
+    sofac::fill(S->b19_damping, data[16], sizes[16]);
+    sofac::fill(S->b20_lengths, data[17], sizes[17]);
+    sofac::fill(S->b21_elongationOnly, data[18], sizes[18]);
+    sofac::fill(S->b22_enabled, data[19], sizes[19]);
+    sofac::fill(S->b23_vertexMass, data[20], sizes[20]);
+    sofac::fill(S->b24_indices, data[21], sizes[21]);
+    sofac::fill(S->b25_indices1, data[22], sizes[22]);
+    sofac::fill(S->b26_indices2, data[23], sizes[23]);
+    sofac::fill(S->b27_stiffness, data[24], sizes[24]);
+    sofac::fill(S->b28_damping, data[25], sizes[25]);
+    sofac::fill(S->b29_lengths, data[26], sizes[26]);
+    sofac::fill(S->b30_elongationOnly, data[27], sizes[27]);
+    sofac::fill(S->b31_enabled, data[28], sizes[28]);
+    sofac::fill(S->b32_vertexMass, data[29], sizes[29]);
+    sofac::fill(S->b33_initialPoints, data[30], sizes[30]);
+    sofac::fill(S->b34_rigidIndexPerPoint, data[31], sizes[31]);
+    sofac::fill(S->b35_offsets, data[32], sizes[32]);
     return S;
 }
 
@@ -184,7 +177,43 @@ SOFAC_EXPORT void sofac_init(void* instance) {
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    return sofac::buffer_at(static_cast<Instance*>(instance)->buffers(), index, size);
+    auto& S = *static_cast<Instance*>(instance);
+    switch (index) {
+        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
+        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
+        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
+        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
+        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
+        case 5: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
+        case 6: *size = std::int64_t(S.b7_position.size()); return S.b7_position.data();
+        case 7: *size = std::int64_t(S.b8_velocity.size()); return S.b8_velocity.data();
+        case 8: *size = std::int64_t(S.b9_force.size()); return S.b9_force.data();
+        case 9: *size = std::int64_t(S.b11_acceleration.size()); return S.b11_acceleration.data();
+        case 10: *size = std::int64_t(S.b12_position.size()); return S.b12_position.data();
+        case 11: *size = std::int64_t(S.b13_velocity.size()); return S.b13_velocity.data();
+        case 12: *size = std::int64_t(S.b14_force.size()); return S.b14_force.data();
+        case 13: *size = std::int64_t(S.b16_indices1.size()); return S.b16_indices1.data();
+        case 14: *size = std::int64_t(S.b17_indices2.size()); return S.b17_indices2.data();
+        case 15: *size = std::int64_t(S.b18_stiffness.size()); return S.b18_stiffness.data();
+        case 16: *size = std::int64_t(S.b19_damping.size()); return S.b19_damping.data();
+        case 17: *size = std::int64_t(S.b20_lengths.size()); return S.b20_lengths.data();
+        case 18: *size = std::int64_t(S.b21_elongationOnly.size()); return S.b21_elongationOnly.data();
+        case 19: *size = std::int64_t(S.b22_enabled.size()); return S.b22_enabled.data();
+        case 20: *size = std::int64_t(S.b23_vertexMass.size()); return S.b23_vertexMass.data();
+        case 21: *size = std::int64_t(S.b24_indices.size()); return S.b24_indices.data();
+        case 22: *size = std::int64_t(S.b25_indices1.size()); return S.b25_indices1.data();
+        case 23: *size = std::int64_t(S.b26_indices2.size()); return S.b26_indices2.data();
+        case 24: *size = std::int64_t(S.b27_stiffness.size()); return S.b27_stiffness.data();
+        case 25: *size = std::int64_t(S.b28_damping.size()); return S.b28_damping.data();
+        case 26: *size = std::int64_t(S.b29_lengths.size()); return S.b29_lengths.data();
+        case 27: *size = std::int64_t(S.b30_elongationOnly.size()); return S.b30_elongationOnly.data();
+        case 28: *size = std::int64_t(S.b31_enabled.size()); return S.b31_enabled.data();
+        case 29: *size = std::int64_t(S.b32_vertexMass.size()); return S.b32_vertexMass.data();
+        case 30: *size = std::int64_t(S.b33_initialPoints.size()); return S.b33_initialPoints.data();
+        case 31: *size = std::int64_t(S.b34_rigidIndexPerPoint.size()); return S.b34_rigidIndexPerPoint.data();
+        case 32: *size = std::int64_t(S.b35_offsets.size()); return S.b35_offsets.data();
+        default: *size = 0; return nullptr;
+    }
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

@@ -41,35 +41,6 @@ struct Instance {
     std::vector<double> b20_poissonRatio;  // /Liver/FEM.poissonRatio (param)
     std::vector<double> b21_elements;  // /Liver/FEM.elements (scratch)
     std::vector<Index> b22_indices;  // /Liver/ligaments.indices (data)
-
-    // The buffers in the order Python numbers them (sofac_create, sofac_buffer).
-    auto buffers() {
-        return std::tie(
-            b0_dt,
-            b1_gravity,
-            b2_position,
-            b3_velocity,
-            b4_force,
-            b5_rest_position,
-            b6_acceleration,
-            b7_rayleighStiffness,
-            b8_rayleighMass,
-            b9_vdamping,
-            b10_iterations,
-            b11_tolerance,
-            b12_threshold,
-            b13_solves,
-            b14_dx,
-            b15_df,
-            b16_r,
-            b17_vertexMass,
-            b18_tetrahedra,
-            b19_youngModulus,
-            b20_poissonRatio,
-            b21_elements,
-            b22_indices
-        );
-    }
 };
 
 // ---- group g0: EulerImplicitSolver '/Liver/odesolver' (liver.scn:41)
@@ -180,7 +151,29 @@ SOFAC_EXPORT int sofac_buffer_count() { return 23; }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill_all(S->buffers(), data, sizes);
+    sofac::fill(S->b0_dt, data[0], sizes[0]);
+    sofac::fill(S->b1_gravity, data[1], sizes[1]);
+    sofac::fill(S->b2_position, data[2], sizes[2]);
+    sofac::fill(S->b3_velocity, data[3], sizes[3]);
+    sofac::fill(S->b4_force, data[4], sizes[4]);
+    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
+    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
+    sofac::fill(S->b7_rayleighStiffness, data[7], sizes[7]);
+    sofac::fill(S->b8_rayleighMass, data[8], sizes[8]);
+    sofac::fill(S->b9_vdamping, data[9], sizes[9]);
+    sofac::fill(S->b10_iterations, data[10], sizes[10]);
+    sofac::fill(S->b11_tolerance, data[11], sizes[11]);
+    sofac::fill(S->b12_threshold, data[12], sizes[12]);
+    sofac::fill(S->b13_solves, data[13], sizes[13]);
+    sofac::fill(S->b14_dx, data[14], sizes[14]);
+    sofac::fill(S->b15_df, data[15], sizes[15]);
+    sofac::fill(S->b16_r, data[16], sizes[16]);
+    sofac::fill(S->b17_vertexMass, data[17], sizes[17]);
+    sofac::fill(S->b18_tetrahedra, data[18], sizes[18]);
+    sofac::fill(S->b19_youngModulus, data[19], sizes[19]);
+    sofac::fill(S->b20_poissonRatio, data[20], sizes[20]);
+    sofac::fill(S->b21_elements, data[21], sizes[21]);
+    sofac::fill(S->b22_indices, data[22], sizes[22]);
     return S;
 }
 
@@ -195,7 +188,33 @@ SOFAC_EXPORT void sofac_init(void* instance) {
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    return sofac::buffer_at(static_cast<Instance*>(instance)->buffers(), index, size);
+    auto& S = *static_cast<Instance*>(instance);
+    switch (index) {
+        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
+        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
+        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
+        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
+        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
+        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
+        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
+        case 7: *size = std::int64_t(S.b7_rayleighStiffness.size()); return S.b7_rayleighStiffness.data();
+        case 8: *size = std::int64_t(S.b8_rayleighMass.size()); return S.b8_rayleighMass.data();
+        case 9: *size = std::int64_t(S.b9_vdamping.size()); return S.b9_vdamping.data();
+        case 10: *size = std::int64_t(S.b10_iterations.size()); return S.b10_iterations.data();
+        case 11: *size = std::int64_t(S.b11_tolerance.size()); return S.b11_tolerance.data();
+        case 12: *size = std::int64_t(S.b12_threshold.size()); return S.b12_threshold.data();
+        case 13: *size = std::int64_t(S.b13_solves.size()); return S.b13_solves.data();
+        case 14: *size = std::int64_t(S.b14_dx.size()); return S.b14_dx.data();
+        case 15: *size = std::int64_t(S.b15_df.size()); return S.b15_df.data();
+        case 16: *size = std::int64_t(S.b16_r.size()); return S.b16_r.data();
+        case 17: *size = std::int64_t(S.b17_vertexMass.size()); return S.b17_vertexMass.data();
+        case 18: *size = std::int64_t(S.b18_tetrahedra.size()); return S.b18_tetrahedra.data();
+        case 19: *size = std::int64_t(S.b19_youngModulus.size()); return S.b19_youngModulus.data();
+        case 20: *size = std::int64_t(S.b20_poissonRatio.size()); return S.b20_poissonRatio.data();
+        case 21: *size = std::int64_t(S.b21_elements.size()); return S.b21_elements.data();
+        case 22: *size = std::int64_t(S.b22_indices.size()); return S.b22_indices.data();
+        default: *size = 0; return nullptr;
+    }
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }
