@@ -21,7 +21,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
-from sofac.plan.contacts import contact_setup_refusal, map_contact_states_while_touching, plan_collisions
+from sofac.plan.contacts import contact_setup_refusal, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
@@ -34,8 +34,10 @@ from sofac.plan.ir import (
     StatePlan,
     independent_groups,
 )
+from sofac.plan.lazy_contacts import map_contact_states_while_touching
 from sofac.plan.lower import LOWERINGS
 from sofac.plan.lower.common import _mapping_inputs, _topology_of
+from sofac.plan.lower.constraint_context import ConstraintLowering
 from sofac.plan.lower.constraints import finish_constraint_phase
 from sofac.plan.passes import (
     add_point_forces,
@@ -96,6 +98,8 @@ class Planner:
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
         self.constraints: ConstraintPhase | None = None  # FreeMotionAnimationLoop's constraint phase
+        # What the constraint lowerings share while they run (plan/lower/constraint_context.py).
+        self.constraint_lowering: ConstraintLowering | None = None
 
     # --- helpers -------------------------------------------------------------------------------
     def value(self, component: Component, name: str) -> Any:
