@@ -27,6 +27,7 @@ from .ir import (
     Env,
     Group,
     Op,
+    Scheme,
     call,
     origin_of,
 )
@@ -570,7 +571,7 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     "while they touch",
                     "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
                 )
-        if group.scheme == "implicit" and static_partner and state.dx is not None:
+        if group.scheme is Scheme.IMPLICIT and static_partner and state.dx is not None:
             group.stiffness_dx.append(
                 Op(
                     where,

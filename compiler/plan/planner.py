@@ -31,6 +31,7 @@ from sofac.plan.ir import (
     Group,
     Op,
     Plan,
+    Scheme,
     StatePlan,
     independent_groups,
 )
@@ -340,7 +341,7 @@ class Planner:
             owner[id(state.component)] = group
         self._attach_mapped(owner)
         for group in groups.values():
-            if group.scheme == "implicit":
+            if group.scheme is Scheme.IMPLICIT:
                 for state in (*group.states, *group.mapped):
                     zeros = np.zeros_like(state.v.initial)
                     state.dx = self.buffer(
@@ -350,11 +351,11 @@ class Planner:
                         state.component, "df", zeros, columns=state.v.columns, role="scratch"
                     )
             names = {
-                "euler": (),
-                "rk2": ("x0", "v0"),
-                "rk4": ("x0", "v0", "dx", "dv"),
+                Scheme.EULER: (),
+                Scheme.RK2: ("x0", "v0"),
+                Scheme.RK4: ("x0", "v0", "dx", "dv"),
                 # The right-hand side b (CG's residual); PCG's direction p and z (CG's p is dx, q is df).
-                "implicit": ("r", "p", "z") if group.pcg else ("r",),
+                Scheme.IMPLICIT: ("r", "p", "z") if group.pcg else ("r",),
             }[group.scheme]
             if group.inert_preconditioner is not None:
                 names = ("r",)  # b only: no CG iteration

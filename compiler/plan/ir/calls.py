@@ -81,6 +81,14 @@ class SpringFlags(enum.Enum):
     PER_SPRING = "PerSpring"
 
 
+class BuiltSolver(enum.Enum):
+    """A constraint solver that solves on the built W (constraints.h BuiltSolver), as the runtime
+    names it."""
+
+    BLOCK_GAUSS_SEIDEL = "BlockGaussSeidel"
+    NNCG = "Nncg"
+
+
 class Preconditioner(enum.Enum):
     """A PCGLinearSolver's preconditioner, as the runtime applies it (direct.h)."""
 
@@ -168,7 +176,21 @@ class Aggregate:
     templates: tuple[TemplateArg, ...] = ()
 
 
-Arg = Union[Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float]  # noqa: UP007
+Arg = Union[  # noqa: UP007
+    Buffer,
+    Count,
+    Element,
+    Offset,
+    Function,
+    LinearSystem,
+    Aggregate,
+    Slot,
+    Env,
+    BuiltSolver,
+    bool,
+    int,
+    float,
+]
 # str: a DataType name ("Vec3d"); the enums: a kernel's variant, spelt as the runtime's enum class
 TemplateArg = Union[str, int, bool, Constant, SpringDamping, SpringFlags]  # noqa: UP007
 
@@ -234,7 +256,21 @@ def _plain(name: str, arg: Any) -> Arg:
     return arg
 
 
-_ARG_TYPES = (Buffer, Count, Element, Offset, Function, LinearSystem, Aggregate, Slot, Env, bool, int, float)
+_ARG_TYPES = (
+    Buffer,
+    Count,
+    Element,
+    Offset,
+    Function,
+    LinearSystem,
+    Aggregate,
+    Slot,
+    Env,
+    BuiltSolver,
+    bool,
+    int,
+    float,
+)
 
 
 def bind(statement: Call, values: dict[Slot, Arg]) -> Call:

@@ -4,6 +4,7 @@ FreeMotionAnimationLoop's constraint phase (rows, corrections, the solve)."""
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 from sofac.check.checker import CheckedComponent
@@ -25,6 +26,17 @@ class ContactGuard:
     pairs: Buffer  # i64 (model, model) rows: the pairs SOFA would test
     boxes: Buffer  # scratch, 6 numbers per model
     touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
+
+
+class Resolution(enum.IntEnum):
+    """How the constraint solver resolves a block of rows (runtime constraints.h Resolution, whose
+    values these are: tests/test_layout.py checks them)."""
+
+    BILATERAL_3 = 0
+    BILATERAL_1 = 1
+    UNILATERAL_1 = 2
+    UNILATERAL_FRICTION_3 = 3
+    STOPPER_1 = 4
 
 
 # The phases of FreeMotionAnimationLoop's constraint step, in step order (each a list of Ops):
@@ -65,7 +77,7 @@ class ConstraintPhase:
     frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)
     saved: dict[str, tuple[Buffer, Buffer]] = field(default_factory=dict)  # frozen state ident -> (x, v)
     capacity: int = 0  # constraint rows reserved (contacts' rows grow past it: CollisionPlan.problem)
-    # Row blocks in row order: (first row, runtime Resolution, parameter, offset of its kept forces
+    # Row blocks in row order: (first row, Resolution, parameter, offset of its kept forces
     # in ``kept`` or -1, upper bound (stoppers' max, else 0)), and the forces kept across steps
     # (bilateral warm start).
     blocks: list[tuple[int, int, float, int, float]] = field(default_factory=list)

@@ -4,6 +4,7 @@ lists of :class:`Op` (a component's calls and where it comes from)."""
 from __future__ import annotations
 
 import dataclasses
+import enum
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -89,6 +90,16 @@ class StatePlan:
         return self.component.path
 
 
+class Scheme(enum.StrEnum):
+    """How a group integrates: its ODE solver's family (static, Newmark and variational solvers
+    are implicit schemes: same stiffness and solves, their own algorithm)."""
+
+    EULER = "euler"  # explicit or symplectic Euler
+    RK2 = "rk2"
+    RK4 = "rk4"
+    IMPLICIT = "implicit"
+
+
 # The phases of a group's step, each a list of Ops (Group.init runs at creation and reset).
 STEP_PHASES = ("forces", "accelerations", "mass_dx", "stiffness_dx", "assemble", "energy")
 
@@ -99,7 +110,7 @@ class Group:
 
     solver: Component
     ident: str
-    scheme: str  # "euler", "rk2", "rk4", "implicit"
+    scheme: Scheme
     symplectic: bool
     states: list[StatePlan] = field(default_factory=list)  # independent
     mapped: list[StatePlan] = field(default_factory=list)  # parent → child order

@@ -16,6 +16,7 @@ from sofac.plan.ir import (
     ConstraintPhase,
     Env,
     Group,
+    Resolution,
     StatePlan,
     origin_of,
 )
@@ -28,10 +29,6 @@ from sofac.plan.lower.constraint_context import (
 )
 from sofac.plan.lower.constraint_solve import values_of
 from sofac.plan.lower.constraints import (
-    BILATERAL_1,
-    BILATERAL_3,
-    STOPPER_1,
-    UNILATERAL_1,
     constraint_lowering,
 )
 from sofac.plan.lower.corrections import rigidly_mapped
@@ -109,7 +106,7 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
     phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
     load = float(planner.value(component, "load"))
     for p in range(pairs):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p, 0.0))
+        phase.blocks.append((first_row + 3 * p, Resolution.BILATERAL_3, load, kept_offset + 3 * p, 0.0))
         for k in range(3):
             unit = tuple(1.0 if c == k else 0.0 for c in range(3))
             row = first_row + 3 * p + k
@@ -178,7 +175,7 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
     phase.capacity += 3 * count
     kept_offset = _kept_forces(planner, phase, 3 * count)
     for p, dof in enumerate(indices):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
+        phase.blocks.append((first_row + 3 * p, Resolution.BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
         for k in range(3):
             unit = tuple(1.0 if c == k else 0.0 for c in range(3))
             phase.entries.setdefault(state.ident, []).append((first_row + 3 * p + k, int(dof), unit))
@@ -214,7 +211,7 @@ def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     phase.capacity += 1
     low, high = float(planner.value(component, "min")), float(planner.value(component, "max"))
     _kept_forces(planner, phase, 0)  # (no warm start, but the solve takes the kept forces' buffer)
-    phase.blocks.append((row, STOPPER_1, low, -1, high))
+    phase.blocks.append((row, Resolution.STOPPER_1, low, -1, high))
     phase.entries.setdefault(state.ident, []).append((row, index, (1.0,)))
     lowering.stoppers.append(StopperViolation(origin_of(component), row, state, index))
 
@@ -252,7 +249,7 @@ def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     for i in range(state.size):
         for j in range(width):
             row = first + width * i + j
-            phase.blocks.append((row, BILATERAL_1, 1.0, -1, 0.0))
+            phase.blocks.append((row, Resolution.BILATERAL_1, 1.0, -1, 0.0))
             unit = tuple(1.0 if c == j else 0.0 for c in range(width))
             phase.entries.setdefault(state.ident, []).append((row, i, unit))
     rest = state.rest if planner.value(component, "constrainToRestPos") else Env.NONE
@@ -296,7 +293,9 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     first = phase.capacity
     phase.capacity += 4
     _kept_forces(planner, phase, 0)
-    for row, kind in enumerate((BILATERAL_1, BILATERAL_1, UNILATERAL_1, UNILATERAL_1)):
+    for row, kind in enumerate(
+        (Resolution.BILATERAL_1, Resolution.BILATERAL_1, Resolution.UNILATERAL_1, Resolution.UNILATERAL_1)
+    ):
         phase.blocks.append((first + row, kind, 1.0, -1, 0.0))
     rows = list(range(first, first + 4))
     low, high = min(a, b), max(a, b)

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from sofac.front.model import Component
-from sofac.plan.ir import Aggregate, Collision, Correction, Element, Env, Op, call, kernel
+from sofac.plan.ir import Aggregate, BuiltSolver, Collision, Correction, Element, Env, Op, call, kernel
 from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem, UncoupledBody
 from sofac.plan.lower.corrections import moved_vectors, rigid_compliance
 from sofac.registry import Variant
@@ -19,8 +19,9 @@ from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_S
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
 
-# The solvers the compiled phase runs on built rows (runtime/sofac/constraints.h, method codes).
-_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
+# The solvers compiled on the phase's rows: built ones solve on W, the unbuilt one through the corrections.
+_BUILT = {Variant.BLOCK_GAUSS_SEIDEL: BuiltSolver.BLOCK_GAUSS_SEIDEL, Variant.NNCG: BuiltSolver.NNCG}
+_ROW_SOLVERS = {*_BUILT, Variant.UNBUILT_GAUSS_SEIDEL}
 
 
 def values_of(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
@@ -172,7 +173,7 @@ def solve_constraints(
     else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
         default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
         settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    method = _ROW_SOLVERS[phase.method]
+    method = _BUILT[Variant(phase.method)]
     arguments = (*problem.arguments(), *blocks, *settings, phase.report, Env.TIME)
     if contacts:
         solve = call(kernel("lagrangian_solve", len(phase.blocks)), Env.LAGRANGIAN, method, *arguments)

@@ -26,6 +26,7 @@ from sofac.plan.ir import (
     Env,
     Group,
     Op,
+    Scheme,
     StatePlan,
     call,
     origin_of,
@@ -166,7 +167,7 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
             "wire_optimization",
         )
         return
-    if kind == Variant.LINEAR_SOLVER and (group.scheme != "implicit" or group.linear_solver is None):
+    if kind == Variant.LINEAR_SOLVER and (group.scheme is not Scheme.IMPLICIT or group.linear_solver is None):
         planner.unsupported(
             checked,
             "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
@@ -176,13 +177,6 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
         planner.unsupported(checked, f"{state.path!r} already has a constraint correction")
         return
     phase.corrections.append(Correction(origin_of(checked.component), kind, state, group, checked))
-
-
-# The runtime's Resolution values (runtime/sofac/constraints.h).
-BILATERAL_3 = 0
-BILATERAL_1 = 1
-UNILATERAL_1 = 2
-STOPPER_1 = 4
 
 
 def _sliding_rows(planner: Planner, lowering: ConstraintLowering, dfree: Buffer) -> None:
@@ -388,7 +382,7 @@ def _correction_compiled(planner: Planner, correction: Correction, contacts: boo
         )
         return False
     group = correction.group
-    if group.scheme != "implicit" or group.static or group.newmark or group.variational:
+    if group.scheme is not Scheme.IMPLICIT or group.static or group.newmark or group.variational:
         planner.unsupported(checked, "with constraint rows, it is compiled under EulerImplicitSolver only")
         return False
     return True
