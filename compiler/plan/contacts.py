@@ -277,18 +277,6 @@ def _plan_collision(
                 'give responseParams="mu=0.8" or another non-negative value',
             )
             return None
-    if collision.alarm_distance < collision.contact_distance:
-        component = intersection.component
-        attribute = component.attributes.get("alarmDistance") or component.attributes.get("contactDistance")
-        planner.diags.add(
-            "E207",
-            attribute.loc if attribute is not None else component.loc,
-            f"{component.type_name}: alarmDistance={collision.alarm_distance!r} must be >= "
-            f"contactDistance={collision.contact_distance!r} (pairs are detected within the alarm "
-            "distance and pushed apart up to the contact distance)",
-            "raise alarmDistance or lower contactDistance",
-        )
-        return None
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
     for later in range(len(models)):
         for earlier in range(later):

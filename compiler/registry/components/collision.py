@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from ..fields import Bool, Int, Link, LinkList, Options, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
@@ -145,12 +148,28 @@ _PROXIMITY = (
     ),
 )
 
+def _alarm_covers_contact(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    """An alarm distance below the contact distance: pairs would be dropped before they come as
+    near as the response keeps them (SOFA does not check it; every contact would start violated)."""
+    alarm, contact = float(value("alarmDistance")), float(value("contactDistance"))
+    if alarm >= contact:
+        return None
+    return (
+        "E207",
+        "alarmDistance",
+        f"alarmDistance={alarm!r} must be >= contactDistance={contact!r} (pairs are detected within "
+        "the alarm distance and pushed apart up to the contact distance)",
+        "raise alarmDistance or lower contactDistance",
+    )
+
+
 MIN_PROXIMITY_INTERSECTION = ComponentSpec(
     name="MinProximityIntersection",
     variant=Variant.MIN_PROXIMITY,
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests between element pairs closer than alarmDistance.",
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(
@@ -169,6 +188,7 @@ NEW_PROXIMITY_INTERSECTION = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests based on triangle-triangle distances.",
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(*_PROXIMITY, FieldSpec("useLineLine", Bool(), False, "also test edge-edge pairs")),
@@ -189,6 +209,7 @@ LOCAL_MIN_DISTANCE = ComponentSpec(
     module=_INTERSECTION,
     doc="Proximity tests filtered by local minimum distance cones (used with constraint-based contacts).",
     variant=Variant.LOCAL_MIN_DISTANCE,
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(
