@@ -17,6 +17,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category, Variant
+from sofac.registry.components.collision import response_params
 
 from .ir import (
     REPORT_FIELDS,
@@ -266,17 +267,8 @@ def _plan_collision(
             bool(value(i, "useLMDFilters")),
         )
     if response == "friction_contact":
-        params = _response_params(str(value(manager, "responseParams") or ""))
-        collision.mu = float(params.get("mu", 0.8))
-        if collision.mu < 0:
-            attribute = manager.attributes.get("responseParams")
-            planner.diags.add(
-                "E207",
-                attribute.loc if attribute is not None else manager.loc,
-                f"{manager.type_name}: mu={collision.mu!r} must be >= 0 (Coulomb's friction coefficient)",
-                'give responseParams="mu=0.8" or another non-negative value',
-            )
-            return None
+        params = response_params(str(value(manager, "responseParams") or ""))
+        collision.mu = float(params.get("mu", 0.8))  # >= 0: the contact manager's spec checks it
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
     for later in range(len(models)):
         for earlier in range(later):
@@ -339,16 +331,6 @@ def _plan_collision(
         return collision
     _place(planner, collision, number, owner)
     return collision
-
-
-def _response_params(text: str) -> dict[str, str]:
-    """CollisionResponse's responseParams, 'name=value&name=value'."""
-    params = {}
-    for item in text.split("&"):
-        name, _, given = item.partition("=")
-        if name.strip():
-            params[name.strip()] = given.strip()
-    return params
 
 
 def _node_ranks(root: Node) -> dict[int, int]:

@@ -236,6 +236,35 @@ CCD_TIGHT_INCLUSION_INTERSECTION = ComponentSpec(
     ),
 )
 
+def response_params(text: str) -> dict[str, str]:
+    """A contact manager's responseParams, 'name=value&name=value' (SOFA's ContactManager)."""
+    params = {}
+    for item in text.split("&"):
+        name, _, given = item.partition("=")
+        if name.strip():
+            params[name.strip()] = given.strip()
+    return params
+
+
+def _friction_is_nonnegative(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    """A FrictionContactConstraint's mu (responseParams) is a Coulomb coefficient: >= 0."""
+    if str(value("response") or "") != "FrictionContactConstraint":
+        return None
+    given = response_params(str(value("responseParams") or "")).get("mu")
+    try:
+        mu = float(given) if given is not None else 0.0
+    except ValueError:
+        return ("E205", "responseParams", f"mu={given!r} is not a number", 'give responseParams="mu=0.8"')
+    if mu >= 0:
+        return None
+    return (
+        "E207",
+        "responseParams",
+        f"mu={mu!r} must be >= 0 (Coulomb's friction coefficient)",
+        'give responseParams="mu=0.8" or another non-negative value',
+    )
+
+
 _RESPONSE_FIELDS = (
     FieldSpec(
         "response",
@@ -254,6 +283,7 @@ COLLISION_RESPONSE = ComponentSpec(
     module=_RESPONSE,
     doc="Contact manager: creates a response (e.g. penalty springs) per colliding pair of models.",
     former_names=("DefaultContactManager",),
+    validate=_friction_is_nonnegative,
     supported=True,
     effects=_COLLISION,
     fields=_RESPONSE_FIELDS,
@@ -264,6 +294,7 @@ RULE_BASED_CONTACT_MANAGER = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_RESPONSE,
     doc="Contact manager choosing the response per pair of model groups from rules.",
+    validate=_friction_is_nonnegative,
     former_names=("RuleBasedCollisionResponse",),
     variant=Variant.CONTACT_MANAGER,
     supported=True,
