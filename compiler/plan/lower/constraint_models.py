@@ -34,7 +34,7 @@ from sofac.plan.lower.constraints import (
     UNILATERAL_1,
     constraint_lowering,
 )
-from sofac.plan.lower.corrections import rigidly_mapped
+from sofac.plan.lower.corrections import linearly_mapped, rigidly_mapped
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -82,10 +82,11 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
         if state is None:
             planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
             return
-        if state.mapped and not rigidly_mapped(planner, state):
+        if state.mapped and not (rigidly_mapped(planner, state) or linearly_mapped(planner, state)):
             planner.unsupported(
                 checked,
-                f"constraint rows through mappings other than one RigidMapping are not compiled yet ({name})",
+                "constraint rows through mappings other than one RigidMapping, IdentityMapping, "
+                f"SubsetMapping or BarycentricMapping from an independent state: not compiled yet ({name})",
             )
             return
         states.append(state)

@@ -33,6 +33,7 @@ from sofac.plan.ir import (
 from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem
 from sofac.plan.lower.constraint_solve import solve_constraints, solver_refusal, uncoupled_correction
 from sofac.plan.lower.corrections import (
+    carry_through_linear_mappings,
     carry_through_rigid_mappings,
     contact_bodies,
     lagrangian_collision,
@@ -266,6 +267,7 @@ def _phase_with_rows(planner: Planner, lowering: ConstraintLowering) -> None:
         phase.violation.append(
             Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, problem.dfree)])
         )
+    carry_through_linear_mappings(planner, lowering)
     carry_through_rigid_mappings(planner, lowering)
     _sliding_rows(planner, lowering, problem.dfree)
     bodies = contact_bodies(planner, lowering, lagrangian, free_x) if lagrangian is not None else set()

@@ -1,0 +1,141 @@
+"""Lagrangian contact and constraint rows carried through a BarycentricMapping onto the DOFs of a
+deformable body (runtime/sofac/lagrangian_contact.h ``barycentric_rows``, plan/lower/corrections.py
+``contact_bodies`` and ``carry_through_linear_mappings``): SOFA's BarycentricMapping::applyJT on
+the constraint matrix, each row of the mapped collision state spread on its element's nodes.
+
+Checked against: the parent's λ = Jᵀ f with J computed by NumPy from the barycentric weights of the
+mapped points (one contact, one bilateral pair); a stiff FEM cube whose barycentric-mapped bottom
+points rest on a floor at the contact distance with the normal impulses adding up to m g dt, under
+LinearSolverConstraintCorrection and UncoupledConstraintCorrection alike; a cube hanging from an
+anchor by a bilateral row on a mapped point (IdentityMapping, SubsetMapping, BarycentricMapping).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sofac
+from lagrangian_scenes import CONTACT, DT, G, contact_root, static_floor
+
+MASS = 1.0
+# A unit cube from y = 0 up, split into six tetrahedra about its diagonal 0-7 (corner i at
+# (i & 1, (i >> 1) & 1, (i >> 2) & 1) - 0.5 in x and z).
+CORNERS = np.array([[(i & 1) - 0.5, (i >> 1) & 1, ((i >> 2) & 1) - 0.5] for i in range(8)], dtype=float)
+TETRAHEDRA = np.array([[0, 1, 3, 7], [0, 5, 1, 7], [0, 3, 2, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 6, 4, 7]])
+
+
+# The cube's correction: its factorised system, or its eight nodes' mass (compliance 1/m each)
+CORRECTIONS = ["<LinearSolverConstraintCorrection/>", '<UncoupledConstraintCorrection compliance="8"/>']
+
+
+def _text(values: np.ndarray) -> str:
+    return " ".join(f"{v:.17g}" for v in np.asarray(values, dtype=float).ravel())
+
+
+def cube_scene(
+    tmp_path: Path,
+    points: np.ndarray,
+    *,
+    correction: str = "<LinearSolverConstraintCorrection/>",
+    lift: float = 0.1,
+    young: float = 1e5,
+    mu: float = 0.0,
+) -> Path:
+    """The cube (FEM, mass MASS, damped), ``lift`` above a static floor at y = 0, its collision
+    points ``points`` (cube coordinates) mapped by a BarycentricMapping."""
+    up = np.array([0.0, lift, 0.0])
+    rest = CORNERS + up
+    text = (
+        contact_root('<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>', mu)
+        + f"""    <Node name="Cube">
+        <EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0" />
+        <SparseLDLSolver/>
+        <MechanicalObject name="dofs" position="{_text(rest)}" />
+        <MeshTopology tetrahedra="{_text(TETRAHEDRA).replace(".0", "")}" />
+        <UniformMass totalMass="{MASS}" />
+        <TetrahedronFEMForceField youngModulus="{young}" poissonRatio="0.3" method="large" />
+        {correction}
+        <Node name="Surface">
+            <MechanicalObject name="points" position="{_text(points + up)}" />
+            <PointCollisionModel />
+            <BarycentricMapping />
+        </Node>
+    </Node>
+"""
+        + static_floor("-2 0 -2  2 0 -2  2 0 2  -2 0 2")
+        + "</Node>\n"
+    )
+    path = tmp_path / f"cube_{abs(hash(text))}.scn"
+    path.write_text(text)
+    return path
+
+
+def barycentric_weights(point: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """NumPy's (nodes, weights) of a point of the cube: the tetrahedron holding it, its four
+    barycentric coordinates (solved, not SOFA's arithmetic)."""
+    for tetra in TETRAHEDRA:
+        a = CORNERS[tetra]
+        w = np.linalg.solve(np.vstack([a.T, np.ones(4)]), np.append(point, 1.0))
+        if (w >= -1e-12).all():
+            return tetra, w
+    raise AssertionError(f"{point} is in no tetrahedron")
+
+
+def correction_lambda(sim: sofac.Simulation, name: str) -> np.ndarray:
+    """The λ = Jᵀ f the correction ``name`` moved its state by this step (a scratch buffer: the
+    step writes it, nothing keeps it)."""
+    (view,) = [
+        v
+        for b, v in zip(sim.spec.buffers, sim._views, strict=True)
+        if b.key.endswith(".lambda") and name in b.key
+    ]
+    return view
+
+
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_a_contact_row_lands_on_the_nodes_with_the_barycentric_weights(
+    tmp_path: Path, correction: str
+) -> None:
+    # one collision point inside a tetrahedron, 0.05 above the bottom: one contact, one row n = +y
+    point = np.array([0.2, 0.05, -0.1])
+    nodes, weights = barycentric_weights(point)
+    sim = sofac.load(cube_scene(tmp_path, point[None, :], correction=correction, lift=0.05))
+    name = correction[1:].split("/")[0].split()[0]
+    rows = 0
+    for _ in range(30):
+        sim.step(1)
+        if sim.output("/CollisionPipeline3.contactReport")[0] == 0:
+            continue
+        rows += 1
+        f = sim.output("/.constraint_f")[0]
+        expected = np.zeros((8, 3))
+        expected[nodes, 1] = weights * f  # Jᵀ f: the row's +y on each node, times its weight
+        lam = correction_lambda(sim, name).reshape(8, 3)
+        # (the floor's normal is +y to 1e-15: its triangle's cross product)
+        np.testing.assert_allclose(lam, expected, rtol=1e-12, atol=1e-14 * abs(f))
+    assert rows > 10 and f > 0
+
+
+@pytest.mark.filterwarnings("ignore:.*iteration limit:RuntimeWarning")
+@pytest.mark.parametrize("correction", CORRECTIONS)
+def test_a_stiff_cube_rests_on_its_mapped_points_at_the_contact_distance(
+    tmp_path: Path, correction: str
+) -> None:
+    # four points near the bottom face's corners (off the diagonal x = z the floor's triangles
+    # share, where LocalMinDistance finds neither), each on a face of some tetrahedra; friction
+    # holds the cube still (without it, the impact's slight twist would spin it on the floor)
+    corners = np.array([[x, 0.0, z] for z in (-0.4, 0.4) for x in (-0.45, 0.45)])
+    sim = sofac.load(cube_scene(tmp_path, corners, correction=correction, mu=0.5))
+    sim.step(300)
+    points = sim["/Cube/Surface/points"].position
+    cube = sim["/Cube/dofs"]
+    assert sim.output("/CollisionPipeline3.contactReport")[0] == 4
+    np.testing.assert_allclose(points[:, 1], CONTACT, atol=1e-9)  # measured: 3e-10
+    # at rest but for the solve's residual: a stiff body on four points is the slow case of
+    # Gauss-Seidel (the linear correction's solves stop at 1000 iterations, residual 4e-9)
+    assert np.abs(cube.velocity).max() < 1e-6  # measured: 7e-8
+    normals = sim.output("/.constraint_f")[:12:3]
+    assert normals.min() > 0.0
+    assert normals.sum() == pytest.approx(MASS * G * DT, rel=1e-9)
