@@ -139,3 +139,76 @@ def test_a_stiff_cube_rests_on_its_mapped_points_at_the_contact_distance(
     normals = sim.output("/.constraint_f")[:12:3]
     assert normals.min() > 0.0
     assert normals.sum() == pytest.approx(MASS * G * DT, rel=1e-9)
+
+
+def hanging_scene(tmp_path: Path, handle: str, second_points: str, anchors: np.ndarray) -> Path:
+    """The cube held up by bilateral rows: pair k joins anchor k to point ``second_points[k]`` of
+    the cube's mapped state /Cube/Handle/points (``handle``: its MechanicalObject and mapping)."""
+    pairs = " ".join(str(k) for k in range(len(anchors)))
+    text = f"""<?xml version="1.0"?>
+<Node name="root" dt="{DT}" gravity="0 -{G} 0">
+    <FreeMotionAnimationLoop />
+    <BlockGaussSeidelConstraintSolver tolerance="1e-14" maxIterations="1000"/>
+    <Node name="Anchor">
+        <MechanicalObject name="points" position="{_text(anchors)}" />
+    </Node>
+    <Node name="Cube">
+        <EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0" />
+        <SparseLDLSolver/>
+        <MechanicalObject name="dofs" position="{_text(CORNERS)}" />
+        <MeshTopology tetrahedra="{_text(TETRAHEDRA).replace(".0", "")}" />
+        <UniformMass totalMass="{MASS}" />
+        <TetrahedronFEMForceField youngModulus="1e4" poissonRatio="0.3" method="large" />
+        <LinearSolverConstraintCorrection/>
+        <Node name="Handle">
+            {handle}
+        </Node>
+    </Node>
+    <BilateralLagrangianConstraint object1="@Anchor/points" object2="@Cube/Handle/points"
+        first_point="{pairs}" second_point="{second_points}"/>
+</Node>
+"""
+    path = tmp_path / f"hanging_{abs(hash(text))}.scn"
+    path.write_text(text)
+    return path
+
+
+TOP = [2, 3, 6, 7]  # the cube's top corners
+NEAR_TOP = np.array([[x, 0.95, z] for z in (-0.4, 0.4) for x in (-0.4, 0.4)])  # inside, near them
+HANDLES = {
+    "identity": ('<MechanicalObject name="points"/> <IdentityMapping/>', "2 3 6 7", CORNERS[TOP]),
+    "subset": (
+        f'<MechanicalObject name="points" position="{_text(CORNERS[TOP])}"/> <SubsetMapping indices="2 3 6 7"/>',
+        "0 1 2 3",
+        CORNERS[TOP],
+    ),
+    "barycentric": (
+        f'<MechanicalObject name="points" position="{_text(NEAR_TOP)}"/> <BarycentricMapping/>',
+        "0 1 2 3",
+        NEAR_TOP,
+    ),
+}
+
+
+@pytest.mark.parametrize("mapping", list(HANDLES))
+def test_a_cube_hangs_from_bilateral_rows_on_mapped_points(tmp_path: Path, mapping: str) -> None:
+    handle, second, anchors = HANDLES[mapping]
+    sim = sofac.load(hanging_scene(tmp_path, handle, second, anchors))
+    sim.step(1)
+    # the rows' impulses (kept forces, 3 per pair), and what they moved the cube by: λ = Jᵀ f, J
+    # the mapping's weights (1 on a corner through identity and subset)
+    f = sim.output("/.constraint_kept_forces").reshape(4, 3)
+    expected = np.zeros((8, 3))
+    for k, point in enumerate(anchors):
+        nodes, weights = barycentric_weights(point)
+        expected[nodes] += np.outer(weights, f[k])
+    lam = correction_lambda(sim, "LinearSolverConstraintCorrection").reshape(8, 3)
+    np.testing.assert_allclose(lam, expected, rtol=1e-12, atol=1e-15)
+    sim.step(1499)
+    # at rest: the handle's points at the anchors, the impulses carrying the weight over a step
+    points = sim["/Cube/Handle/points"].position[[int(s) for s in second.split()]]
+    np.testing.assert_allclose(points, anchors, atol=1e-12)
+    assert np.abs(sim["/Cube/dofs"].velocity).max() < 1e-9
+    f = sim.output("/.constraint_kept_forces").reshape(4, 3)
+    assert f[:, 1].sum() == pytest.approx(MASS * G * DT, rel=1e-9)
+    np.testing.assert_allclose(f[:, [0, 2]].sum(axis=0), 0.0, atol=1e-12)
