@@ -178,7 +178,8 @@ NEAR_TOP = np.array([[x, 0.95, z] for z in (-0.4, 0.4) for x in (-0.4, 0.4)])  #
 HANDLES = {
     "identity": ('<MechanicalObject name="points"/> <IdentityMapping/>', "2 3 6 7", CORNERS[TOP]),
     "subset": (
-        f'<MechanicalObject name="points" position="{_text(CORNERS[TOP])}"/> <SubsetMapping indices="2 3 6 7"/>',
+        f'<MechanicalObject name="points" position="{_text(CORNERS[TOP])}"/> '
+        '<SubsetMapping indices="2 3 6 7"/>',
         "0 1 2 3",
         CORNERS[TOP],
     ),
