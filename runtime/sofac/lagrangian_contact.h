@@ -181,7 +181,11 @@ public:
                 c.pair = index;
                 c.output_id = o.id;
                 for (int s = 0; s < 2; ++s) place(c, s, p.model[s], s == 0 ? o.elem1 : o.elem2, o.point[s], x);
-                c.distance = d0;
+                // a sphere's contact point is its centre, its radius added to the distance (SOFA's
+                // sphere ContactMapper::addPoint; d0 + r1 + r2)
+                const double r1 = m1.kind == ContactSide::kSphere ? m1.sphere.r(o.elem1) : 0.0;
+                const double r2 = m2.kind == ContactSide::kSphere ? m2.sphere.r(o.elem2) : 0.0;
+                c.distance = d0 + r1 + r2;
                 c.Q = position(c, 0, x[p.model[0]]);
                 c.P = position(c, 1, x[p.model[1]]);
                 const V3& n = o.normal;

@@ -372,6 +372,11 @@ def _violations(lowering: ConstraintLowering, dfree: Buffer, free_x: dict[str, B
             coordinates.count,
         )
         phase.violation.append(Op(coordinates.origin, [violation]))
+    for fixed in lowering.rigid_fixed:
+        x, rest = fixed.state.x, fixed.state.rest
+        assert rest is not None
+        violation = call("rigid_fixed_violation", dfree, fixed.first_row, x, rest, fixed.dofs, fixed.count)
+        phase.violation.append(Op(fixed.origin, [violation]))
     for stopper in lowering.stoppers:
         violation = call("stopper_violation", dfree, stopper.row, stopper.state.x, stopper.index)
         phase.violation.append(Op(stopper.origin, [violation]))
