@@ -118,6 +118,44 @@ def test_a_contact_row_lands_on_the_nodes_with_the_barycentric_weights(
     assert rows > 10 and f > 0
 
 
+def test_a_contact_on_a_mapped_triangle_sums_each_node_three_times(tmp_path: Path) -> None:
+    # a small horizontal triangle inside one tetrahedron (corners 0 1 3 7), a static point below
+    # its centroid: the contact row's three collision points each spread on the same four nodes,
+    # so each (row, node) gets three blocks, summed after SOFA's sort. At the first push the cube
+    # has only fallen (a rigid translation): the contact point is the centroid, the normal -y,
+    # so Jᵀ f puts on each node its weight at the centroid times f, upwards.
+    tetra = CORNERS[[0, 1, 3, 7]]
+    triangle = np.array([[0.5, 0.3, 0.1, 0.1], [0.3, 0.5, 0.1, 0.1], [0.4, 0.4, 0.05, 0.15]]) @ tetra
+    centroid = triangle.mean(axis=0)
+    path = cube_scene(tmp_path, triangle, lift=0.05)
+    text = path.read_text().replace(
+        "<PointCollisionModel />",
+        '<MeshTopology triangles="0 1 2" /> <TriangleCollisionModel />',
+    )
+    floor = static_floor("-2 0 -2  2 0 -2  2 0 2  -2 0 2")
+    below = f"""    <Node name="Floor">
+        <MechanicalObject name="dofs" position="{centroid[0]:.17g} 0 {centroid[2]:.17g}" />
+        <PointCollisionModel simulated="0" moving="0" />
+    </Node>
+"""
+    path.write_text(text.replace(floor, below))
+    nodes, weights = barycentric_weights(centroid)
+    assert list(nodes) == [0, 1, 3, 7]
+    sim = sofac.load(path)
+    contacts = []
+    for _ in range(40):
+        sim.step(1)
+        contacts.append(sim.output("/CollisionPipeline3.contactReport")[0])
+        if sim.output("/.constraint_f")[0] > 0:
+            break
+    assert contacts[0] == 0 and contacts[-1] == 1  # falls into the alarm distance, then is pushed
+    f = sim.output("/.constraint_f")[0]
+    expected = np.zeros((8, 3))
+    expected[nodes, 1] = weights * f
+    lam = correction_lambda(sim, "LinearSolverConstraintCorrection").reshape(8, 3)
+    np.testing.assert_allclose(lam, expected, rtol=1e-12, atol=1e-14 * f)
+
+
 @pytest.mark.filterwarnings("ignore:.*iteration limit:RuntimeWarning")
 @pytest.mark.parametrize("correction", CORRECTIONS)
 def test_a_stiff_cube_rests_on_its_mapped_points_at_the_contact_distance(
