@@ -310,3 +310,64 @@ def test_sofas_chain_of_tori_hangs_linked_at_the_contact_distance(shared_dir: Pa
     x_rigid = sim["/Torus3/MechanicalObject3"].position
     assert np.isfinite(x_fem).all() and np.isfinite(x_rigid).all()
     assert 8.0 < x_fem[:, 1].mean() < x_rigid[0, 1]  # hanging below the fixed torus (+y), in order
+
+
+def test_rows_through_a_mesh_of_tetrahedra_and_hexahedra_take_each_element_s_nodes(tmp_path: Path) -> None:
+    # SOFA's mesh mapper over tetrahedra and hexahedra: the mapping's table pads a tetrahedron's
+    # point to eight columns; its rows go to the tetrahedron's four nodes only (applyJT adds
+    # those), a hexahedron's point to its eight in the mapper's order
+    from sofac.check.checker import check_file
+    from sofac.plan.planner import plan_scene
+
+    hexa = [[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)]  # nodes 0..7, SOFA's order
+    positions = np.array([*hexa, [2.0, 0.0, 0.0]])  # node 8: a tetrahedron on the hexahedron's side
+    hexahedra = "0 1 3 2 4 5 7 6"
+    points = np.array([[1.2, 0.2, 0.1], [0.3, 0.6, 0.2]])  # in the tetrahedron, in the hexahedron
+    text = f"""<Node name="root" dt="0.01" gravity="0 -9.81 0">
+    <FreeMotionAnimationLoop/>
+    <Node name="Anchor"> <MechanicalObject name="points" position="{_text(points)}"/> </Node>
+    <Node name="Body">
+        <EulerImplicitSolver/> <SparseLDLSolver/>
+        <MechanicalObject name="dofs" position="{_text(positions)}"/>
+        <MeshTopology tetrahedra="1 8 3 5" hexahedra="{hexahedra}"/>
+        <UniformMass totalMass="1"/>
+        <LinearSolverConstraintCorrection/>
+        <Node name="Handle">
+            <MechanicalObject name="points" position="{_text(points)}"/> <BarycentricMapping/>
+        </Node>
+    </Node>
+    <BilateralLagrangianConstraint object1="@Anchor/points" object2="@Body/Handle/points"
+        first_point="0 1" second_point="0 1"/>
+</Node>
+"""
+    path = tmp_path / "mixed.scn"
+    path.write_text(text)
+    checked, _ = check_file(path)
+    assert checked is not None
+    phase = plan_scene(checked).constraints
+    assert phase is not None
+    (correction,) = phase.corrections
+    assert correction.state.path == "/Body/dofs"
+    by_row: dict[int, list[tuple[int, tuple[float, ...]]]] = {}
+    for row, dof, values in phase.entries[correction.state.ident]:
+        by_row.setdefault(row, []).append((dof, values))
+    # rows 0-2: the tetrahedron's point (x of row 0 only: +e_x times each weight)
+    a, b, c, d = positions[[1, 8, 3, 5]]
+    w = np.linalg.solve(np.vstack([np.array([a, b, c, d]).T, np.ones(4)]), np.append(points[0], 1.0))
+    assert [dof for dof, _ in by_row[0]] == [1, 8, 3, 5]
+    np.testing.assert_allclose([values[0] for _, values in by_row[0]], w, rtol=1e-12, atol=1e-15)
+    # rows 3-5: the hexahedron's point, trilinear weights on hexa[0] hexa[1] hexa[3] hexa[2]
+    # hexa[4] hexa[5] hexa[7] hexa[6]: nodes 0 to 7 here (x + 2 y + 4 z)
+    assert [dof for dof, _ in by_row[3]] == list(range(8))
+    fx, fy, fz = points[1]
+    trilinear = [
+        (1 - fx) * (1 - fy) * (1 - fz),
+        fx * (1 - fy) * (1 - fz),
+        (1 - fx) * fy * (1 - fz),
+        fx * fy * (1 - fz),
+        (1 - fx) * (1 - fy) * fz,
+        fx * (1 - fy) * fz,
+        (1 - fx) * fy * fz,
+        fx * fy * fz,
+    ]
+    np.testing.assert_allclose([values[0] for _, values in by_row[3]], trilinear, rtol=1e-12)
