@@ -34,6 +34,22 @@ def _text(values: np.ndarray) -> str:
     return " ".join(f"{v:.17g}" for v in np.asarray(values, dtype=float).ravel())
 
 
+def cube_node(rest: np.ndarray, young: float, correction: str, child: str) -> str:
+    """Node /Cube: the cube's tetrahedra at ``rest``, mass MASS, FEM of Young's modulus ``young``
+    (its deformation damped), ``correction``, and the ``child`` node of its mapped points."""
+    return f"""    <Node name="Cube">
+        <EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0" />
+        <SparseLDLSolver/>
+        <MechanicalObject name="dofs" position="{_text(rest)}" />
+        <MeshTopology tetrahedra="{_text(TETRAHEDRA).replace(".0", "")}" />
+        <UniformMass totalMass="{MASS}" />
+        <TetrahedronFEMForceField youngModulus="{young}" poissonRatio="0.3" method="large" />
+        {correction}
+        {child}
+    </Node>
+"""
+
+
 def cube_scene(
     tmp_path: Path,
     points: np.ndarray,
@@ -47,23 +63,14 @@ def cube_scene(
     points ``points`` (cube coordinates) mapped by a BarycentricMapping."""
     up = np.array([0.0, lift, 0.0])
     rest = CORNERS + up
-    text = (
-        contact_root('<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>', mu)
-        + f"""    <Node name="Cube">
-        <EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0" />
-        <SparseLDLSolver/>
-        <MechanicalObject name="dofs" position="{_text(rest)}" />
-        <MeshTopology tetrahedra="{_text(TETRAHEDRA).replace(".0", "")}" />
-        <UniformMass totalMass="{MASS}" />
-        <TetrahedronFEMForceField youngModulus="{young}" poissonRatio="0.3" method="large" />
-        {correction}
-        <Node name="Surface">
+    surface = f"""<Node name="Surface">
             <MechanicalObject name="points" position="{_text(points + up)}" />
             <PointCollisionModel />
             <BarycentricMapping />
-        </Node>
-    </Node>
-"""
+        </Node>"""
+    text = (
+        contact_root('<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>', mu)
+        + cube_node(rest, young, correction, surface)
         + static_floor("-2 0 -2  2 0 -2  2 0 2  -2 0 2")
         + "</Node>\n"
     )
@@ -190,18 +197,7 @@ def hanging_scene(tmp_path: Path, handle: str, second_points: str, anchors: np.n
     <Node name="Anchor">
         <MechanicalObject name="points" position="{_text(anchors)}" />
     </Node>
-    <Node name="Cube">
-        <EulerImplicitSolver rayleighStiffness="0.1" rayleighMass="0" />
-        <SparseLDLSolver/>
-        <MechanicalObject name="dofs" position="{_text(CORNERS)}" />
-        <MeshTopology tetrahedra="{_text(TETRAHEDRA).replace(".0", "")}" />
-        <UniformMass totalMass="{MASS}" />
-        <TetrahedronFEMForceField youngModulus="1e4" poissonRatio="0.3" method="large" />
-        <LinearSolverConstraintCorrection/>
-        <Node name="Handle">
-            {handle}
-        </Node>
-    </Node>
+{cube_node(CORNERS, 1e4, "<LinearSolverConstraintCorrection/>", f'<Node name="Handle"> {handle} </Node>')}
     <BilateralLagrangianConstraint object1="@Anchor/points" object2="@Cube/Handle/points"
         first_point="{pairs}" second_point="{second_points}"/>
 </Node>

@@ -167,18 +167,25 @@ def linear_solver_correction(
     phase.correction.append(Op(correction.origin, [correct]))
 
 
-def rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
-    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
+def _mapped_from(planner: Planner, state: StatePlan) -> tuple[str, StatePlan] | None:
+    """The lowering of the mapping whose output is ``state`` and the independent state it maps
+    from (None: not mapped, or mapped from a mapped state)."""
     mapping = planner.checked.mapping_of(state.component)
     spec = mapping.spec if mapping is not None else None
     parent = mapping.links.get("input") if mapping is not None else None
     parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
+    if spec is None or parent_state is None or parent_state.mapped:
+        return None
+    return spec.lowering, parent_state
+
+
+def rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
+    found = _mapped_from(planner, state)
     return (
-        spec is not None
-        and spec.lowering == "rigid_mapping"
-        and parent_state is not None
-        and not parent_state.mapped
-        and parent_state.datatype.name == "Rigid3d"
+        found is not None
+        and found[0] == "rigid_mapping"
+        and found[1].datatype.name == "Rigid3d"
         and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
     )
 
@@ -190,16 +197,8 @@ _LINEAR_MAPPINGS = ("identity_mapping", "subset_mapping", "barycentric_mapping")
 def linearly_mapped(planner: Planner, state: StatePlan) -> bool:
     """A state mapped by one IdentityMapping, SubsetMapping or BarycentricMapping from an
     independent state (whose rows then carry to that state's DOFs)."""
-    mapping = planner.checked.mapping_of(state.component)
-    spec = mapping.spec if mapping is not None else None
-    parent = mapping.links.get("input") if mapping is not None else None
-    parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
-    return (
-        spec is not None
-        and spec.lowering in _LINEAR_MAPPINGS
-        and parent_state is not None
-        and not parent_state.mapped
-    )
+    found = _mapped_from(planner, state)
+    return found is not None and found[0] in _LINEAR_MAPPINGS
 
 
 def _subset(mapping: MappingOp) -> Buffer | None:
