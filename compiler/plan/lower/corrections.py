@@ -195,10 +195,14 @@ _LINEAR_MAPPINGS = ("identity_mapping", "subset_mapping", "barycentric_mapping")
 
 
 def linearly_mapped(planner: Planner, state: StatePlan) -> bool:
-    """A state mapped by one IdentityMapping, SubsetMapping or BarycentricMapping from an
-    independent state (whose rows then carry to that state's DOFs)."""
+    """A state mapped by one IdentityMapping or SubsetMapping (between states of one DataType) or
+    BarycentricMapping from an independent state (whose rows then carry to that state's DOFs)."""
     found = _mapped_from(planner, state)
-    return found is not None and found[0] in _LINEAR_MAPPINGS
+    return (
+        found is not None
+        and found[0] in _LINEAR_MAPPINGS
+        and (found[0] == "barycentric_mapping" or found[1].datatype.name == state.datatype.name)
+    )
 
 
 def _subset(mapping: MappingOp) -> Buffer | None:
@@ -293,8 +297,9 @@ def carry_through_linear_mappings(planner: Planner, lowering: ConstraintLowering
                 for j in range(int(real[point]) if real is not None else width):
                     w = float(weights[point, j])
                     carried.append((row, int(nodes[point, j]), tuple(v * w for v in values)))
-        else:
-            continue
+        else:  # (linearly_mapped holds, so the mapping was lowered otherwise: not expected)
+            checked = planner.checked.of(state.component)
+            planner.unsupported(checked, "constraint rows through its mapping are not compiled yet")
         del phase.entries[state.ident]
 
 
