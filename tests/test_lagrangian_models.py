@@ -1,6 +1,7 @@
 """SOFA's common Lagrangian constraint models compiled under FreeMotionAnimationLoop, against
 closed forms: FixedLagrangianConstraint<Vec3d> holds a particle at its rest position under
-gravity with the multiplier m g dt per step (the impulse), and no drift; StopperLagrangianConstraint
+gravity with the multiplier m g dt per step (the impulse), and no drift, and <Rigid3d> pulls a frame
+to its rest pose and holds it against gravity and a torque; StopperLagrangianConstraint
 <Vec1d> stops a pushed particle on its bound; UniformLagrangianConstraint<Vec1d> holds every
 coordinate at zero or at rest; SlidingLagrangianConstraint<Vec3d> keeps a point on its segment
 under gravity, sliding as implicit Euler does, and stops it at the end."""
