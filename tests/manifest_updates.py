@@ -14,9 +14,9 @@ IMPLEMENTED_SINCE_MANIFEST = {
     "Component/Constraint/Projective/LinearMovementProjectiveConstraint.scn": (
         "LinearMovementProjectiveConstraint"
     ),
-    # (Component/AnimationLoop/FreeMotionAnimationLoop.scn compiled with the contact guard until
-    # LinearSolverConstraintCorrection took contact rows; its torus' collision surface is
-    # BarycentricMapping'd, whose contact rows are not carried to the DOFs yet: E222 again.)
+    # Lagrangian contact (issue 17): a chain of tori, the FEM one's collision surface
+    # BarycentricMapping'd under LinearSolverConstraintCorrection (rows carried through applyJT)
+    "Component/AnimationLoop/FreeMotionAnimationLoop.scn": "LinearSolverConstraintCorrection",
     # a SparseLDLSolver preconditioning the PCG, a Tetra2Triangle surface (issue 17, fallbeam); its
     # augmented-Lagrangian contact response is never compiled: the contact guard stops the run
     # before the beam's first contact (fallingBeamLagrangianCollision.scn, FrictionContactConstraint, runs on)

@@ -19,6 +19,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -196,3 +197,19 @@ def test_linear_solver_correction_contacts_do_not_allocate_in_a_step(shim: Path,
 
     path = particle_scene(tmp_path, "<LinearSolverConstraintCorrection/>")
     assert allocations(shim, [path]) == {str(path): [0, 0]}
+
+
+def test_barycentric_contacts_do_not_allocate_in_a_step(shim: Path, shared_dir: Path, tmp_path: Path) -> None:
+    # contact rows carried through a BarycentricMapping (lagrangian_contact.h barycentric_rows): the
+    # blocks before their sort reserved at init for the widest rows; a stiff FEM cube whose mapped
+    # points come within the alarm distance of the floor during the counted steps (about the
+    # 15th), under either correction, and SOFA's chain of
+    # tori (a barycentric-mapped FEM torus between a fixed and a rigid one, in contact throughout)
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_barycentric_contact import CORRECTIONS, cube_scene
+
+    corners = np.array([[x, 0.0, z] for z in (-0.4, 0.4) for x in (-0.45, 0.45)])
+    scenes = [cube_scene(tmp_path, corners, correction=c, lift=0.3, mu=0.5) for c in CORRECTIONS]
+    scenes.append(shared_dir / "corpus/sofa/Component/AnimationLoop/FreeMotionAnimationLoop.scn")
+    counts = allocations(shim, scenes)
+    assert counts == {str(path): [0, 0] for path in scenes}

@@ -210,3 +210,40 @@ def test_one_compliance_for_many_points_is_each_point_s(tmp_path: Path) -> None:
         b for b in plan_of(path).buffers if b.key.endswith("UncoupledConstraintCorrection5.compliance")
     ]
     assert compliance.initial.tolist() == [3.0, 3.0]
+
+
+RADIUS = 0.1
+
+
+def sphere_scene(tmp_path: Path, intersection: str, radius: float = RADIUS) -> Path:
+    """A sphere (mass 2, radius ``radius``) above the flat floor, the pipeline's intersection
+    ``intersection`` (alarm 0.2, contact CONTACT)."""
+    text = scene(tmp_path, FLAT, (0.6, 0.3, -0.4)).read_text()  # (far from the triangles' shared edge)
+    text = text.replace(
+        f'<LocalMinDistance alarmDistance="0.2" contactDistance="{CONTACT}" />',
+        f'<{intersection} alarmDistance="0.2" contactDistance="{CONTACT}" />',
+    ).replace("<PointCollisionModel />", f'<SphereCollisionModel radius="{radius}" />')
+    path = tmp_path / f"sphere_{intersection}.scn"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("intersection", ["NewProximityIntersection", "MinProximityIntersection"])
+def test_a_sphere_rests_at_the_contact_distance_plus_its_radius(tmp_path: Path, intersection: str) -> None:
+    # SOFA's sphere ContactMapper: the contact point is the centre, the radius added to the distance
+    sim = sofac.load(sphere_scene(tmp_path, intersection))
+    sim.step(40)  # lands within 25 steps
+    for _ in range(50):
+        sim.step(1)
+        assert sim.output("/CollisionPipeline3.contactReport")[0] == 1
+        assert sim["/Particle/dofs"].position[0, 1] == pytest.approx(CONTACT + RADIUS, abs=1e-12)
+        assert sim.output("/.constraint_f")[0] == pytest.approx(MASS * G * DT, rel=1e-12)
+    assert abs(sim["/Particle/dofs"].velocity[0, 1]) < 1e-12
+
+
+def test_spheres_under_local_min_distance_are_refused(tmp_path: Path) -> None:
+    path = sphere_scene(tmp_path, "LocalMinDistance")
+    checked, _ = check_file(path)
+    assert checked is not None
+    plan = plan_scene(checked)  # not compiled: the contact guard stops the step before a contact
+    assert plan.collisions == [] and plan.contact_guard is not None

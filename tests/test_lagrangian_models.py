@@ -1,6 +1,7 @@
 """SOFA's common Lagrangian constraint models compiled under FreeMotionAnimationLoop, against
 closed forms: FixedLagrangianConstraint<Vec3d> holds a particle at its rest position under
-gravity with the multiplier m g dt per step (the impulse), and no drift; StopperLagrangianConstraint
+gravity with the multiplier m g dt per step (the impulse), and no drift, and <Rigid3d> pulls a frame
+to its rest pose and holds it against gravity and a torque; StopperLagrangianConstraint
 <Vec1d> stops a pushed particle on its bound; UniformLagrangianConstraint<Vec1d> holds every
 coordinate at zero or at rest; SlidingLagrangianConstraint<Vec3d> keeps a point on its segment
 under gravity, sliding as implicit Euler does, and stops it at the end."""
@@ -228,3 +229,41 @@ def test_a_zero_length_sliding_axis_is_an_error_at_its_attribute(tmp_path: Path,
     line = next(n for n, row in enumerate(SLIDING.splitlines(), start=1) if "axis_2=" in row)
     assert (diagnostic.loc.line, diagnostic.loc.attribute) == (line, "axis_2")
     assert f"axis_1={a} and axis_2={b}" in diagnostic.message and "zero length" in diagnostic.message
+
+
+RIGID_FIXED = """<Node name="root" dt="0.01" gravity="0 -9.81 0">
+    <FreeMotionAnimationLoop name="loop"/>
+    <BlockGaussSeidelConstraintSolver maxIterations="100" tolerance="1e-14"/>
+    <Node name="A">
+        <EulerImplicitSolver rayleighMass="0" rayleighStiffness="0"/>
+        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-20"/>
+        <MechanicalObject name="frame" template="Rigid3d" position="0.1 1.2 0  0 0 0.0998334166 0.9950041653"
+            rest_position="0 1 0  0 0 0.3826834323650898 0.9238795325112867"/>
+        <UniformMass totalMass="0.5"/>
+        <ConstantForceField template="Rigid3d" forces="0 0 0  0 0 {torque}"/>
+        <UncoupledConstraintCorrection template="Rigid3d"/>
+        <FixedLagrangianConstraint template="Rigid3d" indices="0"/>
+    </Node>
+</Node>
+"""
+
+
+def test_a_fixed_rigid_frame_is_pulled_to_its_rest_pose_and_held_against_a_torque(tmp_path: Path) -> None:
+    # FixedLagrangianConstraint<Rigid3d>: six rows (e_k, 0), (0, e_k); the centre's violation is
+    # linear (pulled home in one step), the orientation's the Euler vector of q q_rest⁻¹ (home
+    # after a few steps); then the kept impulses carry the weight and the torque over a step
+    dt, mass, g, torque = 0.01, 0.5, 9.81, 0.3
+    path = tmp_path / "rigid_fixed.scn"
+    path.write_text(RIGID_FIXED.format(torque=torque))
+    sim = sofac.load(path)
+    phase = sim.plan.constraints
+    assert phase is not None and phase.capacity == 6 and len(phase.blocks) == 2
+    sim.step(1)
+    frame = sim["/A/frame"]
+    np.testing.assert_allclose(frame.position[0, :3], [0, 1, 0], atol=1e-12)
+    sim.step(49)
+    rest = [0, 1, 0, 0, 0, 0.3826834323650898, 0.9238795325112867]
+    np.testing.assert_allclose(frame.position[0], rest, atol=1e-12)
+    np.testing.assert_allclose(frame.velocity, 0.0, atol=1e-12)
+    impulse = sim.output("/.constraint_kept_forces")
+    np.testing.assert_allclose(impulse, [0, mass * g * dt, 0, 0, 0, -torque * dt], rtol=1e-9, atol=1e-14)

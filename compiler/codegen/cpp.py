@@ -606,12 +606,14 @@ class _CollisionView:
         self.setup.append("C.finish_setup();")
         if self.lagrangian:
             rows, static = collision.row_capacity + collision.static_rows, collision.static_rows
-            bodies = max((b for b, *_ in collision.bodies), default=-1) + 1
-            self.setup.append(f"C.setup_lagrangian({collision.mu!r}, {rows}, {static}, {bodies});")
-            for i, (body, free, frames, offsets, subset) in enumerate(collision.bodies):
-                pointers = [_ptr(b) if b is not None else "nullptr" for b in (free, frames, offsets, subset)]
-                self.setup.append(f"C.lagrangian[{i}] = {{{body}, {', '.join(pointers)}}};")
+            bodies = max((b.body for b in collision.bodies), default=-1) + 1
+            self.setup.append(f"C.setup_lagrangian({collision.mu!r}, {static}, {bodies});")
+            for i, b in enumerate(collision.bodies):
+                given = (b.free, b.frames, b.offsets, b.subset, b.nodes, b.weights, b.element_nodes)
+                pointers = ", ".join(_ptr(p) if p is not None else "nullptr" for p in given)
+                self.setup.append(f"C.lagrangian[{i}] = {{{b.body}, {pointers}, {b.width}}};")
             self.setup.append(f"C.rank = {{{', '.join(str(r) for r in collision.ranks)}}};")
+            self.setup.append(f"C.reserve_rows({rows});")
         self.fit = ""  # friction_contact: the problem's buffers grown with the rows (lagrangian_fit)
         if self.lagrangian and collision.problem:
             vectors = ", ".join(f"S.{b.ident}" for b in collision.problem)

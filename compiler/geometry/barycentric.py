@@ -151,6 +151,10 @@ class Embedding:
     indices: np.ndarray
     weights: np.ndarray
     notes: tuple[str, ...] = field(default=())
+    # Per mapped point, how many leading columns are its element's nodes (a mesh of tetrahedra and
+    # hexahedra pads its tetrahedra to 8 columns); None: all of them. SOFA's applyJT on constraint
+    # rows adds exactly these.
+    nodes: np.ndarray | None = None
 
 
 # ---- SOFA's small-matrix arithmetic -------------------------------------------------------------
@@ -625,6 +629,7 @@ def _map_mesh(points: np.ndarray, pts: np.ndarray, cells: dict[str, np.ndarray])
     weights = np.zeros((len(pts), k))
     offset = 0
     element = np.zeros(len(pts), dtype=np.int64)
+    nodes = np.full(len(pts), k, dtype=np.int64)
     for kind in present:
         count = len(cells[kind])
         rows = np.flatnonzero((best >= offset) & (best < offset + count))
@@ -633,10 +638,12 @@ def _map_mesh(points: np.ndarray, pts: np.ndarray, cells: dict[str, np.ndarray])
         order = _HEXA_ORDER_MESH if kind == "hexahedra" else _QUAD_ORDER_MESH if kind == "quads" else None
         idx, w = _linear_map(cells[kind], local, _WEIGHTS[kind](coords), order, k)
         indices[rows], weights[rows], element[rows] = idx, w, best[rows]
+        nodes[rows] = cells[kind].shape[1]
         offset += count
     kind = "+".join(present)
     coords = v[:, : _COORDS[present[0]]]
-    return Embedding(kind, element, coords, indices, weights, _degenerate_note(frames))
+    padded = nodes if bool((nodes < k).any()) else None
+    return Embedding(kind, element, coords, indices, weights, _degenerate_note(frames), padded)
 
 
 def _map_mesh_edges(points: np.ndarray, pts: np.ndarray, edges: np.ndarray) -> Embedding:
@@ -832,17 +839,17 @@ def barycentric_map(
     return embedding.indices, embedding.weights
 
 
-def map_cells(
+def embed_cells(
     input_rest_positions: Any,
     points: Any,
     cells: dict[str, np.ndarray],
     *,
     mode: str,
     grid: RegularGrid | SparseGrid | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`barycentric_map` with a topology's element arrays by name (``edges``, ``triangles``,
-    ``quads``, ``tetrahedra``, ``hexahedra``) and the mapper mode of :func:`mapper_for`."""
-    return barycentric_map(
+) -> Embedding:
+    """:func:`barycentric_embedding` with a topology's element arrays by name (``edges``,
+    ``triangles``, ``quads``, ``tetrahedra``, ``hexahedra``) and the mapper mode of :func:`mapper_for`."""
+    return barycentric_embedding(
         input_rest_positions,
         points,
         tetrahedra=cells.get("tetrahedra"),

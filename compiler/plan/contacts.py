@@ -201,8 +201,14 @@ def contact_setup_refusal(planner: Planner) -> str:
             assert spec is not None
             if spec.variant not in _RANK:
                 return f"{spec.name} takes no part in compiled contacts"
-            if kind == "friction_contact" and spec.variant is Variant.SPHERE:
-                return "Lagrangian contact on spheres is not compiled yet"
+            intersection = setup.parts["intersection"].spec
+            if (
+                kind == "friction_contact"
+                and spec.variant is Variant.SPHERE
+                and intersection is not None
+                and intersection.variant is Variant.LOCAL_MIN_DISTANCE
+            ):
+                return "LocalMinDistance's sphere tests (Lagrangian contact on spheres) are not compiled yet"
             if checked.datatype is not None and checked.datatype.name != "Vec3d":
                 return (
                     f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"

@@ -25,6 +25,7 @@
 #include <cmath>
 #include <limits>
 
+#include "quaternion.h"
 #include "types.h"
 
 namespace sofac {
@@ -659,6 +660,20 @@ inline void bilateral_violation(double* dfree, Index first, const double* x1, co
             if (p < rest_count) value -= rest[3 * p + k];
             dfree[first + 3 * p + k] = value;
         }
+}
+
+// FixedLagrangianConstraint<Rigid3d>::getConstraintViolation: six rows first + 6 p + k per fixed
+// frame dofs[p]: its centre's move from the rest position, then the Euler vector of
+// q_free * q_rest.inverse() (doGetSingleConstraintViolation).
+inline void rigid_fixed_violation(double* dfree, Index first, const double* x, const double* rest, const Index* dofs,
+                                  Index count) {
+    for (Index p = 0; p < count; ++p) {
+        const double* free = x + 7 * dofs[p];
+        const double* home = rest + 7 * dofs[p];
+        double* out = dfree + first + 6 * p;
+        for (int k = 0; k < 3; ++k) out[k] = free[k] - home[k];
+        (SofaQuat::load(free + 3) * SofaQuat::load(home + 3).inverse()).to_euler_vector(out + 3);
+    }
 }
 
 // UniformLagrangianConstraint::getConstraintViolation (position order): rows first + i get

@@ -33,13 +33,20 @@ namespace sofac::collide {
 // Where a collision model's points are corrected: `body` (a constraint correction, in the solver's
 // order; -1: none, as a static obstacle) and, for a rigidly mapped model, each point's frame and
 // rotated offset (the RigidMapping's last apply); for a model mapped by an IdentityMapping or a
-// SubsetMapping with increasing indices, each point's DOF in the corrected state.
+// SubsetMapping with increasing indices, each point's DOF in the corrected state; for a model
+// mapped by a BarycentricMapping, each point's `width` parent DOFs and weights in its mapper's
+// applyJT order, of which the first element_nodes[point] (all when null) are its element's.
 struct LagrangianModel {
     Index body = -1;
     const double* x_free = nullptr;  // the model's free positions (x + dt J v_free when mapped)
     const Index* frames = nullptr;   // rigidly mapped: frame of each point
     const double* offsets = nullptr; // rigidly mapped: rotated offset of each point
     const Index* subset = nullptr;   // identity or subset mapped: the parent DOF of each point
+    const Index* nodes = nullptr;    // barycentrically mapped: the parent DOFs of each point
+    const double* weights = nullptr; // barycentrically mapped: their weights
+    const Index* element_nodes = nullptr;
+    int width = 0;
+    bool barycentric() const { return nodes != nullptr; }
 };
 
 // One contact (BaseContactLagrangianConstraint::Contact) and its contact points.
@@ -73,8 +80,9 @@ struct DynamicRows {
 
 class FrictionContacts : public PenaltyContacts {
 public:
-    // After resize(): the response's settings, the rows the problem can hold, the static rows.
-    void setup_lagrangian(double mu, Index capacity, Index static_rows, Index bodies) {
+    // After resize(): the response's settings, the static rows, the corrections reached; then the
+    // models' `lagrangian` entries, then reserve_rows().
+    void setup_lagrangian(double mu, Index static_rows, Index bodies) {
         mu_ = mu;
         static_rows_ = static_rows;
         lagrangian.resize(models.size());
@@ -89,6 +97,15 @@ public:
         scratch_points_.reserve(1);
         order_.reserve(pairs.size());
         rows_.resize(static_cast<std::size_t>(bodies));
+    }
+
+    // The buffers sized by the rows, reserved for `capacity` rows once the models are known (a
+    // row's widest reach on one body: three points of an element on each side, each spread on
+    // its barycentric element's nodes).
+    void reserve_rows(Index capacity) {
+        int width = 1;  // (a point, or a frame, per element point)
+        for (const LagrangianModel& m : lagrangian) width = std::max(width, m.width);
+        row_width_ = 6 * width;
         reserve(capacity);
     }
 
@@ -164,7 +181,11 @@ public:
                 c.pair = index;
                 c.output_id = o.id;
                 for (int s = 0; s < 2; ++s) place(c, s, p.model[s], s == 0 ? o.elem1 : o.elem2, o.point[s], x);
-                c.distance = d0;
+                // a sphere's contact point is its centre, its radius added to the distance (SOFA's
+                // sphere ContactMapper::addPoint; d0 + r1 + r2)
+                const double r1 = m1.kind == ContactSide::kSphere ? m1.sphere.r(o.elem1) : 0.0;
+                const double r2 = m2.kind == ContactSide::kSphere ? m2.sphere.r(o.elem2) : 0.0;
+                c.distance = d0 + r1 + r2;
                 c.Q = position(c, 0, x[p.model[0]]);
                 c.P = position(c, 1, x[p.model[1]]);
                 const V3& n = o.normal;
@@ -236,6 +257,13 @@ public:
         DynamicRows& r = rows_[static_cast<std::size_t>(body)];
         r.deriv = DT::deriv;
         r.clear();
+        if constexpr (DT::deriv == 3 && !DT::rigid) {
+            for (const LagrangianModel& m : lagrangian)
+                if (m.body == body && m.barycentric()) {
+                    barycentric_rows(r, body, fixed);
+                    return r;
+                }
+        }
         for (Index k = 0; k < fixed.rows; ++k) {
             r.row_index.push_back(fixed.row_index[k]);
             for (Index e = fixed.start[k]; e < fixed.start[k + 1]; ++e) {
@@ -338,6 +366,7 @@ private:
     void reserve(Index capacity) {
         capacity_ = capacity;
         const auto rows = static_cast<std::size_t>(capacity);
+        const auto width = static_cast<std::size_t>(row_width_);
         for (auto& o : object_) o.previous.reserve(rows);
         previous_forces_.reserve(rows);
         ids_.reserve(rows);
@@ -346,8 +375,83 @@ private:
         for (auto& r : rows_) {
             r.row_index.reserve(rows);
             r.start.reserve(rows + 1);
-            r.dof.reserve(4 * rows);
-            r.values.reserve(24 * rows);
+            r.dof.reserve(width * rows);
+            r.values.reserve(6 * width * rows);
+        }
+        if (row_width_ > 6) triplets_.reserve(width * rows + static_entries_);
+    }
+
+    // A block of a body's constraint matrix as CompressedRowSparseMatrixConstraint inserts it
+    // (its btemp: unsorted, a repeat of the last (row, DOF) added to it).
+    struct Triplet {
+        Index row, dof;
+        V3 value;
+        bool operator<(const Triplet& b) const { return row < b.row || (row == b.row && dof < b.dof); }
+    };
+    void insert(Index row, Index dof, const V3& value) {
+        if (triplets_.empty() || triplets_.back().row != row || triplets_.back().dof != dof)
+            triplets_.push_back(Triplet{row, dof, V3{{0.0, 0.0, 0.0}}});
+        triplets_.back().value = triplets_.back().value + value;
+    }
+
+    // The rows of a body whose contact models are barycentrically mapped onto it, as SOFA's
+    // MatrixDeriv holds them when the correction reads it: the static rows (the body's own
+    // constraints wrote them first), then, per collision state (in the models' order), its rows
+    // ascending, each DOF of a row ascending spread on its element's nodes in the mapper's order
+    // (BarycentricMapper::applyJT); then compress(): std::sort of the blocks by (row, DOF), the
+    // blocks of one (row, DOF) summed in the sorted order. The same std::sort on the same
+    // sequence, so the same sums to the last bit.
+    void barycentric_rows(DynamicRows& r, Index body, const JacobianRows& fixed) {
+        const auto entries = static_cast<std::size_t>(fixed.rows > 0 ? fixed.start[fixed.rows] : 0);
+        if (entries > static_entries_) {  // (the first step: the static rows are known now)
+            static_entries_ = entries;
+            triplets_.reserve(static_cast<std::size_t>(row_width_ * capacity_) + entries);
+        }
+        triplets_.clear();
+        for (Index k = 0; k < fixed.rows; ++k)
+            for (Index e = fixed.start[k]; e < fixed.start[k + 1]; ++e)
+                insert(fixed.row_index[k], fixed.dof[e], load3(fixed.values, 3, e));
+        const int lines = mu_ > 0.0 ? 3 : 1;
+        for (std::size_t i = 0; i < lagrangian.size(); ++i) {
+            const LagrangianModel& state = lagrangian[i];
+            bool first = state.body == body && state.barycentric();
+            for (std::size_t j = 0; j < i && first; ++j) first = lagrangian[j].x_free != state.x_free;
+            if (!first) continue;  // (a collision state's models share its free positions)
+            for (const LagrangianContact& c : contacts_) {
+                const PenaltyPair& p = pairs[c.pair];
+                for (int s = 0; s < 2; ++s) {
+                    const LagrangianModel& m = lagrangian[p.model[s]];
+                    if (m.body != body || m.x_free != state.x_free) continue;
+                    for (int l = 0; l < lines; ++l) {
+                        const V3& dir = l == 0 ? c.normal : (l == 1 ? c.t : c.s);
+                        Index vertex[3];
+                        V3 value[3];
+                        const int n = collision_row(c, s, s == 0 ? -dir : dir, vertex, value);
+                        for (int k = 0; k < n; ++k) {
+                            const Index v = vertex[k];
+                            const Index count = m.element_nodes != nullptr ? m.element_nodes[v] : m.width;
+                            for (Index a = 0; a < count; ++a) {
+                                const Index column = Index(m.width) * v + a;
+                                insert(c.row + l, m.nodes[column], value[k] * m.weights[column]);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        std::sort(triplets_.begin(), triplets_.end());
+        for (std::size_t i = 0; i < triplets_.size();) {
+            const Index row = triplets_[i].row;
+            r.row_index.push_back(row);
+            while (i < triplets_.size() && triplets_[i].row == row) {
+                const Index dof = triplets_[i].dof;
+                V3 sum = triplets_[i].value;
+                for (++i; i < triplets_.size() && triplets_[i].row == row && triplets_[i].dof == dof; ++i)
+                    sum = sum + triplets_[i].value;
+                r.dof.push_back(dof);
+                for (int k = 0; k < 3; ++k) r.values.push_back(sum[k]);
+            }
+            r.start.push_back(Index(r.dof.size()));
         }
     }
 
@@ -390,12 +494,10 @@ private:
         return load3(x, 3, v[0]);
     }
 
-    // One row's entries on a body: the contact point's `data` spread on its element's points
-    // (BarycentricMapping::applyJT: a sorted row of the collision state), then, when the model is
-    // rigidly mapped, summed per frame as RigidMapping::applyJT does (v += f, w += r x f, points
-    // ascending).
-    template <class DT>
-    void add_row_entries(DynamicRows& r, const LagrangianModel& m, const LagrangianContact& c, int s, const V3& data) {
+    // A contact row of the collision state, side s: the contact point's `data` spread on its
+    // element's points (the contact mapper's BarycentricMapping::applyJT), as the state's
+    // compressed row holds it: points ascending, a repeated point summed. Returns the entries.
+    static int collision_row(const LagrangianContact& c, int s, const V3& data, Index* merged_vertex, V3* merged) {
         Index vertex[3] = {0, 0, 0};
         V3 f[3] = {};
         const int count = c.count[s];
@@ -415,8 +517,6 @@ private:
         int order[3] = {0, 1, 2};
         for (int i = 1; i < count; ++i)  // insertion sort of (at most) three
             for (int j = i; j > 0 && vertex[order[j]] < vertex[order[j - 1]]; --j) std::swap(order[j], order[j - 1]);
-        Index merged_vertex[3] = {0, 0, 0};
-        V3 merged[3] = {};
         int n = 0;
         for (int k = 0; k < count; ++k) {
             const int a = order[k];
@@ -428,6 +528,17 @@ private:
                 ++n;
             }
         }
+        return n;
+    }
+
+    // One row's entries on a body: the collision state's row (collision_row) on the body's DOFs:
+    // as they are, through an identity or subset mapping, or, when the model is rigidly mapped,
+    // summed per frame as RigidMapping::applyJT does (v += f, w += r x f, points ascending).
+    template <class DT>
+    void add_row_entries(DynamicRows& r, const LagrangianModel& m, const LagrangianContact& c, int s, const V3& data) {
+        Index merged_vertex[3] = {0, 0, 0};
+        V3 merged[3] = {};
+        const int n = collision_row(c, s, data, merged_vertex, merged);
         if constexpr (DT::rigid && DT::deriv == 6) {
             // frames ascending; within a frame, points ascending
             Index frame_list[3] = {0, 0, 0};
@@ -474,6 +585,9 @@ private:
     std::vector<Index> order_;
     std::vector<RowBlock> blocks_;
     std::vector<DynamicRows> rows_;
+    std::vector<Triplet> triplets_;  // a barycentric body's blocks before compress()
+    Index row_width_ = 6;           // the most DOFs a row reaches on one body
+    std::size_t static_entries_ = 0;  // the most static blocks a barycentric body has
     BarycentricContactPoints scratch_points_;
 };
 

@@ -4,6 +4,7 @@
 // Kernels that must reproduce SOFA's digits use these rather than Eigen's quaternions.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -48,6 +49,16 @@ struct SofaQuat {
         }
         const double scale = 1.0 / std::sqrt(magnitude);
         for (double& c : q) c *= scale;
+    }
+    // Quat::toEulerVector: roll, pitch, yaw of the normalized quaternion (pitch's sine clamped).
+    void to_euler_vector(double* out) const {
+        SofaQuat p = *this;
+        p.normalize();
+        const double* a = p.q;
+        const double y = std::max(-1.0, std::min(1.0, 2. * (a[3] * a[1] - a[2] * a[0])));
+        out[0] = std::atan2(2 * (a[3] * a[0] + a[1] * a[2]), (1 - 2 * (a[0] * a[0] + a[1] * a[1])));
+        out[1] = std::asin(y);
+        out[2] = std::atan2(2 * (a[3] * a[2] + a[0] * a[1]), (1 - 2 * (a[1] * a[1] + a[2] * a[2])));
     }
     void rotate(const double* v, double* out) const { quat_rotate(q, false, v, out); }
     void inverse_rotate(const double* v, double* out) const { quat_rotate(q, true, v, out); }

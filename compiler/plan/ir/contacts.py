@@ -181,6 +181,26 @@ REPORT_FIELDS = (
 )
 
 
+@dataclass(frozen=True)
+class ContactBody:
+    """Where a Lagrangian contact model's rows land (runtime LagrangianModel): the constraint
+    correction they reach (``body``, -1: none, a static obstacle), the positions the violation
+    reads (the free positions when mapped), and how the rows go up the model's mapping: none (its
+    own state), RigidMapping (``frames``, ``offsets``), IdentityMapping / SubsetMapping (``subset``:
+    each point's parent DOF) or BarycentricMapping (``nodes``, ``weights``: ``width`` columns per
+    point in its mapper's applyJT order, the first ``element_nodes`` of them real)."""
+
+    body: int
+    free: Buffer | None
+    frames: Buffer | None = None
+    offsets: Buffer | None = None
+    subset: Buffer | None = None
+    nodes: Buffer | None = None
+    weights: Buffer | None = None
+    element_nodes: Buffer | None = None
+    width: int = 0
+
+
 @dataclass
 class Collision:
     """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
@@ -213,11 +233,7 @@ class Collision:
     ranks: list[int] = field(default_factory=list)
     row_capacity: int = 0
     static_rows: int = 0  # the scene's own constraint rows, before the contacts'
-    # friction_contact, per model: (correction index or -1, free positions, frames, offsets, subset
-    # indices: RigidMapping's frames and offsets, or an identity/subset mapping's parent DOFs)
-    bodies: list[tuple[int, Buffer | None, Buffer | None, Buffer | None, Buffer | None]] = field(
-        default_factory=list
-    )
+    bodies: list[ContactBody] = field(default_factory=list)  # friction_contact: per model
     # friction_contact: the constraint problem's buffers sized by the rows (W, dfree, f, d, scratch),
     # grown with the capacity when a step's contacts outgrow it (lagrangian_fit)
     problem: list[Buffer] = field(default_factory=list)

@@ -47,6 +47,10 @@ class MappingOp:
     # ... and its x and v too (the pipeline maps x when a pair may meet, Python maps it on read:
     # Collision.lazy).
     mapped_when_near: bool = False
+    # A BarycentricMapping whose table pads short elements (tetrahedra among hexahedra): each
+    # output point's number of real columns, the leading ones (constraint rows carried through
+    # applyJT take only these); None: every column is real.
+    element_nodes: Buffer | None = None
 
 
 @dataclass

@@ -41,6 +41,18 @@ class CoordinateViolation:
 
 
 @dataclass
+class RigidFixedViolation:
+    """Six rows per fixed frame from ``first_row`` on: the centre's and the orientation's move from
+    the rest position (runtime rigid_fixed_violation)."""
+
+    origin: str
+    first_row: int
+    state: StatePlan
+    dofs: Buffer
+    count: int
+
+
+@dataclass
 class StopperViolation:
     """One row: the coordinate ``index`` of a Vec1d state."""
 
@@ -70,6 +82,7 @@ class ConstraintLowering:
     bilateral: list[BilateralViolation] = field(default_factory=list)
     coordinates: list[CoordinateViolation] = field(default_factory=list)
     stoppers: list[StopperViolation] = field(default_factory=list)
+    rigid_fixed: list[RigidFixedViolation] = field(default_factory=list)
     sliding: list[SlidingRows] = field(default_factory=list)
     # States whose J rows are computed each step (rows carried through a RigidMapping, sliding
     # rows), by state ident: the correction reads these instead of constant rows.

@@ -24,6 +24,7 @@ from sofac.plan.lower.constraint_context import (
     BilateralViolation,
     ConstraintLowering,
     CoordinateViolation,
+    RigidFixedViolation,
     SlidingRows,
     StopperViolation,
 )
@@ -31,7 +32,7 @@ from sofac.plan.lower.constraint_solve import values_of
 from sofac.plan.lower.constraints import (
     constraint_lowering,
 )
-from sofac.plan.lower.corrections import rigidly_mapped
+from sofac.plan.lower.corrections import linearly_mapped, rigidly_mapped
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -79,10 +80,11 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
         if state is None:
             planner.unsupported(checked, f"its {name} is not a compiled MechanicalObject")
             return
-        if state.mapped and not rigidly_mapped(planner, state):
+        if state.mapped and not (rigidly_mapped(planner, state) or linearly_mapped(planner, state)):
             planner.unsupported(
                 checked,
-                f"constraint rows through mappings other than one RigidMapping are not compiled yet ({name})",
+                "constraint rows through mappings other than one RigidMapping, IdentityMapping, "
+                f"SubsetMapping or BarycentricMapping from an independent state: not compiled yet ({name})",
             )
             return
         states.append(state)
@@ -149,9 +151,13 @@ def _kept_forces(planner: Planner, phase: ConstraintPhase, count: int) -> int:
 def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """FixedLagrangianConstraint<Vec3d>: rows +e_x, +e_y, +e_z on each fixed DOF (indices, or every
     DOF with fixAll), violation x_free - rest_position, one BilateralConstraintResolution3Dof per DOF
-    with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation)."""
-    lowering = _lowering_for(planner, checked, "Vec3d")
+    with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation); <Rigid3d>: six rows
+    per frame, see ``_fixed_rigid``."""
+    lowering = _lowering_for(planner, checked)
     if lowering is None:
+        return
+    if checked.datatype is None or checked.datatype.name not in ("Vec3d", "Rigid3d"):
+        planner.unsupported(checked, "it is compiled for Vec3d and Rigid3d only")
         return
     phase, component = lowering.phase, checked.component
     if _has_end_time(planner, checked):
@@ -171,6 +177,12 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
     if count == 0:
         planner.ignored.append((component, "no index: no constraint row"))
         return
+    if state.datatype.name != checked.datatype.name:
+        planner.unsupported(checked, f"its template differs from its state's ({state.datatype.name})")
+        return
+    if state.datatype.rigid:
+        _fixed_rigid(planner, lowering, checked, state, indices)
+        return
     first_row = phase.capacity
     phase.capacity += 3 * count
     kept_offset = _kept_forces(planner, phase, 3 * count)
@@ -188,6 +200,31 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
             origin_of(component), first_row, state.rest, state, fixed, fixed, count, no_rest, 0
         )
     )
+
+
+def _fixed_rigid(
+    planner: Planner,
+    lowering: ConstraintLowering,
+    checked: CheckedComponent,
+    state: StatePlan,
+    dofs: np.ndarray,
+) -> None:
+    """FixedLagrangianConstraint<Rigid3d>: per fixed frame six rows, (e_k, 0) then (0, e_k); the
+    violation the centre's move and the Euler vector of q_free q_rest⁻¹; two
+    BilateralConstraintResolution3Dof, on the kept forces' centre and orientation parts."""
+    phase, component = lowering.phase, checked.component
+    count = len(dofs)
+    first_row = phase.capacity
+    phase.capacity += 6 * count
+    kept_offset = _kept_forces(planner, phase, 6 * count)
+    for p, dof in enumerate(dofs):
+        for half in (0, 3):
+            phase.blocks.append((first_row + 6 * p + half, BILATERAL_3, 1.0, kept_offset + 6 * p + half, 0.0))
+        for k in range(6):
+            unit = tuple(1.0 if c == k else 0.0 for c in range(6))
+            phase.entries.setdefault(state.ident, []).append((first_row + 6 * p + k, int(dof), unit))
+    buffer = planner.buffer(component, "fixed_indices", dofs, "i64")
+    lowering.rigid_fixed.append(RigidFixedViolation(origin_of(component), first_row, state, buffer, count))
 
 
 def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:

@@ -34,6 +34,7 @@ from sofac.plan.ir import (
 from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem
 from sofac.plan.lower.constraint_solve import solve_constraints, solver_refusal, uncoupled_correction
 from sofac.plan.lower.corrections import (
+    carry_through_linear_mappings,
     carry_through_rigid_mappings,
     contact_bodies,
     lagrangian_collision,
@@ -260,6 +261,7 @@ def _phase_with_rows(planner: Planner, lowering: ConstraintLowering) -> None:
         phase.violation.append(
             Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, problem.dfree)])
         )
+    carry_through_linear_mappings(planner, lowering)
     carry_through_rigid_mappings(planner, lowering)
     _sliding_rows(planner, lowering, problem.dfree)
     bodies = contact_bodies(planner, lowering, lagrangian, free_x) if lagrangian is not None else set()
@@ -364,6 +366,11 @@ def _violations(lowering: ConstraintLowering, dfree: Buffer, free_x: dict[str, B
             coordinates.count,
         )
         phase.violation.append(Op(coordinates.origin, [violation]))
+    for fixed in lowering.rigid_fixed:
+        x, rest = fixed.state.x, fixed.state.rest
+        assert rest is not None
+        violation = call("rigid_fixed_violation", dfree, fixed.first_row, x, rest, fixed.dofs, fixed.count)
+        phase.violation.append(Op(fixed.origin, [violation]))
     for stopper in lowering.stoppers:
         violation = call("stopper_violation", dfree, stopper.row, stopper.state.x, stopper.index)
         phase.violation.append(Op(stopper.origin, [violation]))

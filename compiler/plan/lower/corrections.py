@@ -19,6 +19,7 @@ from sofac.plan.ir import (
     Buffer,
     Call,
     Collision,
+    ContactBody,
     Correction,
     Element,
     Env,
@@ -166,25 +167,47 @@ def linear_solver_correction(
     phase.correction.append(Op(correction.origin, [correct]))
 
 
-def rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
-    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
+def _mapped_from(planner: Planner, state: StatePlan) -> tuple[str, StatePlan] | None:
+    """The lowering of the mapping whose output is ``state`` and the independent state it maps
+    from (None: not mapped, or mapped from a mapped state)."""
     mapping = planner.checked.mapping_of(state.component)
     spec = mapping.spec if mapping is not None else None
     parent = mapping.links.get("input") if mapping is not None else None
     parent_state = planner.states.get(id(parent)) if isinstance(parent, Component) else None
+    if spec is None or parent_state is None or parent_state.mapped:
+        return None
+    return spec.lowering, parent_state
+
+
+def rigidly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """Points (Vec3d) mapped by one RigidMapping from an independent Rigid3d state."""
+    found = _mapped_from(planner, state)
     return (
-        spec is not None
-        and spec.lowering == "rigid_mapping"
-        and parent_state is not None
-        and not parent_state.mapped
-        and parent_state.datatype.name == "Rigid3d"
+        found is not None
+        and found[0] == "rigid_mapping"
+        and found[1].datatype.name == "Rigid3d"
         and state.datatype.name == "Vec3d"  # (Rigid3d frames: rows not carried yet)
     )
 
 
-def increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
+# Mappings whose applyJT carries constraint rows with constant weights (carry_through_linear_mappings).
+_LINEAR_MAPPINGS = ("identity_mapping", "subset_mapping", "barycentric_mapping")
+
+
+def linearly_mapped(planner: Planner, state: StatePlan) -> bool:
+    """A state mapped by one IdentityMapping or SubsetMapping (between states of one DataType) or
+    BarycentricMapping from an independent state (whose rows then carry to that state's DOFs)."""
+    found = _mapped_from(planner, state)
+    return (
+        found is not None
+        and found[0] in _LINEAR_MAPPINGS
+        and (found[0] == "barycentric_mapping" or found[1].datatype.name == state.datatype.name)
+    )
+
+
+def _subset(mapping: MappingOp) -> Buffer | None:
     """An IdentityMapping or SubsetMapping between states of one DataType, from an independent
-    state, with strictly increasing indices (a contact row's DOFs keep their order): its indices."""
+    state: each child DOF's parent DOF."""
     jacobian = mapping.jacobian
     indices = jacobian.args[2] if jacobian.kernel == "subset_apply" else None
     if (
@@ -192,6 +215,15 @@ def increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
         or mapping.parent.mapped
         or mapping.parent.datatype.name != mapping.child.datatype.name
     ):
+        return None
+    return indices
+
+
+def increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
+    """An IdentityMapping or SubsetMapping (see _subset) with strictly increasing indices (a
+    contact row's DOFs keep their order): its indices."""
+    indices = _subset(mapping)
+    if indices is None:
         return None
     values = np.asarray(indices.initial, dtype=np.int64).ravel()
     return indices if values.size == 0 or bool(np.all(np.diff(values) > 0)) else None
@@ -233,6 +265,42 @@ def mapped_free_motion(
         phase.rows.append(Op(mapping.origin, [jacobian, advance]))
         free[state.ident] = x_free
     return free
+
+
+def carry_through_linear_mappings(planner: Planner, lowering: ConstraintLowering) -> None:
+    """IdentityMapping, SubsetMapping and BarycentricMapping::applyJT on the constraint matrix: a
+    mapped point's entry (row, point, n) becomes (row, DOF, n w) on each DOF of the parent it
+    follows (w = 1 through identity and subset), in the mapper's column order. The parent's J
+    then sums a (row, DOF) met twice (``_jacobian_rows``): no more than two entries meet there
+    (a row has two objects), so the sum's order does not matter, as in SOFA's compress."""
+    phase = lowering.phase
+    for state in planner.states.values():
+        if not state.mapped or state.ident not in phase.entries:
+            continue
+        mapping = mapping_of_state(lowering, state)
+        if mapping is None or not linearly_mapped(planner, state):
+            continue
+        carried = phase.entries.setdefault(mapping.parent.ident, [])
+        subset, barycentric = _subset(mapping), barycentric_mapping(mapping)
+        if subset is not None:
+            parents = np.asarray(subset.initial, dtype=np.int64).ravel()
+            carried.extend(
+                (row, int(parents[point]), values) for row, point, values in phase.entries[state.ident]
+            )
+        elif barycentric is not None:
+            nodes_buffer, weights_buffer, width = barycentric
+            nodes = np.asarray(nodes_buffer.initial, dtype=np.int64).reshape(-1, width)
+            weights = np.asarray(weights_buffer.initial, dtype=np.float64).reshape(-1, width)
+            counts = mapping.element_nodes
+            real = np.asarray(counts.initial, dtype=np.int64) if counts is not None else None
+            for row, point, values in phase.entries[state.ident]:
+                for j in range(int(real[point]) if real is not None else width):
+                    w = float(weights[point, j])
+                    carried.append((row, int(nodes[point, j]), tuple(v * w for v in values)))
+        else:  # (linearly_mapped holds, so the mapping was lowered otherwise: not expected)
+            checked = planner.checked.of(state.component)
+            planner.unsupported(checked, "constraint rows through its mapping are not compiled yet")
+        del phase.entries[state.ident]
 
 
 def carry_through_rigid_mappings(planner: Planner, lowering: ConstraintLowering) -> None:
@@ -356,41 +424,88 @@ def lagrangian_collision(planner: Planner) -> Collision | None:
     return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
 
 
+def barycentric_mapping(mapping: MappingOp) -> tuple[Buffer, Buffer, int] | None:
+    """A BarycentricMapping (Vec3d, from an independent state): its parent DOFs and weights per
+    point (columns in its mapper's applyJT order) and their number of columns."""
+    jacobian = mapping.jacobian
+    if jacobian.kernel != "linear_map_apply" or mapping.parent.mapped:
+        return None
+    nodes, weights, width = jacobian.args[2], jacobian.args[3], jacobian.args[5]
+    assert isinstance(nodes, Buffer) and isinstance(weights, Buffer) and isinstance(width, int)
+    return nodes, weights, width
+
+
 def contact_bodies(
     planner: Planner, lowering: ConstraintLowering, collision: Collision, free_x: dict[str, Buffer]
 ) -> set[int]:
-    """Where each collision model's contact rows land: the correction of its own state, or of
-    the Rigid3d state its RigidMapping follows (the rows carried through applyJT), or none (a
-    static obstacle); with the free positions the violation reads. Returns the bodies reached."""
+    """Where each collision model's contact rows land: the correction of its own state, or of the
+    state its mapping follows (RigidMapping, IdentityMapping, SubsetMapping with increasing
+    indices, BarycentricMapping: the rows carried through applyJT), or none (a static obstacle);
+    with the free positions the violation reads. Returns the bodies reached."""
     index = {id(c.state): k for k, c in enumerate(lowering.phase.corrections)}
     reached: set[int] = set()
     for model in collision.models:
         state = model.state
         if not state.mapped:
             body = index.get(id(state), -1)
-            collision.bodies.append((body, state.x, None, None, None))
+            collision.bodies.append(ContactBody(body, state.x))
             if body >= 0:
                 reached.add(body)
             continue
         mapping = mapping_of_state(lowering, state)
         body = index.get(id(mapping.parent), -1) if mapping is not None else -1
         subset = increasing_subset(planner, mapping) if mapping is not None else None
+        barycentric = barycentric_mapping(mapping) if mapping is not None else None
         rigid = rigidly_mapped(planner, state)
-        if mapping is None or not (rigid or subset is not None) or state.ident not in free_x:
+        if (
+            mapping is None
+            or not (rigid or subset is not None or barycentric is not None)
+            or state.ident not in free_x
+        ):
             planner.unsupported(
                 planner.checked.of(state.component),
                 "Lagrangian contact on a collision state mapped other than by one RigidMapping, "
-                "IdentityMapping or SubsetMapping (increasing indices) from an independent state is not "
-                "compiled yet",
+                "IdentityMapping, SubsetMapping (increasing indices) or BarycentricMapping from an "
+                "independent state is not compiled yet",
             )
-            collision.bodies.append((-1, state.x, None, None, None))
+            collision.bodies.append(ContactBody(-1, state.x))
             continue
+        free = free_x[state.ident]
         if subset is not None:
-            collision.bodies.append((body, free_x[state.ident], None, None, subset))
+            collision.bodies.append(ContactBody(body, free, subset=subset))
+        elif barycentric is not None:
+            nodes, weights, width = barycentric
+            collision.bodies.append(
+                ContactBody(
+                    body, free, nodes=nodes, weights=weights, element_nodes=mapping.element_nodes, width=width
+                )
+            )
         else:
             frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
             assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
-            collision.bodies.append((body, free_x[state.ident], frames, offsets, None))
+            collision.bodies.append(ContactBody(body, free, frames, offsets))
         if body >= 0:
             reached.add(body)
+    _one_kind_per_barycentric_body(planner, lowering, collision)
     return reached
+
+
+def _one_kind_per_barycentric_body(
+    planner: Planner, lowering: ConstraintLowering, collision: Collision
+) -> None:
+    """A correction whose contact rows come through a BarycentricMapping takes them from
+    barycentrically mapped models only (the runtime rebuilds such a body's rows as SOFA's
+    MatrixDeriv compresses them)."""
+    kinds: dict[int, set[bool]] = {}
+    for body in collision.bodies:
+        if body.body >= 0:
+            kinds.setdefault(body.body, set()).add(body.nodes is not None)
+    for number, found in kinds.items():
+        if len(found) > 1:
+            correction = lowering.phase.corrections[number].checked
+            assert correction is not None
+            planner.unsupported(
+                correction,
+                "contacts on a state through a BarycentricMapping and otherwise (its own collision "
+                "models, another mapping) are not compiled yet",
+            )

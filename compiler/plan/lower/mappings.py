@@ -482,7 +482,7 @@ def _ramified_grid(planner: Planner, topology: Component) -> _Ramified:
 
 
 def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    from sofac.geometry.barycentric import RegularGrid, SparseGrid, map_cells, mapper_for, ramified_grid_map
+    from sofac.geometry.barycentric import RegularGrid, SparseGrid, embed_cells, mapper_for, ramified_grid_map
 
     ends = _mapping_ends(planner, checked, owner)
     if ends is None:
@@ -537,13 +537,15 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
     if rest is None or points is None:
         planner.unsupported(checked, "its input or output positions are not known at compile time")
         return
+    nodes = None
     try:
         if isinstance(grid, _Ramified):
             indices, weights = ramified_grid_map(
                 grid.coarse, grid.finest, grid.table, cells["hexahedra"], points
             )
         else:
-            indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
+            embedding = embed_cells(rest, points, cells, mode=mode, grid=grid)
+            indices, weights, nodes = embedding.indices, embedding.weights, embedding.nodes
     except ValueError as error:
         planner.unsupported(checked, f"it cannot embed its points: {error}")
         return
@@ -581,5 +583,8 @@ def lower_barycentric_mapping(planner: Planner, checked: CheckedComponent, owner
                     )
                 )
             ],
+            element_nodes=planner.buffer(component, "element_nodes", nodes, "i64")
+            if nodes is not None
+            else None,
         )
     )
