@@ -1,11 +1,14 @@
 """Penalty contact as SOFA's DefaultAnimationLoop runs it, compiled for the model pairs that can meet.
 
 At compile time: the pipeline's collision models in SOFA's order, the pairs its broad phase can
-ever produce (different nodes or selfCollision, not both static, disjoint groups, an intersector
-for the two types), each with its element test and model order fixed, and where each pair's
-response goes (a static partner: inside the other model's group, in its force evaluations and K dx
-products; two simulated models: one explicit force per step). At run time (runtime/sofac/penalty.h):
-trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
+ever produce (different nodes, or one node with selfCollision; not both static, disjoint groups, an
+intersector for the two types), each with its element test, model order and, for models of one
+node, SOFA's element filter fixed, and where each pair's response goes (a static partner: inside
+the other model's group, in its force evaluations and K dx products; two simulated models: at the
+pipeline's node, one explicit force per step, or inside the group of a solver integrating that
+node) and which response the models' own contactResponse chooses. At run time
+(runtime/sofac/penalty.h): trees refit, broad and narrow phase, SOFA's contact order, the
+contacts' forces.
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ from sofac.registry import Category, Variant
 
 from .ir import (
     REPORT_FIELDS,
+    Aggregate,
+    Arg,
     Collision,
     CollisionModel,
     ContactPair,
@@ -27,6 +32,7 @@ from .ir import (
     Env,
     Group,
     Op,
+    SelfFilter,
     call,
     origin_of,
 )
@@ -75,6 +81,9 @@ _TESTS[Variant.LOCAL_MIN_DISTANCE] = {
 # doubles the reserve (lagrangian_contact.h, FrictionContacts::fit), a growth in the pipeline's report.
 _CONTACT_CAPACITY = 128
 _RESPONSES = {"PenalityContactForceField": "penalty", "FrictionContactConstraint": "friction_contact"}
+# A model's own contactResponse under the penalty response: SOFA's contact factory name, or
+# "nullptr", SOFA's way to make no contact for the pair (CollisionResponse::createNewContacts).
+_MODEL_RESPONSES = ("PenalityContactForceField", "nullptr")
 # MinProximityIntersection's switches: the pairs each one removes.
 _MIN_PROXIMITY_SWITCHES = {
     "usePointPoint": {("point", "point")},
@@ -201,15 +210,110 @@ def contact_setup_refusal(planner: Planner) -> str:
                 return f"{spec.name} takes no part in compiled contacts"
             if kind == "friction_contact" and spec.variant is Variant.SPHERE:
                 return "Lagrangian contact on spheres is not compiled yet"
-            if checked.datatype is not None and checked.datatype.name != "Vec3d":
+            datatype = checked.datatype.name if checked.datatype is not None else "Vec3d"
+            if datatype != "Vec3d" and not (datatype == "Rigid3d" and spec.variant is Variant.SPHERE):
                 return (
-                    f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
+                    f"{spec.name}<{datatype}> contacts are not compiled yet (Vec3d models and "
+                    "SphereCollisionModel<Rigid3d> are)"
                 )
-            if planner.value(checked.component, "selfCollision"):
-                return "self-collision is not compiled yet"
-            if planner.value(checked.component, "contactResponse"):
-                return "a model's own contactResponse is not compiled yet"
+            if kind == "friction_contact" and planner.value(checked.component, "selfCollision"):
+                return "self-collision under FrictionContactConstraint is not compiled yet (penalty is)"
+        why = _one_node_refusal(planner, setup)
+        if why:
+            return why
     return ""
+
+
+def contact_response_refusals(planner: Planner) -> list[tuple[CheckedComponent, str]]:
+    """The collision models whose own contactResponse sofac cannot compile, and why: under
+    DefaultAnimationLoop's penalty response "PenalityContactForceField" and "nullptr" (no contact)
+    are compiled, under FrictionContactConstraint none yet. (E222 at the attribute.)"""
+    setups = _setups(planner)
+    if isinstance(setups, str):
+        return []
+    refused = []
+    for setup in setups:
+        manager = setup.parts["contact_manager"].component
+        kind = _RESPONSES.get(str(planner.value(manager, "response") or ""))
+        for checked in setup.models:
+            given = _own_response(planner, checked)
+            if not given:
+                continue
+            if kind == "friction_contact":
+                refused.append(
+                    (checked, f"contactResponse={given!r}: a model's own response under "
+                     "FrictionContactConstraint is not compiled yet")
+                )  # fmt: skip
+            elif given not in _MODEL_RESPONSES:
+                refused.append(
+                    (checked, f"contactResponse={given!r} is not compiled: under DefaultAnimationLoop "
+                     "sofac compiles 'PenalityContactForceField' and 'nullptr' (no contact)")
+                )  # fmt: skip
+    return refused
+
+
+def _own_response(planner: Planner, checked: CheckedComponent) -> str:
+    return str(planner.value(checked.component, "contactResponse") or "").strip()
+
+
+def _responds(planner: Planner, a: CheckedComponent, b: CheckedComponent) -> bool:
+    """Whether SOFA makes a contact for a pair of models (CollisionResponse::getContactResponse:
+    the models' own responses when set and not in conflict, else the manager's)."""
+    first, second = _own_response(planner, a), _own_response(planner, b)
+    if first and second and first != second:
+        return True  # the manager's response (penalty)
+    return (first or second or "PenalityContactForceField") != "nullptr"
+
+
+def _one_node_refusal(planner: Planner, setup: _Setup) -> str:
+    """Models of one node that SOFA would pair (both with selfCollision) but whose element filter
+    never returns: LineCollisionModel::canCollideWithElement and PointCollisionModel's hand the
+    question to the other model, which hands it back (two line models, two point models, a line
+    model and a point model other than the first of its node)."""
+    intersection = setup.parts["intersection"]
+    tests = _method_tests(planner, intersection)
+    active = [c for c in setup.models if planner.value(c.component, "active") is not False]
+    for k, a in enumerate(active):
+        for b in active[:k]:
+            if a.component.node is not b.component.node:
+                continue
+            if not (planner.value(a.component, "selfCollision") and planner.value(b.component, "selfCollision")):
+                continue
+            assert a.spec is not None and b.spec is not None
+            kinds = tuple(sorted((a.spec.variant, b.spec.variant), key=lambda v: -_RANK[v]))
+            if kinds not in tests:
+                continue
+            looping = kinds in (("line", "line"), ("point", "point")) or (
+                kinds == ("line", "point")
+                and _node_points(planner, a.component.node) not in (a.component, b.component)
+            )
+            if looping:
+                return (
+                    f"{a.spec.name} at line {a.component.loc.line} and {b.spec.name} at line "
+                    f"{b.component.loc.line} of one node with selfCollision: SOFA's element filter "
+                    "(canCollideWithElement) passes the question between them without end"
+                )
+    return ""
+
+
+def _node_points(planner: Planner, node: Node) -> Component | None:
+    """The first PointCollisionModel of a node: the `mpoints` of its line and triangle models."""
+    for component in node.objects:
+        spec = planner.checked.of(component).spec
+        if spec is not None and spec.variant is Variant.POINT:
+            return component
+    return None
+
+
+def _method_tests(planner: Planner, intersection: CheckedComponent) -> set[tuple[str, str]]:
+    """The (first, second) kinds the intersection method has an element test for."""
+    method = intersection.spec.variant if intersection.spec else None
+    tests = set(_TESTS.get(method, ()))
+    if method == Variant.MIN_PROXIMITY:
+        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
+            if planner.value(intersection.component, switch) is False:
+                tests -= removed
+    return tests
 
 
 def plan_collisions(planner: Planner, owner: dict[int, Group]) -> list[Collision]:
@@ -231,11 +335,7 @@ def _plan_collision(
     pipeline, intersection = setup.pipeline, setup.parts["intersection"]
     method = intersection.spec.variant if intersection.spec else None
     value = planner.value
-    tests = set(_TESTS[method])
-    if method == Variant.MIN_PROXIMITY:
-        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
-            if value(intersection.component, switch) is False:
-                tests -= removed
+    tests = _method_tests(planner, intersection)
     models: list[CollisionModel] = []
     checked_models = [c for c in setup.models if value(c.component, "active") is not False]
     for checked in checked_models:
@@ -289,35 +389,63 @@ def _plan_collision(
         )
         return None
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
+    # Pairs of two simulated models go to the pipeline's node: explicit when no solver integrates
+    # it, else into that solver's group (penalty; the Lagrangian response places rows itself).
+    home = _pipeline_group(planner, pipeline, owner) if response == "penalty" else None
     for later in range(len(models)):
-        for earlier in range(later):
+        # BruteForceBroadPhase::addCollisionModel: the model against itself first, then each earlier one
+        for earlier in (later, *range(later)):
             a, b = models[later], models[earlier]
-            why = _never(planner, checked_models[later], checked_models[earlier], a, b)
-            first, second = (later, earlier) if _RANK[a.kind] >= _RANK[b.kind] else (earlier, later)
+            a_checked, b_checked = checked_models[later], checked_models[earlier]
+            if later == earlier:
+                why = _never_self(planner, a_checked, a)
+                if why is None:
+                    continue  # no selfCollision: nothing to list
+            else:
+                why = _never(planner, a_checked, b_checked, a, b)
+            first, second = (later, earlier) if _first_in_order(a, b) else (earlier, later)
             kinds = (models[first].kind, models[second].kind)
             if not why and kinds not in tests:
                 why = f"{method} has no {kinds[0]}-{kinds[1]} test"
             if why:
                 collision.left_out.append((a.origin, b.origin, why))
                 continue
+            one_node = a_checked.component.node is b_checked.component.node
+            self_filter = (
+                _self_filter(planner, checked_models[first], checked_models[second], later == earlier)
+                if one_node
+                else SelfFilter.NONE
+            )
             options: tuple[bool, ...] = ()
             if kinds == ("triangle", "triangle"):
-                options = (False, use_line_line)
+                options = (later == earlier, use_line_line)
             elif kinds == ("triangle", "line") and method == Variant.NEW_PROXIMITY:
                 options = (use_line_line,)
             elif kinds == ("triangle", "point") and method == Variant.MIN_PROXIMITY:
                 options = (bool(value(intersection.component, "useSurfaceNormals")),)
-            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options)
+            guard = {SelfFilter.NONE: "", SelfFilter.NEVER: "never"}.get(self_filter, "filter")
+            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options, guard)
             if test not in collision.tests:
                 collision.tests.append(test)
             m1, m2 = models[first], models[second]
+            if self_filter in (SelfFilter.SAME_LINES, SelfFilter.LINE_POINT):
+                _add_edges_around_vertex(planner, m1, checked_models[first])
             if kinds == ("triangle", "triangle"):
                 id_bound = 3 * m1.elements + 12 * m2.elements
             else:
                 id_bound = max(m1.elements, m2.elements) + 1
+            both = m1.simulated and m2.simulated
             collision.pairs.append(
                 ContactPair(
-                    first, second, collision.tests.index(test), m1.simulated and m2.simulated, id_bound
+                    first,
+                    second,
+                    collision.tests.index(test),
+                    both and home is None,
+                    id_bound,
+                    grouped=both and home is not None,
+                    self_filter=self_filter,
+                    one_node=one_node,
+                    respond=response != "penalty" or _responds(planner, a_checked, b_checked),
                 )
             )
     if not collision.pairs:
@@ -327,7 +455,7 @@ def _plan_collision(
         for view, index in enumerate(i for i in used if models[i].kind == kind):
             models[index].view = view
     rows = [
-        (p.first, p.second, int(p.root), p.id_bound, p.test, models[p.first].view, models[p.second].view)
+        (p.first, p.second, p.placement, p.id_bound, p.test, models[p.first].view, models[p.second].view)
         for p in collision.pairs
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
@@ -349,7 +477,136 @@ def _plan_collision(
                 _add_cone(planner, collision, model, checked)
         return collision
     _place(planner, collision, number, owner)
+    if home is not None:
+        _place_in_group(planner, collision, number, home, owner)
     return collision
+
+
+def _pipeline_group(planner: Planner, pipeline: CheckedComponent, owner: dict[int, Group]) -> Group | None:
+    """The group of the solver that integrates the pipeline's node, if one does."""
+    solver = planner.checked.solver_of(pipeline.component.node)
+    if solver is None:
+        return None
+    return next((g for g in owner.values() if g.solver is solver.component), None)
+
+
+def _first_in_order(a: CollisionModel, b: CollisionModel) -> bool:
+    """Whether `a` (the later model) is the intersector's first: Triangle before Line before Point,
+    Sphere before Point, Line and Triangle before Sphere, and a Vec3d sphere before a Rigid3d one
+    (SOFA registers SphereCollisionModel<Vec3d>-RigidSphereModel, never the other way)."""
+    if a.kind == b.kind == Variant.SPHERE and a.rigid != b.rigid:
+        return not a.rigid
+    return _RANK[a.kind] >= _RANK[b.kind]
+
+
+def _never_self(planner: Planner, checked: CheckedComponent, model: CollisionModel) -> str | None:
+    """Why the broad phase never pairs a model with itself (BruteForceBroadPhase::doesSelfCollide);
+    None when its selfCollision is off (nothing worth listing)."""
+    if not planner.value(checked.component, "selfCollision"):
+        return None
+    if not model.simulated:
+        return "a static model (simulated=0) never collides with itself"
+    if not model.elements:
+        return "it has no element"
+    return ""
+
+
+def _self_filter(
+    planner: Planner, first: CheckedComponent, second: CheckedComponent, same_model: bool
+) -> SelfFilter:
+    """SOFA's element filter for two models of one node, `first` the intersector's first
+    (CollisionElementIterator::canCollideWith and the first model's canCollideWithElement)."""
+    assert first.spec is not None and second.spec is not None
+    kind = first.spec.variant
+    if same_model:
+        return {
+            Variant.TRIANGLE: SelfFilter.SAME_MODEL,
+            Variant.SPHERE: SelfFilter.SAME_MODEL,
+            Variant.LINE: SelfFilter.SAME_LINES,
+            Variant.POINT: SelfFilter.NEVER,
+        }[kind]
+    if second.spec.variant is Variant.POINT and second.component is _node_points(planner, first.component.node):
+        if kind is Variant.TRIANGLE:
+            return SelfFilter.TRIANGLE_POINT
+        if kind is Variant.LINE:
+            return SelfFilter.LINE_POINT
+    return SelfFilter.NONE  # the filters answer true (or hand over to a sphere's, which does)
+
+
+def _add_edges_around_vertex(planner: Planner, model: CollisionModel, checked: CheckedComponent) -> None:
+    """A line model's edgesAroundVertex (its edges are its topology's), for its element filter."""
+    if model.edges_around_vertex is not None:
+        return
+    around: list[list[int]] = [[] for _ in range(model.state.size)]
+    for e, (a, b) in enumerate(model_edges(planner, model)):
+        around[int(a)].append(e)
+        if int(b) != int(a):
+            around[int(b)].append(e)
+    offsets, items = _csr(around)
+    owner = checked.component
+    model.edges_around_vertex = (
+        planner.buffer(owner, "edges_around_vertex_offsets", offsets, "i64"),
+        planner.buffer(owner, "edges_around_vertex", items, "i64"),
+    )
+
+
+def _place_in_group(
+    planner: Planner, collision: Collision, pipeline: int, group: Group, owner: dict[int, Group]
+) -> None:
+    """The pairs of two simulated models when a solver integrates the pipeline's node: SOFA places
+    their force fields there, inside that solver's group: evaluated in each of its force
+    evaluations and (implicit) K dx products, both models moving, in SOFA's contact order."""
+    grouped = [p for p in collision.pairs if p.grouped]
+    if not grouped:
+        return
+    models = collision.models
+    involved = sorted({i for p in grouped for i in (p.first, p.second)})
+    for index in involved:
+        if owner.get(id(models[index].state.component)) is not group:
+            solver = planner.checked.of(group.solver)
+            planner.unsupported(
+                solver,
+                f"the contacts of {models[index].origin} are placed at the collision pipeline's node, "
+                "which this solver integrates, but this solver does not integrate the model's state",
+            )
+            return
+    for solver in (group.linear_solver,):
+        if group.assembled and solver is not None:
+            planner.unsupported(
+                planner.checked.of(solver),
+                "penalty contacts between two simulated models in its group (the pipeline's node is "
+                "integrated by its solver) change the system's couplings every step; an assembled "
+                "system keeps one pattern: not compiled yet (a matrix-free CGLinearSolver is)",
+            )
+            return
+
+    def vectors(name: str) -> Aggregate:
+        fields: list[Arg] = []
+        for i, model in enumerate(models):
+            buffer = getattr(model.state, name) if i in involved else None
+            fields.append(buffer if buffer is not None else Env.NONE)
+        return Aggregate("ModelVectors", tuple(fields), (len(models),))
+
+    where = f"contact forces of {collision.origin} between simulated models"
+    group.forces.append(
+        Op(where, [call("contact_group_add_force", Env.CONTACTS, pipeline, vectors("f"), vectors("x"))])
+    )
+    if group.scheme == "implicit" and all(models[i].state.dx is not None for i in involved):
+        group.stiffness_dx.append(
+            Op(
+                where,
+                [
+                    call(
+                        "contact_group_add_dforce",
+                        Env.CONTACTS,
+                        pipeline,
+                        vectors("df"),
+                        vectors("dx"),
+                        Env.KFACT,
+                    )
+                ],
+            )
+        )
 
 
 def _response_params(text: str) -> dict[str, str]:
@@ -454,10 +711,14 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
     state = planner.state_of(checked)
     spec = checked.spec
     assert spec is not None
-    if state is None or state.datatype.name != "Vec3d":
-        planner.unsupported(checked, "a collision model needs a Vec3d MechanicalObject in its node")
-        return None
     kind = spec.variant
+    rigid = state is not None and state.datatype.name == "Rigid3d" and kind == Variant.SPHERE
+    if state is None or (state.datatype.name != "Vec3d" and not rigid):
+        planner.unsupported(
+            checked,
+            "a collision model needs a Vec3d MechanicalObject in its node (a Rigid3d one for spheres)",
+        )
+        return None
     value = planner.value
     cells_buffer = radii = None
     elements = flagged = state.size
@@ -505,6 +766,7 @@ def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None
         radius=float(value(checked.component, "radius")) if kind == Variant.SPHERE else 0.0,
         flagged=flagged if kind == Variant.TRIANGLE else 0,
         both_side=bool(value(checked.component, "bothSide")) if kind == Variant.TRIANGLE else False,
+        rigid=rigid,
     )
 
 
@@ -518,10 +780,13 @@ def _never(
     """Why the broad phase never pairs two models ("" if it may): CollisionModel::canCollideWith
     and BruteForceBroadPhase's static test."""
     if a_checked.component.node is b_checked.component.node:
-        return "models of one node collide only with selfCollision"
-    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
-    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
-    if groups_a & groups_b:
+        # canCollideWith: one node -> both models' selfCollision decide (their groups do not)
+        if not (
+            planner.value(a_checked.component, "selfCollision")
+            and planner.value(b_checked.component, "selfCollision")
+        ):
+            return "models of one node collide only with selfCollision"
+    elif _share_group(planner, a_checked, b_checked):
         return "they share a collision group"
     if not a.simulated and not b.simulated:
         return "both are static (simulated=0)"
@@ -530,10 +795,17 @@ def _never(
     return ""
 
 
+def _share_group(planner: Planner, a_checked: CheckedComponent, b_checked: CheckedComponent) -> bool:
+    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
+    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
+    return bool(groups_a & groups_b)
+
+
 def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[int, Group]) -> None:
     """Each simulated model's contact forces in the group integrating its state: in every force
-    evaluation and, for its contacts with static models, in every K dx product."""
-    in_pairs = {i for p in collision.pairs for i in (p.first, p.second)}
+    evaluation and, for its contacts with static models, in every K dx product. (Pairs placed in
+    the group of the pipeline's node are _place_in_group's.)"""
+    in_pairs = {i for p in collision.pairs if not p.grouped for i in (p.first, p.second)}
     for index, model in enumerate(collision.models):
         if index not in in_pairs or not model.simulated:
             continue
@@ -554,7 +826,13 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
             offset = group.assembly_offset(state, planner.checked.of(state.component))
             assembly = (Env.CONTACTS, pipeline, index, Env.ASSEMBLER, offset, Env.KFACT)
             group.assemble.append(Op(where, [call("contact_assemble", *assembly)]))
-            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
+            if group.btd and model.rigid:
+                planner.unsupported(
+                    planner.checked.of(model.state.component),
+                    f"the contacts of {model.origin} (spheres on Rigid3d frames) under BTDLinearSolver "
+                    "are not compiled yet",
+                )
+            elif group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
                 group.assemble.append(
                     Op(where, [call("contact_assemble_static_coupling", *assembly, Env.BAND)])
                 )

@@ -55,6 +55,7 @@ from .contacts import (
     Correction,
     ElementTest,
     LazyPoints,
+    SelfFilter,
 )
 from .groups import (
     STEP_PHASES,
@@ -144,6 +145,7 @@ __all__ = [
     "Plan",
     "Preconditioner",
     "Projection",
+    "SelfFilter",
     "Slot",
     "SpringDamping",
     "SpringFlags",
