@@ -244,7 +244,9 @@ class Shim:
         cells = np.ascontiguousarray(cells, dtype=np.int64)
         offsets, items = csr(around or [])
         mask = np.zeros(n1 * n2, dtype=np.int8)
-        self.lib.self_filter(rule, n1, n2, _i(cells), _i(offsets), _i(items), mask.ctypes.data_as(ctypes.c_char_p))
+        self.lib.self_filter(
+            rule, n1, n2, _i(cells), _i(offsets), _i(items), mask.ctypes.data_as(ctypes.c_char_p)
+        )
         return mask.reshape(n1, n2).astype(bool)
 
     def self_detect(

@@ -11,8 +11,18 @@ import math
 
 import numpy as np
 import pytest
-from collision_shim import KINDS, LINE_POINT, SAME_LINES, SAME_MODEL, TRIANGLE_POINT, Model, Output, Shim, csr, make_shim
-from collision_shim import outputs as outputs_of
+from collision_shim import (
+    KINDS,
+    LINE_POINT,
+    SAME_LINES,
+    SAME_MODEL,
+    TRIANGLE_POINT,
+    Model,
+    Output,
+    Shim,
+    csr,
+    make_shim,
+)
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
 
@@ -403,9 +413,10 @@ def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:
     edges = np.array([(i, i + 1) for i in range(n - 1)], dtype=np.int64)
     around = [[0]] + [[i - 1, i] for i in range(1, n - 1)] + [[n - 2]]
     rope = Model(x, elements=edges, cd=0.01)
+    reach = {"alarm": 0.04, "contact": 0.01}
     runs = [
-        sorted(map(key, shim.self_detect("min", "LL", rope, rope, SAME_LINES, around, alarm=0.04, contact=0.01, brute=b)))
-        for b in (False, True)
+        sorted(map(key, shim.self_detect("min", "LL", rope, rope, SAME_LINES, around, **reach, brute=brute)))
+        for brute in (False, True)
     ]  # fmt: skip
     assert len(runs[1]) > 10 and runs[0] == runs[1]
     assert all(o[0] + 1 < o[1] for o in runs[0])  # e1 < e2, never two links of one joint
@@ -422,7 +433,9 @@ def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:
         assert abs(o.p0[1] - o.p1[1]) > 0.02  # across the fold, one layer to the other
     vertices = Model(x, cd=0.005)
     found = shim.self_detect("min", "TP", sheet, vertices, TRIANGLE_POINT, alarm=0.04, contact=0.01)
-    every = shim.self_detect("min", "TP", sheet, vertices, TRIANGLE_POINT, alarm=0.04, contact=0.01, brute=True)
+    every = shim.self_detect(
+        "min", "TP", sheet, vertices, TRIANGLE_POINT, alarm=0.04, contact=0.01, brute=True
+    )
     assert len(found) > 20 and sorted(map(key, found)) == sorted(map(key, every))
     assert all(o.elem2 not in tris[o.elem1] for o in found)
     assert all(abs(o.value - (0.03 - 0.02)) < 1e-12 for o in found)  # the gap less both contact distances

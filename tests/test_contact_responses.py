@@ -14,13 +14,18 @@ from sofac.diagnostics import SceneError
 from sofac.pipeline import plan_file
 
 PARTICLES = Path(__file__).parent / "data" / "contact_two_particles.scn"
-LEFT, RIGHT = "<PointCollisionModel/>\n    </Node>\n    <Node name=\"Right\">", "<PointCollisionModel/>\n    </Node>\n</Node>"
+LEFT, RIGHT = (
+    '<PointCollisionModel/>\n    </Node>\n    <Node name="Right">',
+    "<PointCollisionModel/>\n    </Node>\n</Node>",
+)
 
 
 def scene(tmp_path: Path, name: str, left: str = "", right: str = "", text: str = "") -> Path:
     """contact_two_particles.scn with the models' contactResponse (empty: unset)."""
     text = text or PARTICLES.read_text()
-    own = {side: f' contactResponse="{value}"' if value else "" for side, value in (("l", left), ("r", right))}
+    own = {
+        side: f' contactResponse="{value}"' if value else "" for side, value in (("l", left), ("r", right))
+    }
     text = text.replace(LEFT, LEFT.replace("<PointCollisionModel/>", f"<PointCollisionModel{own['l']}/>"))
     text = text.replace(RIGHT, RIGHT.replace("<PointCollisionModel/>", f"<PointCollisionModel{own['r']}/>"))
     path = tmp_path / name
@@ -52,7 +57,9 @@ def test_the_pair_response_follows_sofas_rule(tmp_path: Path, left: str, right: 
     assert pair.respond is responds
     reference = run(scene(tmp_path, "default.scn"))
     if not responds:
-        reference = run(scene(tmp_path, "bare.scn", text=PARTICLES.read_text().replace("<PointCollisionModel/>", "")))
+        reference = run(
+            scene(tmp_path, "bare.scn", text=PARTICLES.read_text().replace("<PointCollisionModel/>", ""))
+        )
     assert np.array_equal(run(path), reference)
 
 
@@ -71,4 +78,6 @@ def test_unsupported_responses_are_refused_at_the_attribute(tmp_path: Path) -> N
     with pytest.raises(SceneError) as error:
         plan_file(scene(tmp_path, "friction.scn", left="FrictionContactConstraint", text=text))
     found = [d for d in error.value.diagnostics if d.code == "E222" and d.loc.line == 15]
-    assert len(found) == 1 and "own response under FrictionContactConstraint is not compiled" in found[0].message
+    assert (
+        len(found) == 1 and "own response under FrictionContactConstraint is not compiled" in found[0].message
+    )

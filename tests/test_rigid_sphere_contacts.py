@@ -158,7 +158,10 @@ TWO_BALLS = """<?xml version="1.0"?>
 """
 
 
-RIGHT_RIGID = '<MechanicalObject name="dofs" template="Rigid3d" position="0.5 0.08 0 0 0 0 1" velocity="-0.5 0 0 0 0 0"/>'
+RIGHT_RIGID = (
+    '<MechanicalObject name="dofs" template="Rigid3d" position="0.5 0.08 0 0 0 0 1" '
+    'velocity="-0.5 0 0 0 0 0"/>'
+)
 RIGHT_POINT = '<MechanicalObject name="dofs" position="0.5 0.08 0" velocity="-0.5 0 0"/>'
 IMPLICIT = (
     '<EulerImplicitSolver rayleighMass="0" rayleighStiffness="0"/>\n'
@@ -175,7 +178,9 @@ IMPLICIT = (
     ],
     ids=["explicit, a solver each", "one solver at the pipeline's node", "a Vec3d sphere against it"],
 )
-def test_two_spheres_exchange_momentum(tmp_path: Path, root: str, solver: str, right: str, tolerance: float) -> None:
+def test_two_spheres_exchange_momentum(
+    tmp_path: Path, root: str, solver: str, right: str, tolerance: float
+) -> None:
     """A rigid sphere meets another sphere off-centre (centres 0.08 apart across the motion): a
     glancing contact. Equal and opposite forces keep the momentum (explicit: to round-off; in the
     group of a solver at the pipeline's node, both sides' K dx too: to the CG's tolerance); the

@@ -56,7 +56,8 @@ def folded_cloth(
     position = " ".join(f"{x!r} {y!r} {z!r}" for x, y, z in points)
     flag = "1" if self_collision else "0"
     collision = "\n".join(
-        f'        <{m}CollisionModel selfCollision="{flag}" contactStiffness="{stiffness!r}"/>' for m in models
+        f'        <{m}CollisionModel selfCollision="{flag}" contactStiffness="{stiffness!r}"/>'
+        for m in models
     )
     solver = f'<EulerImplicitSolver rayleighMass="2" rayleighStiffness="0"/>\n    {linear_solver}'
     return f"""<?xml version="1.0"?>

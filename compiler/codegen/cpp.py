@@ -456,7 +456,9 @@ class _CollisionView:
                 self.cases.append((number, test.name, _lmd_case(test.name)))
                 continue
             if test.self_filter == "never":  # one point model: SOFA's filter refuses every pair
-                self.cases.append((number, test.name, "// no element pair of one point model passes SOFA's filter"))
+                self.cases.append(
+                    (number, test.name, "// no element pair of one point model passes SOFA's filter")
+                )
                 continue
             first, second = test.kinds
             flags = "".join(f", {'true' if o else 'false'}" for o in test.options)
@@ -548,8 +550,9 @@ def _pair_settings(collision: Collision) -> list[str]:
         if pair.one_node:
             lines.append(f"{here}.one_node = true;  // models of one node: one state")
         if not pair.respond:
-            lines.append(f"{here}.respond = false;  // contactResponse \"nullptr\": no contact")
+            lines.append(f'{here}.respond = false;  // contactResponse "nullptr": no contact')
     return lines
+
 
 _LMD = "sofac::collide::local_min_distance"
 

@@ -277,7 +277,9 @@ def _one_node_refusal(planner: Planner, setup: _Setup) -> str:
         for b in active[:k]:
             if a.component.node is not b.component.node:
                 continue
-            if not (planner.value(a.component, "selfCollision") and planner.value(b.component, "selfCollision")):
+            if not (
+                planner.value(a.component, "selfCollision") and planner.value(b.component, "selfCollision")
+            ):
                 continue
             assert a.spec is not None and b.spec is not None
             kinds = tuple(sorted((a.spec.variant, b.spec.variant), key=lambda v: -_RANK[v]))
@@ -525,7 +527,8 @@ def _self_filter(
             Variant.LINE: SelfFilter.SAME_LINES,
             Variant.POINT: SelfFilter.NEVER,
         }[kind]
-    if second.spec.variant is Variant.POINT and second.component is _node_points(planner, first.component.node):
+    points = _node_points(planner, first.component.node)  # its canCollideWithElement's point model
+    if second.spec.variant is Variant.POINT and second.component is points:
         if kind is Variant.TRIANGLE:
             return SelfFilter.TRIANGLE_POINT
         if kind is Variant.LINE:

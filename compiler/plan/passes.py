@@ -131,9 +131,7 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
             if pair.root:
                 where = "explicit: once per step at its start (two simulated models)"
             elif pair.grouped:
-                where = (
-                    "in the group integrating the pipeline's node (two simulated models): forces and K dx"
-                )
+                where = "in the group integrating the pipeline's node (two simulated models): forces and K dx"
             else:
                 where = "in the group of the simulated model (a static partner): forces and K dx"
             if pair.self_filter is SelfFilter.NEVER:
