@@ -25,6 +25,7 @@ from collision_shim import (
 )
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
+from test_self_collision import grid_triangles
 
 
 @pytest.fixture(scope="module")
@@ -392,13 +393,7 @@ def folded_sheet(cells: int = 12, width: int = 4, gap: float = 0.03) -> tuple[np
     vs = np.linspace(0.0, 0.4, width + 1)
     du, dv = 1.0 / cells, 0.4 / width
     x = np.array([(u, 0.0, v) if u <= 1.0 else (2.0 - u + du / 2, gap, v + dv / 4) for u in us for v in vs])
-    n = width + 1
-    tris = []
-    for i in range(2 * cells):
-        for j in range(width):
-            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
-            tris += [(a, b, c), (a, c, d)]
-    return x, np.array(tris, dtype=np.int64)
+    return x, np.array(grid_triangles(2 * cells, width), dtype=np.int64)
 
 
 def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:

@@ -47,12 +47,7 @@ def folded_cloth(
             points.append((float(u), 0.0, float(v)) if u <= 1.0 else (float(2.0 - u), height, float(v)))
             if i <= cells + 1:  # the lower half, the fold and the upper half's first row
                 held.append(len(points) - 1)
-    n = width + 1
-    triangles = []
-    for i in range(2 * cells):
-        for j in range(width):
-            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
-            triangles += [(a, b, c), (a, c, d)]
+    triangles = grid_triangles(2 * cells, width)
     position = " ".join(f"{x!r} {y!r} {z!r}" for x, y, z in points)
     flag = "1" if self_collision else "0"
     collision = "\n".join(
@@ -81,6 +76,18 @@ def folded_cloth(
     </Node>
 </Node>
 """
+
+
+def grid_triangles(rows: int, columns: int) -> list[tuple[int, int, int]]:
+    """Two triangles per cell of a grid of (rows + 1) x (columns + 1) points numbered row by row:
+    (a, b, c) and (a, c, d), a the cell's first corner, b the next row's, d the next column's."""
+    n = columns + 1
+    triangles = []
+    for i in range(rows):
+        for j in range(columns):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            triangles += [(a, b, c), (a, c, d)]
+    return triangles
 
 
 def write(tmp_path: Path, name: str, text: str) -> Path:

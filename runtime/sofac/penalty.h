@@ -533,46 +533,16 @@ public:
     // x[m] and f[m] are the state vectors of model m (null for models in no such pair); two models
     // of one state share them.
     void add_group_force(double* const* f, const double* const* x) {
-        for (const auto& entry : contacts_map_.map()) {
-            PenaltyPair& p = pairs[entry.second];
-            if (!p.grouped) continue;
-            double* fs[2];
-            const double* xs[2];
-            for (int s = 0; s < 2; ++s) {
-                const Index model = p.model[s];
-                if (has_points(p, s)) {
-                    map_positions(p, s, x[model], p.x[s].data());
-                    std::fill(p.f[s].begin(), p.f[s].end(), 0.0);
-                }
-                fs[s] = has_points(p, s) ? p.f[s].data() : f[model];
-                xs[s] = has_points(p, s) ? p.x[s].data() : x[model];
-            }
-            p.ff.add_force(fs[0], fs[1], xs[0], xs[1]);
-            for (int s = 0; s < 2; ++s)
-                if (has_points(p, s)) points_jt(p, s, p.f[s].data(), f[p.model[s]]);
-        }
+        for_each_group_pair(f, x, false, [](PenaltyPair& p, double* const* out, const double* const* in) {
+            p.ff.add_force(out[0], out[1], in[0], in[1]);
+        });
     }
 
     // df += kfact K dx for the same contacts (both sides move: dx of both models).
     void add_group_dforce(double* const* df, const double* const* dx, double kfact) {
-        for (const auto& entry : contacts_map_.map()) {
-            PenaltyPair& p = pairs[entry.second];
-            if (!p.grouped) continue;
-            double* dfs[2];
-            const double* dxs[2];
-            for (int s = 0; s < 2; ++s) {
-                const Index model = p.model[s];
-                if (has_points(p, s)) {
-                    map_dx(p, s, dx[model], p.dx[s].data());
-                    std::fill(p.df[s].begin(), p.df[s].end(), 0.0);
-                }
-                dfs[s] = has_points(p, s) ? p.df[s].data() : df[model];
-                dxs[s] = has_points(p, s) ? p.dx[s].data() : dx[model];
-            }
-            p.ff.add_dforce(dfs[0], dfs[1], dxs[0], dxs[1], kfact);
-            for (int s = 0; s < 2; ++s)
-                if (has_points(p, s)) points_jt(p, s, p.df[s].data(), df[p.model[s]]);
-        }
+        for_each_group_pair(df, dx, true, [kfact](PenaltyPair& p, double* const* out, const double* const* in) {
+            p.ff.add_dforce(out[0], out[1], in[0], in[1], kfact);
+        });
     }
 
     // The coupling blocks of the contacts on `model` with static partners, as SOFA's
@@ -667,6 +637,37 @@ private:
                 if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
                 f(c, s == 0 ? c.element1 : c.element2, w, s == 0 ? c.m2 : c.m1);
             }
+        }
+    }
+
+    // The live pairs placed in the group of the pipeline's node, in SOFA's contact order: each
+    // side's contact points from its model's vector `in` (positions; dx when `derivative`, through
+    // J), `evaluate(pair, sides' outputs, sides' inputs)`, the points' outputs mapped onto `out`.
+    template <class Evaluate>
+    void for_each_group_pair(double* const* out, const double* const* in, bool derivative, Evaluate&& evaluate) {
+        for (const auto& entry : contacts_map_.map()) {
+            PenaltyPair& p = pairs[entry.second];
+            if (!p.grouped) continue;
+            double* outs[2];
+            const double* ins[2];
+            for (int s = 0; s < 2; ++s) {
+                const Index model = p.model[s];
+                outs[s] = out[model];
+                ins[s] = in[model];
+                if (!has_points(p, s)) continue;
+                std::vector<double>& point_in = derivative ? p.dx[s] : p.x[s];
+                std::vector<double>& point_out = derivative ? p.df[s] : p.f[s];
+                if (derivative)
+                    map_dx(p, s, in[model], point_in.data());
+                else
+                    map_positions(p, s, in[model], point_in.data());
+                std::fill(point_out.begin(), point_out.end(), 0.0);
+                outs[s] = point_out.data();
+                ins[s] = point_in.data();
+            }
+            evaluate(p, outs, ins);
+            for (int s = 0; s < 2; ++s)
+                if (has_points(p, s)) points_jt(p, s, outs[s], out[p.model[s]]);
         }
     }
 
