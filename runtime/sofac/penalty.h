@@ -84,8 +84,8 @@ struct PenaltyPair {
     // has) and the two models' places among the models of their kind.
     Index test = 0;
     Index view[2] = {0, 0};
-    bool root = false;         // both models simulated, no solver at the pipeline's node: evaluated once, at the start of the step
-    bool grouped = false;      // both models simulated, placed in the group integrating the pipeline's node
+    bool root = false;     // both simulated, no solver integrates the pipeline's node: once, at the step's start
+    bool grouped = false;  // both simulated, in the group of the solver integrating the pipeline's node
     bool respond = true;       // false: the models' contactResponse is "nullptr" (SOFA drops the contact)
     SelfCollisionFilter filter;  // models of one node (the narrow phase's test case applies it)
     bool one_node = false;       // models of one node, one state: the motion watch skips the pair
