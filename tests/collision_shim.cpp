@@ -397,28 +397,40 @@ API Index contact_order(int sofa_expression, Index n_models, const Index* pairs,
     return n;
 }
 
-// A self-colliding point model (a chain): the narrow phase of the model against itself with
-// PointCollisionModel's element filter, or (brute) every element pair through the same filter.
-API Index self_points_detect(const double* x, Index n, const Index* offsets, const Index* items, int depth,
-                             double alarm, double contact, int brute, double* rows, Index capacity) {
-    const PointModel m{x, n, 0.01};
-    const Adjacency around{offsets, items};
-    CubeTree tree;
-    tree.resize(n, depth);
-    update_tree(tree, m);
+// SelfCollisionFilter `rule` on every element pair (e1 < n1, e2 < n2): mask[e1 * n2 + e2].
+API void self_filter(int rule, Index n1, Index n2, const Index* cells, const Index* offsets, const Index* items,
+                     char* mask) {
+    const SelfCollisionFilter filter{static_cast<SelfCollisionFilter::Rule>(rule), cells, Adjacency{offsets, items}};
+    for (Index e1 = 0; e1 < n1; ++e1)
+        for (Index e2 = 0; e2 < n2; ++e2) mask[e1 * n2 + e2] = filter(e1, e2) ? 1 : 0;
+}
+
+// Two models of one node (b may be a itself: kind LL or TT on one model; TP, LP on the points of
+// a's state) through their trees and the narrow phase, each element pair first through
+// SelfCollisionFilter `rule` (a's cells, its edgesAroundVertex for the line rules), as BVHNarrowPhase
+// asks canCollideWith; or (brute) every element pair through the same filter.
+API Index self_detect(int method, int kind, const Model* a, const Model* b, int rule, const Index* offsets,
+                      const Index* items, int depth, double alarm, double contact, int option, int brute,
+                      double* rows, Index capacity) {
+    const SelfCollisionFilter filter{static_cast<SelfCollisionFilter::Rule>(rule), a->elements, Adjacency{offsets, items}};
+    CubeTree tree1, tree2;
+    tree1.resize(a->size, depth);
+    tree2.resize(b->size, depth);
+    update(kind, 0, *a, tree1);
+    update(kind, 1, *b, tree2);
     NarrowPhaseStack stack;
-    stack.reserve_for(tree, tree);
+    stack.reserve_for(tree1, tree2);
     OutputList out;
     out.reserve(static_cast<std::size_t>(capacity));
     const Proximity prox{alarm, contact};
     auto elements = [&](Index e1, Index e2) {
-        if (points_can_collide(e1, e2, around)) min_proximity::point_point(prox, m, e1, m, e2, out);
+        if (filter(e1, e2)) test(method, kind, *a, e1, *b, e2, prox, option, out);
     };
     if (brute) {
-        for (Index e1 = 0; e1 < n; ++e1)
-            for (Index e2 = 0; e2 < n; ++e2) elements(e1, e2);
+        for (Index e1 = 0; e1 < a->size; ++e1)
+            for (Index e2 = 0; e2 < b->size; ++e2) elements(e1, e2);
     } else {
-        bvh_narrow_phase(tree, m.contact_distance, tree, m.contact_distance, alarm, stack, elements);
+        bvh_narrow_phase(tree1, a->cd, tree2, b->cd, alarm, stack, elements);
     }
     return write(out, rows, capacity);
 }

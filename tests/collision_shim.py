@@ -124,8 +124,10 @@ class Shim:
         lib.lmd_test.restype = i64
         lib.contact_order.argtypes = [integer, i64, I64, ctypes.POINTER(ctypes.c_int), I64, i64, I64, I64]
         lib.contact_order.restype = i64
-        lib.self_points_detect.argtypes = [D, i64, I64, I64, integer, dbl, dbl, integer, D, i64]
-        lib.self_points_detect.restype = i64
+        lib.self_detect.argtypes = [integer, integer, m, m, integer, I64, I64, integer, dbl, dbl, integer]
+        lib.self_detect.argtypes += [integer, D, i64]
+        lib.self_detect.restype = i64
+        lib.self_filter.argtypes = [integer, i64, i64, I64, I64, I64, ctypes.c_char_p]
         lib.tree_structure.argtypes = [D, D, i64, integer, I64, I64, D]
         lib.drop_points.argtypes = [D, i64, i64, dbl, dbl, dbl, dbl, dbl, dbl, dbl, I64]
         lib.drop_points.restype = ctypes.c_long
@@ -234,6 +236,35 @@ class Shim:
         )  # fmt: skip
         return outputs(rows, n)
 
+    def self_filter(
+        self, rule: int, n1: int, n2: int, cells: np.ndarray, around: list[list[int]] | None = None
+    ) -> np.ndarray:
+        """SelfCollisionFilter `rule` over every (e1, e2) as a boolean n1 x n2 mask; `around` the
+        first model's edgesAroundVertex (line rules)."""
+        cells = np.ascontiguousarray(cells, dtype=np.int64)
+        offsets, items = csr(around or [])
+        mask = np.zeros(n1 * n2, dtype=np.int8)
+        self.lib.self_filter(
+            rule, n1, n2, _i(cells), _i(offsets), _i(items), mask.ctypes.data_as(ctypes.c_char_p)
+        )
+        return mask.reshape(n1, n2).astype(bool)
+
+    def self_detect(
+        self, method: str, kind: str, a: Model, b: Model, rule: int, around: list[list[int]] | None = None,
+        *, depth: int = 6, alarm: float, contact: float, option: int = 0, brute: bool = False,
+    ) -> list[Output]:  # fmt: skip
+        """Two models of one node (or one model twice) through the narrow phase with SOFA's element
+        filter (SelfCollisionFilter `rule`), or every element pair through it (`brute`)."""
+        capacity = 20000
+        rows = np.zeros((capacity, 13))
+        offsets, items = csr(around or [])
+        n = self.lib.self_detect(
+            METHODS[method], KINDS[kind], ctypes.byref(a.struct), ctypes.byref(b.struct), rule, _i(offsets),
+            _i(items), depth, alarm, contact, option, int(brute), _d(rows), capacity,
+        )  # fmt: skip
+        assert n <= capacity
+        return outputs(rows, n)
+
     def pretest_run(
         self, kind: str, b: Model, xs: np.ndarray, pretest: bool, alarm: float, contact: float,
         floor_cd: float,
@@ -249,6 +280,17 @@ class Shim:
         )  # fmt: skip
         return {"skipped": skipped, "outputs": found, "contacts": contacts, "energy": energy,
                 "mismatches": int(mismatches[0]), "fast_motions": int(fast)}  # fmt: skip
+
+
+# runtime SelfCollisionFilter::Rule
+SAME_MODEL, SAME_LINES, TRIANGLE_POINT, LINE_POINT = 1, 2, 3, 4
+
+
+def csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
+    """Adjacency lists as (offsets, items), the runtime's Adjacency."""
+    offsets = np.cumsum([0] + [len(items) for items in lists]).astype(np.int64)
+    items = np.array([i for items in lists for i in items] or [0], dtype=np.int64)
+    return offsets, items
 
 
 def make_shim(tmp_path_factory: pytest.TempPathFactory) -> Shim:

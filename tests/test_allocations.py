@@ -213,3 +213,34 @@ def test_barycentric_contacts_do_not_allocate_in_a_step(shim: Path, shared_dir: 
     scenes.append(shared_dir / "corpus/sofa/Component/AnimationLoop/FreeMotionAnimationLoop.scn")
     counts = allocations(shim, scenes)
     assert counts == {str(path): [0, 0] for path in scenes}
+
+
+def test_self_collision_and_rigid_sphere_contacts_do_not_allocate_in_a_step(
+    shim: Path, tmp_path: Path
+) -> None:
+    # Self-collision (pairs of one node, SOFA's element filters) explicit and in the group of the
+    # solver integrating the pipeline's node (contact_group_add_force / _dforce); spheres on
+    # Rigid3d frames (rigid contact points), with CG, with SparseLDLSolver (their 6 x 6 blocks)
+    # and two of them in one solver's group.
+    sys.path.insert(0, str(REPO / "tests"))
+    from test_rigid_sphere_contacts import IMPLICIT, RIGHT_RIGID, TWO_BALLS, rigid_scene
+    from test_self_collision import folded_cloth
+
+    scenes = []
+    for name, root in (("explicit", False), ("grouped", True)):
+        path = tmp_path / f"cloth_{name}.scn"  # the upper half 4 cm above: in contact within 3 steps
+        path.write_text(folded_cloth(height=0.04, solver_at_root=root, stiffness=10.0 if root else 1.0))
+        scenes.append(path)
+    scenes.append(rigid_scene(tmp_path, "rigid_floor.scn"))
+    ldl = (REPO / "tests" / "data" / "contact_sphere_floor.scn").read_text()
+    scenes.append(rigid_scene(tmp_path, "rigid_ldl.scn", ldl.replace(
+        '<CGLinearSolver iterations="50" tolerance="1e-12" threshold="1e-20"/>', "<SparseLDLSolver/>"
+    )))  # fmt: skip
+    balls = tmp_path / "balls.scn"
+    touching = TWO_BALLS.format(root=IMPLICIT, solver="", right=RIGHT_RIGID)
+    balls.write_text(
+        touching.replace('"-0.5 0 0 0 0 0 1"', '"-0.1 0 0 0 0 0 1"').replace('"0.5 0.08 0', '"0.1 0.08 0')
+    )
+    scenes.append(balls)
+    counts = allocations(shim, scenes)
+    assert counts == {str(path): [0, 0] for path in scenes}

@@ -11,10 +11,21 @@ import math
 
 import numpy as np
 import pytest
-from collision_shim import KINDS, Model, Output, Shim, make_shim
-from collision_shim import outputs as outputs_of
+from collision_shim import (
+    KINDS,
+    LINE_POINT,
+    SAME_LINES,
+    SAME_MODEL,
+    TRIANGLE_POINT,
+    Model,
+    Output,
+    Shim,
+    csr,
+    make_shim,
+)
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
+from test_self_collision import grid_triangles
 
 
 @pytest.fixture(scope="module")
@@ -338,19 +349,20 @@ def test_triangle_flags(shim: Shim) -> None:
 
 
 def test_self_collision_element_filters(shim: Shim) -> None:
-    """A chain 0-1-2-3-4: points collide only as (later, earlier) and not within two links; lines
-    not when they share a point or an edge touches both."""
+    """A chain 0-1-2-3-4: PointCollisionModel::canCollideWithElement lets points collide only as
+    (later, earlier) and not within two links; lines not when they share a point or an edge
+    touches both. canCollideWith adds e1 < e2 within one model, so no pair of one point model
+    ever passes (the planner gives it no narrow phase), and a line model keeps (0, 3) only."""
     around = [[1], [0, 2], [1, 3], [2, 4], [3]]
-    offsets = np.cumsum([0] + [len(a) for a in around]).astype(np.int64)
-    items = np.concatenate(around).astype(np.int64)
+    offsets, items = csr(around)
     allowed = {
         (i, j) for i in range(5) for j in range(5) if shim.lib.self_points(i, j, _i(offsets), _i(items))
     }
     assert allowed == {(3, 0), (4, 0), (4, 1)}
+    assert not {(i, j) for i, j in allowed if i < j}  # SOFA's canCollideWith: index < index2 too
     edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4]], dtype=np.int64)
     edges_around = [[0], [0, 1], [1, 2], [2, 3], [3]]
-    e_offsets = np.cumsum([0] + [len(a) for a in edges_around]).astype(np.int64)
-    e_items = np.concatenate(edges_around).astype(np.int64)
+    e_offsets, e_items = csr(edges_around)
     pairs = {
         (i, j)
         for i in range(4)
@@ -358,6 +370,70 @@ def test_self_collision_element_filters(shim: Shim) -> None:
         if shim.lib.self_lines(i, j, _i(edges), _i(e_offsets), _i(e_items))
     }
     assert pairs == {(0, 3), (3, 0)}
+    mask = shim.self_filter(SAME_LINES, 4, 4, edges, edges_around)
+    assert set(zip(*np.nonzero(mask), strict=True)) == {(0, 3)}
+    # LineCollisionModel against its node's points: not an end of the line, nor of an edge around its ends
+    mask = shim.self_filter(LINE_POINT, 4, 5, edges, edges_around)
+    assert {int(p) for p in np.flatnonzero(mask[0])} == {3, 4}  # line 0-1: 0, 1 and 2 (edge 1-2) excluded
+    assert {int(p) for p in np.flatnonzero(mask[1])} == {4}  # line 1-2: edges 0-1 and 2-3 around it
+    assert {int(p) for p in np.flatnonzero(mask[3])} == {0, 1}
+    # TriangleCollisionModel against its node's points: not a vertex of the triangle
+    tris = np.array([[0, 1, 2], [2, 1, 3]], dtype=np.int64)
+    mask = shim.self_filter(TRIANGLE_POINT, 2, 5, tris)
+    assert [set(np.flatnonzero(row).tolist()) for row in mask] == [{3, 4}, {0, 4}]
+    # one triangle (or sphere) model: e1 < e2, whatever they share (the intersector skips neighbours)
+    mask = shim.self_filter(SAME_MODEL, 3, 3, tris)
+    assert set(zip(*np.nonzero(mask), strict=True)) == {(0, 1), (0, 2), (1, 2)}
+
+
+def folded_sheet(cells: int = 12, width: int = 4, gap: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """A strip of cells x width quads folded back over itself `gap` above (points, triangles), its
+    upper layer shifted by a fraction of a cell so that its points lie inside lower triangles."""
+    us = np.linspace(0.0, 2.0, 2 * cells + 1)
+    vs = np.linspace(0.0, 0.4, width + 1)
+    du, dv = 1.0 / cells, 0.4 / width
+    x = np.array([(u, 0.0, v) if u <= 1.0 else (2.0 - u + du / 2, gap, v + dv / 4) for u in us for v in vs])
+    return x, np.array(grid_triangles(2 * cells, width), dtype=np.int64)
+
+
+def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:
+    """Models of one node through BVHNarrowPhase with SOFA's element filter (canCollideWith before
+    each element pair): a random-walk rope (one line model) and a sheet folded over itself (one
+    triangle model with NewProximity, and its triangles against the points of its own state). The
+    traversal of a model against itself finds exactly what every element pair through the filter
+    finds, and never a pair the filter refuses: neighbouring elements never touch."""
+    rng = np.random.default_rng(9)
+    n = 300
+    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
+    edges = np.array([(i, i + 1) for i in range(n - 1)], dtype=np.int64)
+    around = [[0]] + [[i - 1, i] for i in range(1, n - 1)] + [[n - 2]]
+    rope = Model(x, elements=edges, cd=0.01)
+    reach = {"alarm": 0.04, "contact": 0.01}
+    runs = [
+        sorted(map(key, shim.self_detect("min", "LL", rope, rope, SAME_LINES, around, **reach, brute=brute)))
+        for brute in (False, True)
+    ]  # fmt: skip
+    assert len(runs[1]) > 10 and runs[0] == runs[1]
+    assert all(o[0] + 1 < o[1] for o in runs[0])  # e1 < e2, never two links of one joint
+
+    x, tris = folded_sheet()
+    flags = np.zeros(len(tris), dtype=np.int32)
+    shim.lib.flags(_i(tris), len(tris), len(x), flags.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+    sheet = Model(x, elements=tris, flags=flags, normals=np.zeros((len(tris), 3)), cd=0.005)
+    found = shim.self_detect("new", "TT", sheet, sheet, SAME_MODEL, alarm=0.04, contact=0.01)
+    every = shim.self_detect("new", "TT", sheet, sheet, SAME_MODEL, alarm=0.04, contact=0.01, brute=True)
+    assert len(found) > 50 and sorted(map(key, found)) == sorted(map(key, every))
+    for o in found:
+        assert o.elem1 < o.elem2 and not set(tris[o.elem1]) & set(tris[o.elem2])
+        assert abs(o.p0[1] - o.p1[1]) > 0.02  # across the fold, one layer to the other
+    vertices = Model(x, cd=0.005)
+    found = shim.self_detect("min", "TP", sheet, vertices, TRIANGLE_POINT, alarm=0.04, contact=0.01)
+    every = shim.self_detect(
+        "min", "TP", sheet, vertices, TRIANGLE_POINT, alarm=0.04, contact=0.01, brute=True
+    )
+    assert len(found) > 20 and sorted(map(key, found)) == sorted(map(key, every))
+    assert all(o.elem2 not in tris[o.elem1] for o in found)
+    assert all(abs(o.value - (0.03 - 0.02)) < 1e-12 for o in found)  # the gap less both contact distances
 
 
 def test_update_tree_writes_triangle_normals(shim: Shim) -> None:
@@ -874,26 +950,6 @@ def test_contact_order_matches_sofas_expression_under_gxx(shim: Shim) -> None:
     literal, _ = shim.contact_order(steps, n_models, sofa_expression=True)
     assert explicit == literal
     assert any(out != con for out, con in explicit)  # the two maps do disagree at times
-
-
-def test_self_collision_through_the_narrow_phase(shim: Shim) -> None:
-    """A random-walk chain of points colliding with itself: the narrow phase of the model against
-    itself, with PointCollisionModel's element filter, finds what all pairs through the filter find."""
-    rng = np.random.default_rng(9)
-    n = 300
-    x = np.cumsum(rng.normal(scale=0.05, size=(n, 3)), axis=0)
-    around = [[1]] + [[i - 1, i + 1] for i in range(1, n - 1)] + [[n - 2]]
-    offsets = np.cumsum([0] + [len(a) for a in around]).astype(np.int64)
-    items = np.concatenate(around).astype(np.int64)
-    runs = []
-    for brute in (0, 1):
-        rows = np.zeros((20000, 13))
-        count = shim.lib.self_points_detect(
-            _d(x), n, _i(offsets), _i(items), 6, 0.04, 0.01, brute, _d(rows), 20000
-        )
-        runs.append(sorted(map(key, outputs_of(rows, count))))
-    assert len(runs[1]) > 20 and runs[0] == runs[1]
-    assert all(o[0] > o[1] + 2 for o in runs[0])  # (later, earlier), never within two links
 
 
 def test_rigid_spheres_through_the_narrow_phase(shim: Shim) -> None:

@@ -47,6 +47,7 @@ from sofac.plan.ir import (
     Plan,
     Preconditioner,
     Projection,
+    SelfFilter,
     Slot,
     SpringDamping,
     SpringFlags,
@@ -509,8 +510,14 @@ def _model_view(index: int, model: CollisionModel) -> str:
     if model.kind == "line":
         return f"{{{x}, {_ptr(model.cells)}, {model.elements}, {cd}}}"
     if model.kind == "sphere":
-        return f"{{{x}, 3, {_sphere_radii(model)}, {model.radius!r}, {model.elements}, {cd}}}"
+        stride = _sphere_stride(model)
+        return f"{{{x}, {stride}, {_sphere_radii(model)}, {model.radius!r}, {model.elements}, {cd}}}"
     return f"{{{x}, {model.elements}, {cd}}}"
+
+
+def _sphere_stride(model: CollisionModel) -> int:
+    """Numbers per sphere centre in its state: Vec3d, or a Rigid3d frame (centre, quaternion)."""
+    return 7 if model.rigid else 3
 
 
 def _sphere_radii(model: CollisionModel) -> str:
@@ -555,10 +562,17 @@ class _CollisionView:
             if test.name.startswith("local_min_distance::"):
                 self.cases.append((number, test.name, _lmd_case(test.name)))
                 continue
+            if test.self_filter == "never":  # one point model: SOFA's filter refuses every pair
+                self.cases.append(
+                    (number, test.name, "// no element pair of one point model passes SOFA's filter")
+                )
+                continue
             first, second = test.kinds
             flags = "".join(f", {'true' if o else 'false'}" for o in test.options)
             views = f"{first}s[p.view[0]], e1, {second}s[p.view[1]], e2"
             call = f"sofac::collide::{test.name}(method, {views}{flags}, out);"
+            if test.self_filter == "filter":  # models of one node: SOFA's canCollideWith first
+                call = f"if (p.filter(e1, e2)) {call}"
             lambda_ = f"[&](Index e1, Index e2, sofac::collide::OutputList& out) {{ {call} }}"
             self.cases.append((number, test.name, f"C.narrow_phase(p, {lambda_});"))
         self.setup = [f"C.resize({len(models)}, {alarm}, {contact}, {collision.depth});"]
@@ -575,11 +589,13 @@ class _CollisionView:
             if model.cells is not None:
                 self.setup.append(f"{here}.cells = {_ptr(model.cells)};")
             if model.kind == "sphere":  # its radii, for the contacts' distances (x set by the response)
-                radii = _sphere_radii(model)
+                radii, stride = _sphere_radii(model), _sphere_stride(model)
                 self.setup.append(
-                    f"{here}.sphere = {{nullptr, 3, {radii}, {model.radius!r}, {model.elements}, "
+                    f"{here}.sphere = {{nullptr, {stride}, {radii}, {model.radius!r}, {model.elements}, "
                     f"{model.contact_distance!r}}};"
                 )
+                if model.rigid:
+                    self.setup.append(f"{here}.rigid = true;  // contact points fixed in the frames")
             if model.kind == "triangle":
                 self.setup.append(f"{here}.flags.assign({model.elements}, 0);")
                 self.setup.append(
@@ -590,8 +606,9 @@ class _CollisionView:
         table, rows = _ptr(collision.table), len(collision.pairs)
         self.setup.append(f"for (Index k = 0; k < {rows}; ++k) {{  // the pair table: {_VIEW_COLUMNS}")
         self.setup.append(f"    const Index* row = {table} + 7 * k;")
-        self.setup.append("    C.add_pair(row[0], row[1], row[2] != 0, row[3], row[4], row[5], row[6]);")
+        self.setup.append("    C.add_pair(row[0], row[1], row[2], row[3], row[4], row[5], row[6]);")
         self.setup.append("}")
+        self.setup += _pair_settings(collision)
         # points mapped only when near: their parent, enclosure's growth, saved positions, models
         self.lazy = [
             (_comment(z.origin), statement(z.previous), statement(z.current)) for z in collision.lazy
@@ -623,7 +640,28 @@ class _CollisionView:
         self.report = _ptr(collision.report)
 
 
-_VIEW_COLUMNS = "first, second, root, id bound, test, views"
+_VIEW_COLUMNS = "first, second, placement, id bound, test, views"
+
+
+def _pair_settings(collision: Collision) -> list[str]:
+    """What a pair of models of one node needs besides its row (SOFA's element filter; the motion
+    watch skips it), and the pairs whose models' contactResponse is "nullptr"."""
+    lines = []
+    for k, pair in enumerate(collision.pairs):
+        here = f"C.pairs[{k}]"
+        if pair.self_filter not in (SelfFilter.NONE, SelfFilter.NEVER):
+            first = collision.models[pair.first]
+            around = first.edges_around_vertex
+            adjacency = f"{{{_ptr(around[0])}, {_ptr(around[1])}}}" if around is not None else "{}"
+            cells = _ptr(first.cells) if first.cells is not None else "nullptr"
+            rule = f"sofac::collide::SelfCollisionFilter::{pair.self_filter.value}"
+            lines.append(f"{here}.filter = {{{rule}, {cells}, {adjacency}}};")
+        if pair.one_node:
+            lines.append(f"{here}.one_node = true;  // models of one node: one state")
+        if not pair.respond:
+            lines.append(f'{here}.respond = false;  // contactResponse "nullptr": no contact')
+    return lines
+
 
 _LMD = "sofac::collide::local_min_distance"
 

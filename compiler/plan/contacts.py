@@ -1,11 +1,14 @@
 """Penalty contact as SOFA's DefaultAnimationLoop runs it, compiled for the model pairs that can meet.
 
 At compile time: the pipeline's collision models in SOFA's order, the pairs its broad phase can
-ever produce (different nodes or selfCollision, not both static, disjoint groups, an intersector
-for the two types), each with its element test and model order fixed, and where each pair's
-response goes (a static partner: inside the other model's group, in its force evaluations and K dx
-products; two simulated models: one explicit force per step). At run time (runtime/sofac/penalty.h):
-trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
+ever produce (different nodes, or one node with selfCollision; not both static, disjoint groups, an
+intersector for the two types), each with its element test, model order and, for models of one
+node, SOFA's element filter fixed, and where each pair's response goes (a static partner: inside
+the other model's group, in its force evaluations and K dx products; two simulated models: at the
+pipeline's node, one explicit force per step, or inside the group of a solver integrating that
+node) and which response the models' own contactResponse chooses. At run time
+(runtime/sofac/penalty.h): trees refit, broad and narrow phase, SOFA's contact order, the
+contacts' forces.
 """
 
 from __future__ import annotations
@@ -19,17 +22,16 @@ from sofac.front.model import Component, Node
 from sofac.registry import Category, Variant
 from sofac.registry.components.collision import response_params
 
+from .collision_models import add_cone, add_edges_around_vertex, collision_model, node_ranks
+from .contact_placement import pipeline_group, place_contacts, place_in_group
 from .ir import (
     REPORT_FIELDS,
     Collision,
     CollisionModel,
     ContactPair,
     ElementTest,
-    Env,
     Group,
-    Op,
-    Scheme,
-    call,
+    SelfFilter,
     origin_of,
 )
 
@@ -77,6 +79,9 @@ _TESTS[Variant.LOCAL_MIN_DISTANCE] = {
 # doubles the reserve (lagrangian_contact.h, FrictionContacts::fit), a growth in the pipeline's report.
 _CONTACT_CAPACITY = 128
 _RESPONSES = {"PenalityContactForceField": "penalty", "FrictionContactConstraint": "friction_contact"}
+# A model's own contactResponse under the penalty response: SOFA's contact factory name, or
+# "nullptr", SOFA's way to make no contact for the pair (CollisionResponse::createNewContacts).
+_MODEL_RESPONSES = ("PenalityContactForceField", "nullptr")
 # MinProximityIntersection's switches: the pairs each one removes.
 _MIN_PROXIMITY_SWITCHES = {
     "usePointPoint": {("point", "point")},
@@ -209,15 +214,113 @@ def contact_setup_refusal(planner: Planner) -> str:
                 and intersection.variant is Variant.LOCAL_MIN_DISTANCE
             ):
                 return "LocalMinDistance's sphere tests (Lagrangian contact on spheres) are not compiled yet"
-            if checked.datatype is not None and checked.datatype.name != "Vec3d":
+            datatype = checked.datatype.name if checked.datatype is not None else "Vec3d"
+            rigid_sphere = datatype == "Rigid3d" and spec.variant is Variant.SPHERE and kind == "penalty"
+            if datatype != "Vec3d" and not rigid_sphere:
                 return (
-                    f"{spec.name}<{checked.datatype.name}> contacts are not compiled yet (Vec3d models are)"
+                    f"{spec.name}<{datatype}> contacts are not compiled yet (Vec3d models and "
+                    "SphereCollisionModel<Rigid3d> are)"
                 )
-            if planner.value(checked.component, "selfCollision"):
-                return "self-collision is not compiled yet"
-            if planner.value(checked.component, "contactResponse"):
-                return "a model's own contactResponse is not compiled yet"
+            if kind == "friction_contact" and planner.value(checked.component, "selfCollision"):
+                return "self-collision under FrictionContactConstraint is not compiled yet (penalty is)"
+        why = _one_node_refusal(planner, setup)
+        if why:
+            return why
     return ""
+
+
+def contact_response_refusals(planner: Planner) -> list[tuple[CheckedComponent, str]]:
+    """The collision models whose own contactResponse sofac cannot compile, and why: under
+    DefaultAnimationLoop's penalty response "PenalityContactForceField" and "nullptr" (no contact)
+    are compiled, under FrictionContactConstraint none yet. (E222 at the attribute.)"""
+    setups = _setups(planner)
+    if isinstance(setups, str):
+        return []
+    refused = []
+    for setup in setups:
+        manager = setup.parts["contact_manager"].component
+        kind = _RESPONSES.get(str(planner.value(manager, "response") or ""))
+        for checked in setup.models:
+            given = _own_response(planner, checked)
+            if not given:
+                continue
+            if kind == "friction_contact":
+                refused.append(
+                    (checked, f"contactResponse={given!r}: a model's own response under "
+                     "FrictionContactConstraint is not compiled yet")
+                )  # fmt: skip
+            elif given not in _MODEL_RESPONSES:
+                refused.append(
+                    (checked, f"contactResponse={given!r} is not compiled: under DefaultAnimationLoop "
+                     "sofac compiles 'PenalityContactForceField' and 'nullptr' (no contact)")
+                )  # fmt: skip
+    return refused
+
+
+def _own_response(planner: Planner, checked: CheckedComponent) -> str:
+    return str(planner.value(checked.component, "contactResponse") or "").strip()
+
+
+def _responds(planner: Planner, a: CheckedComponent, b: CheckedComponent) -> bool:
+    """Whether SOFA makes a contact for a pair of models (CollisionResponse::getContactResponse:
+    the models' own responses when set and not in conflict, else the manager's)."""
+    first, second = _own_response(planner, a), _own_response(planner, b)
+    if first and second and first != second:
+        return True  # the manager's response (penalty)
+    return (first or second or "PenalityContactForceField") != "nullptr"
+
+
+def _one_node_refusal(planner: Planner, setup: _Setup) -> str:
+    """Models of one node that SOFA would pair (both with selfCollision) but whose element filter
+    never returns: LineCollisionModel::canCollideWithElement and PointCollisionModel's hand the
+    question to the other model, which hands it back (two line models, two point models, a line
+    model and a point model other than the first of its node)."""
+    intersection = setup.parts["intersection"]
+    tests = _method_tests(planner, intersection)
+    active = [c for c in setup.models if planner.value(c.component, "active") is not False]
+    for k, a in enumerate(active):
+        for b in active[:k]:
+            if a.component.node is not b.component.node:
+                continue
+            if not (
+                planner.value(a.component, "selfCollision") and planner.value(b.component, "selfCollision")
+            ):
+                continue
+            assert a.spec is not None and b.spec is not None
+            kinds = tuple(sorted((a.spec.variant, b.spec.variant), key=lambda v: -_RANK[v]))
+            if kinds not in tests:
+                continue
+            looping = kinds in (("line", "line"), ("point", "point")) or (
+                kinds == ("line", "point")
+                and _node_points(planner, a.component.node) not in (a.component, b.component)
+            )
+            if looping:
+                return (
+                    f"{a.spec.name} at line {a.component.loc.line} and {b.spec.name} at line "
+                    f"{b.component.loc.line} of one node with selfCollision: SOFA's element filter "
+                    "(canCollideWithElement) passes the question between them without end"
+                )
+    return ""
+
+
+def _node_points(planner: Planner, node: Node) -> Component | None:
+    """The first PointCollisionModel of a node: the `mpoints` of its line and triangle models."""
+    for component in node.objects:
+        spec = planner.checked.of(component).spec
+        if spec is not None and spec.variant is Variant.POINT:
+            return component
+    return None
+
+
+def _method_tests(planner: Planner, intersection: CheckedComponent) -> set[tuple[str, str]]:
+    """The (first, second) kinds the intersection method has an element test for."""
+    method = intersection.spec.variant if intersection.spec else None
+    tests = set(_TESTS.get(method, ()))
+    if method == Variant.MIN_PROXIMITY:
+        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
+            if planner.value(intersection.component, switch) is False:
+                tests -= removed
+    return tests
 
 
 def plan_collisions(planner: Planner, owner: dict[int, Group]) -> list[Collision]:
@@ -239,15 +342,11 @@ def _plan_collision(
     pipeline, intersection = setup.pipeline, setup.parts["intersection"]
     method = intersection.spec.variant if intersection.spec else None
     value = planner.value
-    tests = set(_TESTS[method])
-    if method == Variant.MIN_PROXIMITY:
-        for switch, removed in _MIN_PROXIMITY_SWITCHES.items():
-            if value(intersection.component, switch) is False:
-                tests -= removed
+    tests = _method_tests(planner, intersection)
     models: list[CollisionModel] = []
     checked_models = [c for c in setup.models if value(c.component, "active") is not False]
     for checked in checked_models:
-        model = _model(planner, checked)
+        model = collision_model(planner, checked)
         if model is None:
             return None
         models.append(model)
@@ -276,35 +375,63 @@ def _plan_collision(
         params = response_params(str(value(manager, "responseParams") or ""))
         collision.mu = float(params.get("mu", 0.8))  # >= 0: the contact manager's spec checks it
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
+    # Pairs of two simulated models go to the pipeline's node: explicit when no solver integrates
+    # it, else into that solver's group (penalty; the Lagrangian response places rows itself).
+    home = pipeline_group(planner, pipeline, owner) if response == "penalty" else None
     for later in range(len(models)):
-        for earlier in range(later):
+        # BruteForceBroadPhase::addCollisionModel: the model against itself first, then each earlier one
+        for earlier in (later, *range(later)):
             a, b = models[later], models[earlier]
-            why = _never(planner, checked_models[later], checked_models[earlier], a, b)
-            first, second = (later, earlier) if _RANK[a.kind] >= _RANK[b.kind] else (earlier, later)
+            a_checked, b_checked = checked_models[later], checked_models[earlier]
+            if later == earlier:
+                why = _never_self(planner, a_checked, a)
+                if why is None:
+                    continue  # no selfCollision: nothing to list
+            else:
+                why = _never(planner, a_checked, b_checked, a, b)
+            first, second = (later, earlier) if _first_in_order(a, b) else (earlier, later)
             kinds = (models[first].kind, models[second].kind)
             if not why and kinds not in tests:
                 why = f"{method} has no {kinds[0]}-{kinds[1]} test"
             if why:
                 collision.left_out.append((a.origin, b.origin, why))
                 continue
+            one_node = a_checked.component.node is b_checked.component.node
+            self_filter = (
+                _self_filter(planner, checked_models[first], checked_models[second], later == earlier)
+                if one_node
+                else SelfFilter.NONE
+            )
             options: tuple[bool, ...] = ()
             if kinds == ("triangle", "triangle"):
-                options = (False, use_line_line)
+                options = (later == earlier, use_line_line)
             elif kinds == ("triangle", "line") and method == Variant.NEW_PROXIMITY:
                 options = (use_line_line,)
             elif kinds == ("triangle", "point") and method == Variant.MIN_PROXIMITY:
                 options = (bool(value(intersection.component, "useSurfaceNormals")),)
-            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options)
+            guard = {SelfFilter.NONE: "", SelfFilter.NEVER: "never"}.get(self_filter, "filter")
+            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options, guard)
             if test not in collision.tests:
                 collision.tests.append(test)
             m1, m2 = models[first], models[second]
+            if self_filter in (SelfFilter.SAME_LINES, SelfFilter.LINE_POINT):
+                add_edges_around_vertex(planner, m1, checked_models[first])
             if kinds == ("triangle", "triangle"):
                 id_bound = 3 * m1.elements + 12 * m2.elements
             else:
                 id_bound = max(m1.elements, m2.elements) + 1
+            both = m1.simulated and m2.simulated
             collision.pairs.append(
                 ContactPair(
-                    first, second, collision.tests.index(test), m1.simulated and m2.simulated, id_bound
+                    first,
+                    second,
+                    collision.tests.index(test),
+                    both and home is None,
+                    id_bound,
+                    grouped=both and home is not None,
+                    self_filter=self_filter,
+                    one_node=one_node,
+                    respond=response != "penalty" or _responds(planner, a_checked, b_checked),
                 )
             )
     if not collision.pairs:
@@ -314,7 +441,7 @@ def _plan_collision(
         for view, index in enumerate(i for i in used if models[i].kind == kind):
             models[index].view = view
     rows = [
-        (p.first, p.second, int(p.root), p.id_bound, p.test, models[p.first].view, models[p.second].view)
+        (p.first, p.second, p.placement, p.id_bound, p.test, models[p.first].view, models[p.second].view)
         for p in collision.pairs
     ]
     collision.table = planner.buffer(pipeline.component, "contact_pairs", rows, "i64", columns=7)
@@ -322,7 +449,7 @@ def _plan_collision(
         pipeline.component, "contactReport", np.zeros(len(REPORT_FIELDS)), role="state"
     )
     if response == "friction_contact":
-        ranks = _node_ranks(planner.checked.scene.root)
+        ranks = node_ranks(planner.checked.scene.root)
         nodes = [c.component.node for c in checked_models]
         for model, node in zip(models, nodes, strict=True):
             model.node_rank = ranks[id(node)]
@@ -333,156 +460,56 @@ def _plan_collision(
         collision.row_capacity = (3 if collision.mu > 0 else 1) * _CONTACT_CAPACITY
         if method == Variant.LOCAL_MIN_DISTANCE:
             for model, checked in zip(models, checked_models, strict=True):
-                _add_cone(planner, collision, model, checked)
+                add_cone(planner, collision, model, checked)
         return collision
-    _place(planner, collision, number, owner)
+    place_contacts(planner, collision, number, owner)
+    if home is not None:
+        place_in_group(planner, collision, number, home, owner)
     return collision
 
 
-def _node_ranks(root: Node) -> dict[int, int]:
-    """Each node's index in a depth-first pre-order walk (SOFA's top-down visitors)."""
-    ranks: dict[int, int] = {}
-    pending = [root]
-    while pending:
-        node = pending.pop()
-        ranks[id(node)] = len(ranks)
-        pending.extend(reversed(node.children))
-    return ranks
+def _first_in_order(a: CollisionModel, b: CollisionModel) -> bool:
+    """Whether `a` (the later model) is the intersector's first: Triangle before Line before Point,
+    Sphere before Point, Line and Triangle before Sphere, and a Vec3d sphere before a Rigid3d one
+    (SOFA registers SphereCollisionModel<Vec3d>-RigidSphereModel, never the other way)."""
+    if a.kind == b.kind == Variant.SPHERE and a.rigid != b.rigid:
+        return not a.rigid
+    return _RANK[a.kind] >= _RANK[b.kind]
 
 
-def _csr(lists: list[list[int]]) -> tuple[np.ndarray, np.ndarray]:
-    offsets = np.zeros(len(lists) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(items) for items in lists])
-    items = np.array([i for items in lists for i in items], dtype=np.int64)
-    return offsets, items
-
-
-def _add_cone(
-    planner: Planner, collision: Collision, model: CollisionModel, checked: CheckedComponent
-) -> None:
-    """LocalMinDistance's testValidity data for a point or line model: its topology's triangles,
-    edges and adjacency lists (ascending, as MeshTopology builds them). A point model of a node
-    without a LineCollisionModel is always valid (no cone)."""
-    from sofac.geometry import masses
-
-    from .lower.common import _topology_cells
-
-    assert collision.lmd is not None
-    if model.kind not in ("point", "line") or not collision.lmd[0]:
-        return
-    node = checked.component.node
-    if model.kind == Variant.POINT and not any(
-        planner.checked.of(c).spec is not None and planner.checked.of(c).spec.variant is Variant.LINE
-        for c in node.objects
-    ):
-        return
-    cells = _topology_cells(planner, checked) or {}
-    n = model.state.size
-    triangles = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
-    edges = cells.get("edges")
-    if edges is None or not np.size(edges):
-        edges = masses.topology_edges(n, triangles=cells.get("triangles"), quads=cells.get("quads"))
-    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    owner = checked.component
-    tri_buffer = planner.buffer(owner, "cone_triangles", triangles, "i64", columns=3)
-    if model.kind == Variant.POINT:
-        around_vertex: list[list[int]] = [[] for _ in range(n)]
-        for t, tri in enumerate(triangles):
-            for v in tri:
-                around_vertex[int(v)].append(t)
-        edges_around: list[list[int]] = [[] for _ in range(n)]
-        for e, edge in enumerate(edges):
-            for v in edge:
-                edges_around[int(v)].append(e)
-        tav, eav = _csr(around_vertex), _csr(edges_around)
-        model.cone = (
-            tri_buffer,
-            planner.buffer(owner, "cone_edges", edges, "i64", columns=2),
-            planner.buffer(owner, "triangles_around_vertex_offsets", tav[0], "i64"),
-            planner.buffer(owner, "triangles_around_vertex", tav[1], "i64"),
-            planner.buffer(owner, "edges_around_vertex_offsets", eav[0], "i64"),
-            planner.buffer(owner, "edges_around_vertex", eav[1], "i64"),
-        )
-    else:
-        index = {tuple(sorted((int(a), int(b)))): e for e, (a, b) in enumerate(model_edges(planner, model))}
-        around_edge: list[list[int]] = [[] for _ in range(model.elements)]
-        for t, tri in enumerate(triangles):
-            for j in range(3):
-                key = tuple(sorted((int(tri[(j + 1) % 3]), int(tri[(j + 2) % 3]))))
-                if key in index:
-                    around_edge[index[key]].append(t)
-        tae = _csr([sorted(set(items)) for items in around_edge])
-        model.cone = (
-            tri_buffer,
-            planner.buffer(owner, "triangles_around_edge_offsets", tae[0], "i64"),
-            planner.buffer(owner, "triangles_around_edge", tae[1], "i64"),
-        )
-
-
-def model_edges(planner: Planner, model: CollisionModel) -> np.ndarray:
-    """A line model's edges (its cells)."""
-    assert model.cells is not None
-    return model.cells.initial.reshape(-1, 2)
-
-
-def _model(planner: Planner, checked: CheckedComponent) -> CollisionModel | None:
-    from .lower.common import _topology_cells
-
-    state = planner.state_of(checked)
-    spec = checked.spec
-    assert spec is not None
-    if state is None or state.datatype.name != "Vec3d":
-        planner.unsupported(checked, "a collision model needs a Vec3d MechanicalObject in its node")
+def _never_self(planner: Planner, checked: CheckedComponent, model: CollisionModel) -> str | None:
+    """Why the broad phase never pairs a model with itself (BruteForceBroadPhase::doesSelfCollide);
+    None when its selfCollision is off (nothing worth listing)."""
+    if not planner.value(checked.component, "selfCollision"):
         return None
-    kind = spec.variant
-    value = planner.value
-    cells_buffer = radii = None
-    elements = flagged = state.size
-    if kind == Variant.SPHERE:
-        listed = value(checked.component, "listRadius")
-        if listed is not None and np.size(listed):
-            radii = planner.buffer(checked.component, "listRadius", listed)
-    if kind in ("triangle", "line"):
-        cells = _topology_cells(planner, checked) or {}
-        if kind == Variant.TRIANGLE:
-            # The topology's triangles, then two per quad (TriangleCollisionModel::updateFromTopology:
-            # (q1, q2, q0) and (q3, q0, q2)); only the first ones get vertex and edge flags.
-            array = np.asarray(cells.get("triangles", np.zeros(0)), dtype=np.int64).reshape(-1, 3)
-            flagged = len(array)
-            quads = np.asarray(cells.get("quads", np.zeros(0)), dtype=np.int64).reshape(-1, 4)
-            if len(quads):
-                halves = np.stack([quads[:, [1, 2, 0]], quads[:, [3, 0, 2]]], axis=1).reshape(-1, 3)
-                array = np.concatenate([array, halves])
-        else:
-            from sofac.geometry import masses
+    if not model.simulated:
+        return "a static model (simulated=0) never collides with itself"
+    if not model.elements:
+        return "it has no element"
+    return ""
 
-            array = cells.get("edges")
-            if array is None or not np.size(array):
-                array = masses.topology_edges(
-                    state.size, triangles=cells.get("triangles"), quads=cells.get("quads")
-                )
-            array = np.asarray(array, dtype=np.int64).reshape(-1, 2)
-        if array.size and (array.min() < 0 or array.max() >= state.size):
-            planner.unsupported(checked, f"its topology names points beyond the {state.size} of its state")
-            return None
-        elements = len(array)
-        cells_buffer = planner.buffer(checked.component, kind + "s", array, "i64", columns=array.shape[1])
-    return CollisionModel(
-        origin=origin_of(checked.component),
-        kind=kind,
-        state=state,
-        elements=elements,
-        cells=cells_buffer,
-        contact_distance=float(value(checked.component, "contactDistance")),
-        contact_stiffness=float(value(checked.component, "contactStiffness")),
-        moving=bool(value(checked.component, "moving")),
-        simulated=bool(value(checked.component, "simulated")),
-        compute_normals=kind == Variant.TRIANGLE and bool(value(checked.component, "computeNormals")),
-        radii=radii,
-        radius=float(value(checked.component, "radius")) if kind == Variant.SPHERE else 0.0,
-        flagged=flagged if kind == Variant.TRIANGLE else 0,
-        both_side=bool(value(checked.component, "bothSide")) if kind == Variant.TRIANGLE else False,
-    )
+
+def _self_filter(
+    planner: Planner, first: CheckedComponent, second: CheckedComponent, same_model: bool
+) -> SelfFilter:
+    """SOFA's element filter for two models of one node, `first` the intersector's first
+    (CollisionElementIterator::canCollideWith and the first model's canCollideWithElement)."""
+    assert first.spec is not None and second.spec is not None
+    kind = first.spec.variant
+    if same_model:
+        return {
+            Variant.TRIANGLE: SelfFilter.SAME_MODEL,
+            Variant.SPHERE: SelfFilter.SAME_MODEL,
+            Variant.LINE: SelfFilter.SAME_LINES,
+            Variant.POINT: SelfFilter.NEVER,
+        }[kind]
+    points = _node_points(planner, first.component.node)  # its canCollideWithElement's point model
+    if second.spec.variant is Variant.POINT and second.component is points:
+        if kind is Variant.TRIANGLE:
+            return SelfFilter.TRIANGLE_POINT
+        if kind is Variant.LINE:
+            return SelfFilter.LINE_POINT
+    return SelfFilter.NONE  # the filters answer true (or hand over to a sphere's, which does)
 
 
 def _never(
@@ -495,10 +522,13 @@ def _never(
     """Why the broad phase never pairs two models ("" if it may): CollisionModel::canCollideWith
     and BruteForceBroadPhase's static test."""
     if a_checked.component.node is b_checked.component.node:
-        return "models of one node collide only with selfCollision"
-    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
-    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
-    if groups_a & groups_b:
+        # canCollideWith: one node -> both models' selfCollision decide (their groups do not)
+        if not (
+            planner.value(a_checked.component, "selfCollision")
+            and planner.value(b_checked.component, "selfCollision")
+        ):
+            return "models of one node collide only with selfCollision"
+    elif _share_group(planner, a_checked, b_checked):
         return "they share a collision group"
     if not a.simulated and not b.simulated:
         return "both are static (simulated=0)"
@@ -507,54 +537,7 @@ def _never(
     return ""
 
 
-def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[int, Group]) -> None:
-    """Each simulated model's contact forces in the group integrating its state: in every force
-    evaluation and, for its contacts with static models, in every K dx product."""
-    in_pairs = {i for p in collision.pairs for i in (p.first, p.second)}
-    for index, model in enumerate(collision.models):
-        if index not in in_pairs or not model.simulated:
-            continue
-        group = owner.get(id(model.state.component))
-        if group is None:
-            continue  # nothing integrates it: the forces on it go nowhere, as in SOFA
-        where = f"contact forces on {model.origin}"
-        state = model.state
-        group.forces.append(
-            Op(where, [call("contact_add_force", Env.CONTACTS, pipeline, index, state.f, state.x)])
-        )
-        static_partner = any(
-            not collision.models[p.second if p.first == index else p.first].simulated
-            for p in collision.pairs
-            if index in (p.first, p.second)
-        )
-        if group.assembled and static_partner:  # A += kfact K: blocks between each element's points
-            offset = group.assembly_offset(state, planner.checked.of(state.component))
-            assembly = (Env.CONTACTS, pipeline, index, Env.ASSEMBLER, offset, Env.KFACT)
-            group.assemble.append(Op(where, [call("contact_assemble", *assembly)]))
-            if group.btd:  # SOFA's coupling blocks with the static side, read as the system's DOFs
-                group.assemble.append(
-                    Op(where, [call("contact_assemble_static_coupling", *assembly, Env.BAND)])
-                )
-            elif group.linear_solver is not None:
-                solver = group.linear_solver
-                planner.diags.add(
-                    "W232",
-                    solver.loc,
-                    f"{solver.type_name} at line {solver.loc.line} assembles the contacts of "
-                    f"{model.origin} with a static model: SOFA's MatrixLinearSystem also adds their "
-                    "coupling blocks at the static contact points' indices, read as this system's "
-                    "DOFs; sofac leaves them out for this solver, so its solve can differ from SOFA's "
-                    "while they touch",
-                    "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
-                )
-        if group.scheme is Scheme.IMPLICIT and static_partner and state.dx is not None:
-            group.stiffness_dx.append(
-                Op(
-                    where,
-                    [
-                        call(
-                            "contact_add_dforce", Env.CONTACTS, pipeline, index, state.df, state.dx, Env.KFACT
-                        )
-                    ],
-                )
-            )
+def _share_group(planner: Planner, a_checked: CheckedComponent, b_checked: CheckedComponent) -> bool:
+    groups_a = set(np.atleast_1d(planner.value(a_checked.component, "group") or []).tolist())
+    groups_b = set(np.atleast_1d(planner.value(b_checked.component, "group") or []).tolist())
+    return bool(groups_a & groups_b)

@@ -21,6 +21,7 @@ from sofac.plan.ir import (
     Note,
     Offset,
     Op,
+    SelfFilter,
     Statement,
     StatePlan,
     bind,
@@ -33,6 +34,14 @@ from sofac.registry import Category
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
+
+# What each self-collision filter lets through (the effects table).
+_FILTERS = {
+    SelfFilter.SAME_MODEL: "e1 < e2",
+    SelfFilter.SAME_LINES: "e1 < e2, no shared point, no edge touching both",
+    SelfFilter.TRIANGLE_POINT: "not a vertex of the triangle",
+    SelfFilter.LINE_POINT: "not an end of the line nor of an edge around its ends",
+}
 
 
 def init_only(planner: Planner, groups: list[Group]) -> frozenset[str]:
@@ -119,11 +128,18 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
         models = collision.models
         for pair in collision.pairs:
             first, second = models[pair.first], models[pair.second]
-            where = (
-                "explicit: once per step at its start (two simulated models)"
-                if pair.root
-                else "in the group of the simulated model (a static partner): forces and K dx"
-            )
+            if pair.root:
+                where = "explicit: once per step at its start (two simulated models)"
+            elif pair.grouped:
+                where = "in the group integrating the pipeline's node (two simulated models): forces and K dx"
+            else:
+                where = "in the group of the simulated model (a static partner): forces and K dx"
+            if pair.self_filter is SelfFilter.NEVER:
+                where += "; one point model: SOFA's element filter refuses every pair (no narrow phase)"
+            elif pair.self_filter is not SelfFilter.NONE:
+                where += f"; one node: SOFA's element filter ({_FILTERS[pair.self_filter]})"
+            if not pair.respond:
+                where += '; contactResponse "nullptr": detected, no contact'
             test = collision.tests[pair.test].name
             if collision.response == "friction_contact":
                 rows = 3 if collision.mu > 0 else 1

@@ -21,7 +21,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
-from sofac.plan.contacts import contact_setup_refusal, plan_collisions
+from sofac.plan.contacts import contact_response_refusals, contact_setup_refusal, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
@@ -205,7 +205,11 @@ class Planner:
         # Models of different nodes could touch: guarded (the step stops before a contact), unless
         # a model may touch itself, which a box cannot rule out.
         guard = contacts and not any(self.value(c.component, "selfCollision") for c in models)
-        self.colliding = contacts and not contact_setup_refusal(self)
+        refusal = contact_setup_refusal(self) if contacts else ""
+        self.colliding = contacts and not refusal
+        if contacts:
+            for checked, why in contact_response_refusals(self):
+                self.unsupported(checked, why, attribute="contactResponse")
         for checked in self.checked:
             spec = checked.spec
             if spec is None:
@@ -219,7 +223,8 @@ class Planner:
                 else:
                     self.ignored.append((checked.component, "inactive collision model"))
             elif checked.category is Category.COLLISION_MODEL and contacts:
-                self.unsupported(checked, "self-collision detection and response are not compiled yet")
+                # a model may touch itself (no box can rule it out), and this setup is not compiled
+                self.unsupported(checked, f"self-collision: {refusal}")
             elif checked.category is Category.TOPOLOGICAL_MAPPING and self._feeds_a_state(checked):
                 self.unsupported(checked, "its output topology sizes a MechanicalObject; not evaluated yet")
             elif checked.category is Category.COLLISION_MODEL:

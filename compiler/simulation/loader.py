@@ -353,7 +353,7 @@ class Simulation:
             None,
         )
         self._limited_seen = 0  # solves that hit the limit, already warned about
-        self._contact_seen = [np.zeros(3) for _ in spec.contact_reports]  # counters already reported
+        self._contact_seen = [np.zeros(4) for _ in spec.contact_reports]  # counters already reported
         self._steps = 0  # steps run since the creation or the last reset()
         self._energy_guard: _EnergyGuard | None = None
         # The buffers a step carries over ("state": positions, velocities, solver history): copied
@@ -505,9 +505,12 @@ class Simulation:
             "detection outputs were degenerate (NaN dropped, or a zero distance given the normal (1, 0, 0))",
             "times a model moved farther in one step than the detection's reach while near a partner: "
             "contacts may have been missed (tunnelling); reduce dt or raise alarmDistance",
+            "contact(s) pushed through in a step (their points crossed over each other along the "
+            "contact's normal, e.g. a point through a thin sheet; the penalty then pushes them on "
+            "through): raise contactStiffness or contactDistance, or reduce dt",
         )
         for (origin, index), seen in zip(self.spec.contact_reports, self._contact_seen, strict=True):
-            counters = self._views[index][[1, 2, 5]]
+            counters = self._views[index][[1, 2, 5, 7]]
             for k in np.flatnonzero(counters > seen):
                 count = int(counters[k] - seen[k])
                 where = f"step {self._steps} (t={self.time:g}), {origin}"

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "proximity.h"
+#include "quaternion.h"
 
 namespace sofac::collide {
 
@@ -185,6 +186,76 @@ private:
 };
 
 // ---------------------------------------------------------------------------------------------
+// The rigid contact mapper of SphereCollisionModel<Rigid3d> (RigidContactMapper.{h,inl}: a
+// RigidMapping from the spheres' frames onto the contact points): point i is fixed in frame
+// frame[i] at local = q.inverseRotate(P - c), SOFA's quaternion arithmetic (quaternion.h).
+// apply (RigidMapping::apply): rotated = q.rotate(local), x = rotated + c; apply_j (applyJ, with
+// the rotated offsets of the last apply): v = v_c + w x rotated; apply_jt (applyJT): f_c += f,
+// tau_c += rotated x f. Frames are Rigid3d: 7 numbers per coordinate, 6 per derivative.
+class RigidContactPoints {
+public:
+    void reserve(std::size_t n) {
+        points_.reserve(n);
+    }
+    void clear() { points_.clear(); }
+    std::size_t size() const { return points_.size(); }
+
+    // ContactMapper<RigidSphereModel>::addPoint: P in frame `frame` of the positions `x`.
+    Index add(const V3& P, Index frame, const double* x) {
+        const double* c = x + 7 * frame;
+        const double d[3] = {P[0] - c[0], P[1] - c[1], P[2] - c[2]};
+        Point p{frame, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}};
+        quat_rotate(c + 3, true, d, p.local);
+        if (points_.size() == points_.capacity()) ++growths;
+        points_.push_back(p);
+        return static_cast<Index>(points_.size()) - 1;
+    }
+
+    void apply(const double* x, double* out) {
+        for (std::size_t i = 0; i < points_.size(); ++i) {
+            Point& p = points_[i];
+            const double* c = x + 7 * p.frame;
+            quat_rotate(c + 3, false, p.local, p.rotated);
+            for (int k = 0; k < 3; ++k) out[3 * i + k] = p.rotated[k] + c[k];
+        }
+    }
+
+    void apply_j(const double* v, double* out) const {
+        for (std::size_t i = 0; i < points_.size(); ++i) {
+            const Point& p = points_[i];
+            const V3 w = load3(v + 6 * p.frame + 3, 3, 0), r = load3(p.rotated, 3, 0);
+            const V3 u = load3(v + 6 * p.frame, 3, 0) + cross(w, r);
+            for (int k = 0; k < 3; ++k) out[3 * i + k] = u[k];
+        }
+    }
+
+    void apply_jt(const double* f, double* in_f) const {
+        for (std::size_t i = 0; i < points_.size(); ++i) {
+            const Point& p = points_[i];
+            const V3 force = load3(f, 3, static_cast<Index>(i));
+            double* frame = in_f + 6 * p.frame;
+            for (int k = 0; k < 3; ++k) frame[k] += force[k];
+            const V3 torque = cross(load3(p.rotated, 3, 0), force);
+            for (int k = 0; k < 3; ++k) frame[3 + k] += torque[k];
+        }
+    }
+
+    // Point i's frame and its offset from the frame's centre at the last apply.
+    Index frame(Index i) const { return points_[static_cast<std::size_t>(i)].frame; }
+    V3 rotated(Index i) const { return load3(points_[static_cast<std::size_t>(i)].rotated, 3, 0); }
+
+    Index growths = 0;
+
+private:
+    struct Point {
+        Index frame;
+        double local[3];
+        double rotated[3];
+    };
+    std::vector<Point> points_;
+};
+
+// ---------------------------------------------------------------------------------------------
 // PenalityContactForceField<Vec3d> between two Vec3d states (the contact-point states; the same
 // state twice is allowed). Contact c pushes x1[m1] and x2[m2] apart along `normal` while
 // pen = dist - (x2[m2] - x1[m1]) . normal > 0: energy ks pen^2 / 2, f1 = -ks pen n, f2 = +ks pen n.
@@ -269,7 +340,8 @@ public:
 };
 
 // How a model places its contact points (ContactMapper): on triangles and lines a barycentric
-// point per contact; on points and spheres the element itself (and r = the sphere's radius).
+// point per contact; on points and Vec3d spheres the element itself, on Rigid3d spheres a point
+// fixed in the sphere's frame (r = the sphere's radius for both sphere kinds).
 enum class ContactSide { kTriangle, kLine, kPoint, kSphere };
 
 struct ContactSideModel {
@@ -280,6 +352,7 @@ struct ContactSideModel {
     double contact_distance;
     double contact_stiffness;
     BarycentricContactPoints* points;  // kTriangle / kLine: the contact-point state's mapping
+    RigidContactPoints* rigid = nullptr;  // kSphere on Rigid3d frames: the contact-point state's mapping
 };
 
 namespace detail {
@@ -291,7 +364,7 @@ inline Index add_contact_point(const ContactSideModel& side, const V3& P, Index 
             return side.points->add_in_line(P, element, side.x, side.elements);
         case ContactSide::kSphere:
             r = side.sphere->r(element);
-            return element;
+            return side.rigid ? side.rigid->add(P, element, side.x) : element;
         case ContactSide::kPoint:
             break;
     }
@@ -307,8 +380,10 @@ inline void set_penalty_contacts(const OutputList& outputs, const ContactDedupli
                                  double intersection_contact_distance, const ContactSideModel& side1,
                                  const ContactSideModel& side2, PenaltyContactForceField& ff) {
     ff.clear();
-    if (side1.points) side1.points->clear();
-    if (side2.points) side2.points->clear();
+    for (const ContactSideModel* side : {&side1, &side2}) {
+        if (side->points) side->points->clear();
+        if (side->rigid) side->rigid->clear();
+    }
     const double d0 = intersection_contact_distance + side1.contact_distance + side2.contact_distance;
     for (const std::size_t i : dedup.survivors) {
         const DetectionOutput& o = outputs[i];

@@ -7,13 +7,17 @@
 //              code generation instantiates only the (method, type pair) tests the scene has);
 //   respond(): SOFA's two stable-id maps decide the order of the contacts; each pair's outputs are
 //              de-duplicated and become penalty contacts on contact points (barycentric points
-//              on triangles and lines, the model's own points on point and sphere models); pairs of
-//              two simulated models get their force now, once, at the start of the step (SOFA
-//              evaluates them at the pipeline's node, before any solver: explicit coupling);
+//              on triangles and lines, points fixed in the frames of Rigid3d spheres, the model's
+//              own points on point and Vec3d sphere models); pairs of two simulated models get
+//              their force now, once, at the start of the step when no solver integrates the
+//              pipeline's node (SOFA evaluates them there, before any solver: explicit coupling);
 //   add_force() / add_dforce(): in each force evaluation and each K dx product of the group that
 //              integrates a model, the contacts with a static model (placed in that group) are
 //              evaluated, and every contact point's force is mapped onto the model's points in the
-//              order SOFA creates the contact-point nodes under the model's node.
+//              order SOFA creates the contact-point nodes under the model's node;
+//   add_group_force() / add_group_dforce(): pairs of two simulated models when a solver integrates
+//              the pipeline's node (SOFA places them there: inside that solver's group, implicit),
+//              in every force evaluation and K dx product of that group, in SOFA's contact order.
 //
 // Memory: every buffer is reserved at init for the pair's element counts; a step that needs more
 // grows them (counted in growths(), never an overrun) and keeps the larger capacity.
@@ -39,6 +43,7 @@ struct PenaltyModel {
     double contact_distance = 0.0;
     double contact_stiffness = 0.0;
     bool moving = true;  // its boxes follow its points (moving="0": computed once, at the first step)
+    bool rigid = false;  // sphere models on Rigid3d frames: contact points mapped rigidly (RigidContactPoints)
     CubeTree tree;
     std::vector<int> flags;       // triangle models: SOFA's vertex / edge ownership flags
     std::vector<double> normals;  // triangle models: the normals of the last tree update
@@ -79,11 +84,16 @@ struct PenaltyPair {
     // has) and the two models' places among the models of their kind.
     Index test = 0;
     Index view[2] = {0, 0};
-    bool root = false;         // both models simulated: evaluated once, at the start of the step
+    bool root = false;     // both simulated, no solver integrates the pipeline's node: once, at the step's start
+    bool grouped = false;  // both simulated, in the group of the solver integrating the pipeline's node
+    bool respond = true;       // false: the models' contactResponse is "nullptr" (SOFA drops the contact)
+    SelfCollisionFilter filter;  // models of one node (the narrow phase's test case applies it)
+    bool one_node = false;       // models of one node, one state: the motion watch skips the pair
     OutputList outputs;
     NarrowPhaseStack stack;
     ContactDeduplication dedup;
     BarycentricContactPoints points[2];
+    RigidContactPoints rigid[2];
     std::vector<double> x[2], f[2], dx[2], df[2];  // the contact-point states (barycentric sides)
     PenaltyContactForceField ff;
     bool live = false;  // SOFA's contact object exists (from its first outputs to its last)
@@ -102,12 +112,16 @@ public:
         depth_ = depth;
     }
 
+    // Where a pair's response goes (the pair table's placement column).
+    enum Placement : int { kStaticPartner = 0, kExplicit = 1, kInGroup = 2 };
+
     // A possible pair; `id_bound` bounds its outputs' ids (the dedup's table).
-    Index add_pair(Index first, Index second, bool root, Index id_bound, Index test, Index view1, Index view2) {
+    Index add_pair(Index first, Index second, Index placement, Index id_bound, Index test, Index view1, Index view2) {
         PenaltyPair& p = pairs.emplace_back();
         p.model[0] = first;
         p.model[1] = second;
-        p.root = root;
+        p.root = placement == kExplicit;
+        p.grouped = placement == kInGroup;
         p.test = test;
         p.view[0] = view1;
         p.view[1] = view2;
@@ -126,6 +140,7 @@ public:
         p.ff.reserve(4 * capacity);
         for (int s = 0; s < 2; ++s) {
             p.points[s].reserve(4 * capacity);
+            p.rigid[s].reserve(4 * capacity);
             for (auto* v : {&p.x[s], &p.f[s], &p.dx[s], &p.df[s]}) v->reserve(12 * capacity);
         }
         return index;
@@ -147,7 +162,7 @@ public:
             const bool explicit_forces = std::any_of(pairs.begin(), pairs.end(), [&](const PenaltyPair& p) {
                 return p.root && (p.model[0] == static_cast<Index>(i) || p.model[1] == static_cast<Index>(i));
             });
-            if (explicit_forces && (m.kind == ContactSide::kPoint || m.kind == ContactSide::kSphere))
+            if (explicit_forces && (m.kind == ContactSide::kPoint || (m.kind == ContactSide::kSphere && !m.rigid)))
                 m.external.assign(static_cast<std::size_t>(3 * m.points), 0.0);
             m.children.reserve(2 * pairs.size());
             broad_[i] = BroadPhaseModel{&m.tree, m.contact_distance};
@@ -338,10 +353,15 @@ public:
     // The contacts of this step from the outputs, in SOFA's contact order, and the explicit forces
     // of the pairs of two simulated models. `x[m]`: model m's points.
     void respond(const double* const* x) {
+        count_crossings(x);
         auto& contacts = contacts_map_.map();
         for (const auto& entry : outputs_map_.map()) {
             auto [it, fresh] = contact_slot(contacts, entry.first);
             if (fresh) {
+                if (!pairs[entry.second].respond) {  // response "nullptr": SOFA erases the new entry
+                    contacts.erase(it);
+                    continue;
+                }
                 it->second = entry.second;
                 create(entry.second);
             }
@@ -389,11 +409,11 @@ public:
             for (std::size_t i = 0; i < m.external.size(); ++i) f[i] += m.external[i];
         for (const auto& entry : contacts_map_.map()) {  // the contacts with a static model, in this group
             PenaltyPair& p = pairs[entry.second];
-            if (p.root) continue;
+            if (p.root || p.grouped) continue;
             const int s = side_of(p, model);
             if (s < 0) continue;
             if (has_points(p, s)) {
-                p.points[s].apply(x, p.x[s].data());
+                map_positions(p, s, x, p.x[s].data());
                 std::fill(p.f[s].begin(), p.f[s].end(), 0.0);
             }
             if (has_points(p, 1 - s)) std::fill(p.f[1 - s].begin(), p.f[1 - s].end(), 0.0);
@@ -408,7 +428,7 @@ public:
         }
         for (const Index child : m.children) {  // contact points up to the model, creation order
             const PenaltyPair& p = pairs[child / 2];
-            p.points[child % 2].apply_jt(p.f[child % 2].data(), f);
+            points_jt(p, child % 2, p.f[child % 2].data(), f);
         }
     }
 
@@ -418,12 +438,12 @@ public:
         PenaltyModel& m = models[model];
         for (const auto& entry : contacts_map_.map()) {
             PenaltyPair& p = pairs[entry.second];
-            if (p.root) continue;
+            if (p.root || p.grouped) continue;
             const int s = side_of(p, model);
             if (s < 0) continue;
             const int o = 1 - s;
             if (has_points(p, s)) {
-                p.points[s].apply(dx, p.dx[s].data());
+                map_dx(p, s, dx, p.dx[s].data());
                 std::fill(p.df[s].begin(), p.df[s].end(), 0.0);
             }
             zero_other(p, o);
@@ -436,7 +456,7 @@ public:
         }
         for (const Index child : m.children) {
             const PenaltyPair& p = pairs[child / 2];
-            if (!p.root) p.points[child % 2].apply_jt(p.df[child % 2].data(), df);
+            if (!p.root) points_jt(p, child % 2, p.df[child % 2].data(), df);
         }
     }
 
@@ -447,6 +467,10 @@ public:
     template <class Assembler>
     void add_k(Index model, Assembler& A, Index offset, double kfact) {
         PenaltyModel& m = models[model];
+        if (m.rigid) {
+            add_rigid_k(model, A, offset, kfact);
+            return;
+        }
         const int width = element_width(m);
         const std::size_t per = static_cast<std::size_t>(9 * width * width);
         m.element_k.assign(per * static_cast<std::size_t>(m.elements), 0.0);
@@ -471,6 +495,54 @@ public:
                 }
             }
         }
+    }
+
+    // add_k for a model of Rigid3d spheres: J^T (-ks kfact n n^T) J on each frame, J = [I, -[r]x]
+    // the contact point's RigidMapping row (r its rotated offset): -ks kfact g g^T, g = (n, r x n).
+    // Every frame's 6x6 block is added at every call, zeros included (a fixed pattern).
+    template <class Assembler>
+    void add_rigid_k(Index model, Assembler& A, Index offset, double kfact) {
+        PenaltyModel& m = models[model];
+        m.element_k.assign(36 * static_cast<std::size_t>(m.elements), 0.0);
+        for (const auto& entry : contacts_map_.map()) {
+            const PenaltyPair& p = pairs[entry.second];
+            if (p.root || p.grouped) continue;
+            const int s = side_of(p, model);
+            if (s < 0) continue;
+            for (const PenaltyContact& c : p.ff.contacts) {
+                if (!(c.pen > 0)) continue;
+                const Index point = s == 0 ? c.m1 : c.m2;
+                double g[6];
+                rigid_gradient(p.rigid[s], point, c.normal, g);
+                double* block = m.element_k.data() + 36 * static_cast<std::size_t>(p.rigid[s].frame(point));
+                const double k = c.ks * kfact;
+                for (int i = 0; i < 6; ++i)
+                    for (int j = 0; j < 6; ++j) block[6 * i + j] -= k * g[i] * g[j];
+            }
+        }
+        for (Index e = 0; e < m.elements; ++e) {
+            const double* block = m.element_k.data() + 36 * static_cast<std::size_t>(e);
+            for (int i = 0; i < 6; ++i)
+                for (int j = 0; j < 6; ++j) A.add(offset + 6 * e + i, offset + 6 * e + j, block[6 * i + j]);
+        }
+    }
+
+    // f += the forces of the contacts placed in the group integrating the pipeline's node (pairs
+    // of two simulated models), in SOFA's contact order: each pair's contact points from the
+    // models' positions x[model], its force field, its points' forces mapped onto the models.
+    // x[m] and f[m] are the state vectors of model m (null for models in no such pair); two models
+    // of one state share them.
+    void add_group_force(double* const* f, const double* const* x) {
+        for_each_group_pair(f, x, false, [](PenaltyPair& p, double* const* out, const double* const* in) {
+            p.ff.add_force(out[0], out[1], in[0], in[1]);
+        });
+    }
+
+    // df += kfact K dx for the same contacts (both sides move: dx of both models).
+    void add_group_dforce(double* const* df, const double* const* dx, double kfact) {
+        for_each_group_pair(df, dx, true, [kfact](PenaltyPair& p, double* const* out, const double* const* in) {
+            p.ff.add_dforce(out[0], out[1], in[0], in[1], kfact);
+        });
     }
 
     // The coupling blocks of the contacts on `model` with static partners, as SOFA's
@@ -518,7 +590,8 @@ public:
     Index growths() const {
         Index n = outputs_map_.growths() + contacts_map_.growths();
         for (const PenaltyPair& p : pairs)
-            n += p.outputs.growths + p.dedup.growths + p.ff.growths + p.points[0].growths + p.points[1].growths;
+            n += p.outputs.growths + p.dedup.growths + p.ff.growths + p.points[0].growths + p.points[1].growths +
+                 p.rigid[0].growths + p.rigid[1].growths;
         return n;
     }
     // Steps x pairs where a model moved farther than the detection's reach near its partner: the
@@ -526,6 +599,8 @@ public:
     Index fast_motions() const { return fast_motions_; }
     // Detections skipped without mapping the lazy points (skip_unmapped).
     Index unmapped_detections() const { return unmapped_detections_; }
+    // Contacts pushed through in a step (count_crossings): a point through a thin sheet, say.
+    Index crossings() const { return crossings_; }
 
     // Outputs SOFA would have made of NaN (dropped) or of a zero distance (normal (1, 0, 0)).
     Index degenerate_outputs() const {
@@ -553,7 +628,7 @@ private:
     void for_each_static_contact(Index model, F&& f) const {
         for (const auto& entry : contacts_map_.map()) {
             const PenaltyPair& p = pairs[entry.second];
-            if (p.root) continue;
+            if (p.root || p.grouped) continue;
             const int s = side_of(p, model);
             if (s < 0) continue;
             for (const PenaltyContact& c : p.ff.contacts) {
@@ -562,6 +637,46 @@ private:
                 if (has_points(p, s)) p.points[s].weights(s == 0 ? c.m1 : c.m2, w);
                 f(c, s == 0 ? c.element1 : c.element2, w, s == 0 ? c.m2 : c.m1);
             }
+        }
+    }
+
+    // The live pairs placed in the group of the pipeline's node, in SOFA's contact order: each
+    // side's contact points from its model's vector `in` (positions; dx when `derivative`, through
+    // J), `evaluate(pair, sides' outputs, sides' inputs)`, the points' outputs mapped onto `out`.
+    template <class Evaluate>
+    void for_each_group_pair(double* const* out, const double* const* in, bool derivative, Evaluate&& evaluate) {
+        for (const auto& entry : contacts_map_.map()) {
+            PenaltyPair& p = pairs[entry.second];
+            if (!p.grouped) continue;
+            double* outs[2];
+            const double* ins[2];
+            for (int s = 0; s < 2; ++s) {
+                const Index model = p.model[s];
+                outs[s] = out[model];
+                ins[s] = in[model];
+                if (!has_points(p, s)) continue;
+                std::vector<double>& point_in = derivative ? p.dx[s] : p.x[s];
+                std::vector<double>& point_out = derivative ? p.df[s] : p.f[s];
+                if (derivative)
+                    map_dx(p, s, in[model], point_in.data());
+                else
+                    map_positions(p, s, in[model], point_in.data());
+                std::fill(point_out.begin(), point_out.end(), 0.0);
+                outs[s] = point_out.data();
+                ins[s] = point_in.data();
+            }
+            evaluate(p, outs, ins);
+            for (int s = 0; s < 2; ++s)
+                if (has_points(p, s)) points_jt(p, s, outs[s], out[p.model[s]]);
+        }
+    }
+
+    // g = J^T n for a rigidly mapped contact point: (n, r x n), r its rotated offset.
+    static void rigid_gradient(const RigidContactPoints& points, Index point, const V3& n, double* g) {
+        const V3 t = cross(points.rotated(point), n);
+        for (int k = 0; k < 3; ++k) {
+            g[k] = n[k];
+            g[3 + k] = t[k];
         }
     }
 
@@ -636,6 +751,28 @@ private:
         return true;
     }
 
+    // Before a response: the contacts of the last step that were active (pen > 0) and whose points
+    // now lie on the wrong side of each other along the contact's normal ((x2 - x1) . n < 0, pen >
+    // dist): a point pushed through a triangle, two edges across each other. The detection finds
+    // them again with the normal reversed and the penalty then pushes them on through: counted for
+    // the report (ContactWarning), not undone.
+    void count_crossings(const double* const* x) {
+        for (const auto& entry : contacts_map_.map()) {
+            PenaltyPair& p = pairs[entry.second];
+            if (p.ff.contacts.empty()) continue;
+            const double* xs[2];
+            for (int s = 0; s < 2; ++s) {
+                xs[s] = x[p.model[s]];
+                if (has_points(p, s)) {  // (set_outputs maps them again for the new contacts)
+                    map_positions(p, s, xs[s], p.x[s].data());
+                    xs[s] = p.x[s].data();
+                }
+            }
+            for (const PenaltyContact& c : p.ff.contacts)
+                if (c.pen > 0 && dot(load3(xs[1], 3, c.m2) - load3(xs[0], 3, c.m1), c.normal) < 0) ++crossings_;
+        }
+    }
+
     // The box of a model swept from its last root box to this one (watch_fast_motion).
     static Box union_of(const Box& now, const Box& last) {
         Box swept = now;
@@ -665,7 +802,8 @@ private:
             for (const PenaltyPair& p : pairs) {
                 const PenaltyModel& a = models[p.model[0]];
                 const PenaltyModel& b = models[p.model[1]];
-                if (a.tree.empty() || b.tree.empty()) continue;
+                // one state moving as a whole moves both sides alike: its box says nothing here
+                if (a.tree.empty() || b.tree.empty() || p.one_node) continue;
                 const double reach = alarm_distance_ + a.contact_distance + b.contact_distance;
                 if ((a.motion > reach || b.motion > reach) && boxes_meet(a.swept, b.swept, reach)) ++fast_motions_;
             }
@@ -673,9 +811,35 @@ private:
         watching_ = true;
     }
 
+    // Whether a side's contact points are a state of their own (a mapping from the model's state):
+    // barycentric on triangles and lines, rigid on Rigid3d spheres; else the model's own points.
     bool has_points(const PenaltyPair& p, int side) const {
-        const ContactSide kind = models[p.model[side]].kind;
-        return kind == ContactSide::kTriangle || kind == ContactSide::kLine;
+        const PenaltyModel& m = models[p.model[side]];
+        return m.kind == ContactSide::kTriangle || m.kind == ContactSide::kLine || m.rigid;
+    }
+    bool rigid_side(const PenaltyPair& p, int side) const { return models[p.model[side]].rigid; }
+    // The contact points' mapping of a side with points: positions (RigidMapping::apply keeps the
+    // rotated offsets), derivatives (J) and J^T.
+    void map_positions(PenaltyPair& p, int side, const double* x, double* out) {
+        if (rigid_side(p, side))
+            p.rigid[side].apply(x, out);
+        else
+            p.points[side].apply(x, out);
+    }
+    void map_dx(const PenaltyPair& p, int side, const double* dx, double* out) const {
+        if (rigid_side(p, side))
+            p.rigid[side].apply_j(dx, out);
+        else
+            p.points[side].apply(dx, out);
+    }
+    void points_jt(const PenaltyPair& p, int side, const double* f, double* in_f) const {
+        if (rigid_side(p, side))
+            p.rigid[side].apply_jt(f, in_f);
+        else
+            p.points[side].apply_jt(f, in_f);
+    }
+    std::size_t point_count(const PenaltyPair& p, int side) const {
+        return rigid_side(p, side) ? p.rigid[side].size() : p.points[side].size();
     }
     double* force(PenaltyPair& p, int side) {
         return has_points(p, side) ? p.f[side].data() : models[p.model[side]].external.data();
@@ -702,6 +866,7 @@ private:
         p.live = true;
         ++live_pairs_[static_cast<std::size_t>(p.model[0])];
         ++live_pairs_[static_cast<std::size_t>(p.model[1])];
+        if (p.grouped) return;  // add_group_force maps its points' forces itself
         for (int s = 0; s < 2; ++s)
             if (has_points(p, s)) models[p.model[s]].children.push_back(2 * index + s);
     }
@@ -720,8 +885,15 @@ private:
     ContactSideModel side_model(PenaltyPair& p, int s, const double* x) {
         PenaltyModel& m = models[p.model[s]];
         m.sphere.x = x;
-        return ContactSideModel{m.kind, x, m.cells, m.kind == ContactSide::kSphere ? &m.sphere : nullptr,
-                                m.contact_distance, m.contact_stiffness, has_points(p, s) ? &p.points[s] : nullptr};
+        const bool barycentric = has_points(p, s) && !m.rigid;
+        return ContactSideModel{m.kind,
+                                x,
+                                m.cells,
+                                m.kind == ContactSide::kSphere ? &m.sphere : nullptr,
+                                m.contact_distance,
+                                m.contact_stiffness,
+                                barycentric ? &p.points[s] : nullptr,
+                                m.rigid ? &p.rigid[s] : nullptr};
     }
 
     // BarycentricPenalityContact::setDetectionOutputs, then the mappers' update() on positions.
@@ -732,9 +904,9 @@ private:
         for (int s = 0; s < 2; ++s) {
             static_x_[p.model[s]] = x[p.model[s]];
             if (!has_points(p, s)) continue;
-            const std::size_t n = 3 * p.points[s].size();
+            const std::size_t n = 3 * point_count(p, s);
             for (auto* v : {&p.x[s], &p.f[s], &p.dx[s], &p.df[s]}) v->resize(n);
-            p.points[s].apply(x[p.model[s]], p.x[s].data());
+            map_positions(p, s, x[p.model[s]], p.x[s].data());
         }
     }
 
@@ -744,6 +916,7 @@ private:
     bool skip_ = false;  // this step's pre-test found no pair that can meet
     Index fast_motions_ = 0;
     Index unmapped_detections_ = 0;
+    Index crossings_ = 0;
     int depth_ = 0;
     std::vector<BroadPhaseModel> broad_;
     std::vector<Index> broad_pairs_;
@@ -778,6 +951,24 @@ inline void contact_assemble_static_coupling(ContactPipelines& pipelines, Index 
 inline void contact_add_dforce(ContactPipelines& pipelines, Index pipeline, Index model, double* df,
                                const double* dx, double kfact) {
     pipelines[pipeline]->add_dforce(model, df, dx, kfact);
+}
+
+// One state vector per model of a pipeline (null for the models it does not concern).
+template <int N>
+struct ModelVectors {
+    double* at[N];
+};
+
+template <int N>
+inline void contact_group_add_force(ContactPipelines& pipelines, Index pipeline, const ModelVectors<N>& f,
+                                    const ModelVectors<N>& x) {
+    pipelines[pipeline]->add_group_force(f.at, x.at);
+}
+
+template <int N>
+inline void contact_group_add_dforce(ContactPipelines& pipelines, Index pipeline, const ModelVectors<N>& df,
+                                     const ModelVectors<N>& dx, double kfact) {
+    pipelines[pipeline]->add_group_dforce(df.at, dx.at, kfact);
 }
 
 }  // namespace sofac

@@ -728,10 +728,13 @@ struct Adjacency {
 };
 
 // The element filters of a self-colliding model (canCollideWithElement), asked only when both
-// elements belong to models of the same node with selfCollision set.
+// elements belong to models of the same node with selfCollision set. SOFA asks them through
+// CollisionElementIterator::canCollideWith, which also wants index < index2 within one model
+// (SelfCollisionFilter below combines the two).
 //
 // PointCollisionModel, both elements in the model: only index > index2, and not when a neighbour
 // of one is the other or a neighbour of both (SOFA's loop runs only when both have neighbours).
+// With canCollideWith's index < index2 no pair of one point model ever passes.
 inline bool points_can_collide(Index index, Index index2, const Adjacency& vertices_around_vertex) {
     if (index <= index2) return false;
     const Index n1 = vertices_around_vertex.count(index), n2 = vertices_around_vertex.count(index2);
@@ -766,6 +769,50 @@ inline bool lines_can_collide(Index line, Index line2, const Index* edges, const
 inline bool triangle_point_can_collide(const TriangleModel& m, Index tri, Index point) {
     return point != m.point(tri, 0) && point != m.point(tri, 1) && point != m.point(tri, 2);
 }
+
+// LineCollisionModel against the point model of its node (its `mpoints`): not an end of the line,
+// nor an end of an edge around either end (edges_around_vertex indexes the line model's edges).
+inline bool line_point_can_collide(Index line, Index point, const Index* edges, const Adjacency& edges_around_vertex) {
+    for (const Index p : {edges[2 * line], edges[2 * line + 1]}) {
+        if (point == p) return false;
+    }
+    for (const Index p : {edges[2 * line], edges[2 * line + 1]})
+        for (Index i = 0; i < edges_around_vertex.count(p); ++i) {
+            const Index e = edges_around_vertex.at(p, i);
+            if (point == edges[2 * e] || point == edges[2 * e + 1]) return false;
+        }
+    return true;
+}
+
+// BVHNarrowPhase's test before each element pair of two models of one node (both selfCollision):
+// CollisionElementIterator::canCollideWith, (model1 != model2 || e1 < e2) &&
+// model1->canCollideWithElement(e1, model2, e2), e1 on the intersector's first model. The planner
+// picks the rule from the models (compiler/plan/contacts.py): the pairs of one point model never
+// pass (no filter object: their narrow phase is not run), other pairs of one node pass always.
+struct SelfCollisionFilter {
+    enum Rule : int {
+        kSameModel = 1,      // triangles, spheres: e1 < e2 (their canCollideWithElement says yes)
+        kSameLines = 2,      // e1 < e2 and lines_can_collide
+        kTrianglePoint = 3,  // triangle_point_can_collide (the point model is the triangle's node's)
+        kLinePoint = 4,      // line_point_can_collide (the point model is the line's node's)
+    };
+    Rule rule = kSameModel;
+    const Index* cells = nullptr;     // the first model's triangles or edges
+    Adjacency edges_around_vertex{};  // line rules: the line model's topology
+    bool operator()(Index e1, Index e2) const {
+        switch (rule) {
+            case kSameModel:
+                return e1 < e2;
+            case kSameLines:
+                return e1 < e2 && lines_can_collide(e1, e2, cells, edges_around_vertex);
+            case kTrianglePoint:
+                return e2 != cells[3 * e1] && e2 != cells[3 * e1 + 1] && e2 != cells[3 * e1 + 2];
+            case kLinePoint:
+                return line_point_can_collide(e1, e2, cells, edges_around_vertex);
+        }
+        return true;
+    }
+};
 
 }  // namespace sofac::collide
 

@@ -58,6 +58,7 @@ from .contacts import (
     ElementTest,
     LazyPoints,
     Resolution,
+    SelfFilter,
 )
 from .groups import (
     STEP_PHASES,
@@ -152,6 +153,7 @@ __all__ = [
     "Projection",
     "Resolution",
     "Scheme",
+    "SelfFilter",
     "Slot",
     "SpringDamping",
     "SpringFlags",

@@ -105,7 +105,7 @@ class CollisionModel:
 
     origin: str
     kind: str  # "triangle", "line", "point" or "sphere" (runtime ContactSide)
-    state: StatePlan  # its points (Vec3d)
+    state: StatePlan  # its points (Vec3d), or a sphere model's frames (Rigid3d: ``rigid``)
     elements: int  # triangles, edges, points or spheres
     cells: Buffer | None  # i64 triangles (3 per) or edges (2 per)
     contact_distance: float
@@ -124,6 +124,22 @@ class CollisionModel:
     cone: tuple[Buffer, ...] | None = None
     both_side: bool = False  # triangle models' bothSide
     node_rank: int = 0  # depth-first index of its node (where a Lagrangian contact is placed)
+    rigid: bool = False  # spheres centred on Rigid3d frames: contact points fixed in the frames
+    # line models in a self-collision filter: the i64 CSR edgesAroundVertex of their topology
+    # (offsets, items), ascending edge indices as MeshTopology lists them
+    edges_around_vertex: tuple[Buffer, Buffer] | None = None
+
+
+class SelfFilter(enum.Enum):
+    """BVHNarrowPhase's element filter for a pair of models of one node with selfCollision
+    (CollisionElementIterator::canCollideWith), by the runtime's SelfCollisionFilter rule."""
+
+    NONE = ""  # models of different nodes, or a pair SOFA's filter always lets through
+    SAME_MODEL = "kSameModel"  # one triangle or sphere model: e1 < e2
+    SAME_LINES = "kSameLines"  # one line model: e1 < e2, no shared point, no edge touching both
+    TRIANGLE_POINT = "kTrianglePoint"  # the point is no vertex of the triangle
+    LINE_POINT = "kLinePoint"  # the point is no end of the line nor of an edge around its ends
+    NEVER = "never"  # one point model: index < index2 and index > index2, never both
 
 
 @dataclass
@@ -148,10 +164,13 @@ class LazyPoints:
 @dataclass(frozen=True)
 class ElementTest:
     """An element test of runtime/sofac/proximity.h, ``<method>::<kind>_<kind>``, with its flags
-    after the two models (same_model, useLineLine, useSurfaceNormals)."""
+    after the two models (same_model, useLineLine, useSurfaceNormals). ``self_filter``: "" for
+    pairs of different nodes, "filter" when each pair's SelfCollisionFilter is asked before each
+    element pair, "never" when SOFA's filter refuses every element pair (no traversal)."""
 
     name: str
     options: tuple[bool, ...] = ()
+    self_filter: str = ""
 
     @property
     def kinds(self) -> tuple[str, str]:
@@ -166,8 +185,20 @@ class ContactPair:
     first: int
     second: int
     test: int  # index in Collision.tests
-    root: bool  # both simulated: one explicit force per step (SOFA places it at the pipeline's node)
+    # Both simulated: SOFA places the response at the pipeline's node. ``root``: no solver
+    # integrates that node, one explicit force per step; ``grouped``: inside the group of the
+    # solver that integrates it (penalty only), in its force evaluations and K dx products.
+    root: bool
     id_bound: int  # the outputs' ids are below it (the de-duplication's table)
+    grouped: bool = False
+    self_filter: SelfFilter = SelfFilter.NONE  # models of one node (selfCollision)
+    one_node: bool = False  # both models in one node (one state): the motion watch skips it
+    respond: bool = True  # False: the models' contactResponse is "nullptr", no contact is made
+
+    @property
+    def placement(self) -> int:
+        """The pair table's placement column (runtime PenaltyContacts::Placement)."""
+        return 2 if self.grouped else int(self.root)
 
 
 REPORT_FIELDS = (
@@ -178,6 +209,7 @@ REPORT_FIELDS = (
     "response_seconds",
     "fast_motions",
     "unmapped_detections",
+    "crossings",
 )
 
 
@@ -219,7 +251,8 @@ class Collision:
     # contacts; since the instance was created or reset, buffers that outgrew their capacity,
     # degenerate outputs (NaN dropped or zero distance), the seconds spent in detection and in
     # response, the pairs a model came near after moving farther than the detection's reach, and
-    # the detections that left the points mapped when near (``lazy``) unmapped.
+    # the detections that left the points mapped when near (``lazy``) unmapped, and the contacts
+    # pushed through in a step (their points crossed along the contact's normal).
     report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)

@@ -219,7 +219,9 @@ def _fixed_rigid(
     kept_offset = _kept_forces(planner, phase, 6 * count)
     for p, dof in enumerate(dofs):
         for half in (0, 3):
-            phase.blocks.append((first_row + 6 * p + half, BILATERAL_3, 1.0, kept_offset + 6 * p + half, 0.0))
+            phase.blocks.append(
+                (first_row + 6 * p + half, Resolution.BILATERAL_3, 1.0, kept_offset + 6 * p + half, 0.0)
+            )
         for k in range(6):
             unit = tuple(1.0 if c == k else 0.0 for c in range(6))
             phase.entries.setdefault(state.ident, []).append((first_row + 6 * p + k, int(dof), unit))
