@@ -67,7 +67,8 @@ HEADINGS = {"free_motion": "free", "violation": "viol", "compliance": "W", "corr
 SOLVERS = {
     "bgs": '<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>',
     "nncg": '<NNCGConstraintSolver tolerance="1e-12" maxIterations="1000"/>',
-    "lcp": '<LCPConstraintSolver maxIt="1000" tolerance="1e-12" initial_guess="true" build_lcp="true" mu="0.5"/>',
+    "lcp": '<LCPConstraintSolver maxIt="1000" tolerance="1e-12" initial_guess="true" build_lcp="true" '
+    'mu="0.5"/>',
 }
 SIDES = (2, 3, 4, 6, 8, 12, 16, 20, 26)  # 3 side^2 rows: 12 .. 2028
 MASS = 0.01
@@ -204,7 +205,14 @@ def _cell(value: float) -> str:
 def split_table(names: Sequence[str], splits: Sequence[Split], markdown: bool) -> str:
     heading = ["scene", "rows/step", "ms/step", *(HEADINGS.get(p, p) for p in PARTS), "rest", "iterations"]
     lines = [
-        [name, f"{s.rows:.1f}", _cell(s.total), *(_cell(s.parts[p]) for p in PARTS), _cell(s.rest), f"{s.iterations:g}"]
+        [
+            name,
+            f"{s.rows:.1f}",
+            _cell(s.total),
+            *(_cell(s.parts[p]) for p in PARTS),
+            _cell(s.rest),
+            f"{s.iterations:g}",
+        ]
         for name, s in zip(names, splits, strict=True)
     ]
     return render([heading, *lines], markdown)
@@ -216,7 +224,10 @@ def render(cells: Sequence[Sequence[str]], markdown: bool) -> str:
         return "\n".join(out + ["| " + " | ".join(row) + " |" for row in cells[1:]])
     widths = [max(len(row[c]) for row in cells) for c in range(len(cells[0]))]
     return "\n".join(
-        "  ".join(cell.ljust(w) if c == 0 else cell.rjust(w) for c, (cell, w) in enumerate(zip(row, widths, strict=True)))
+        "  ".join(
+            cell.ljust(w) if c == 0 else cell.rjust(w)
+            for c, (cell, w) in enumerate(zip(row, widths, strict=True))
+        )
         for row in cells
     )
 
@@ -247,8 +258,16 @@ def plot(results: dict[str, list[Split]], exponents: dict[str, dict[str, float]]
     for (solver, splits), colour in zip(results.items(), ("C0", "C1", "C2", "C3"), strict=False):
         rows = [s.rows for s in splits]
         fitted = exponents.get(solver, {}).get("solve", float("nan"))
-        axes.loglog(rows, [s.parts["solve"] for s in splits], "o-", color=colour, label=f"{solver} solve (slope {fitted:.2f})")
-        axes.loglog(rows, [s.total for s in splits], "--", color=colour, alpha=0.6, label=f"{solver} whole step")
+        axes.loglog(
+            rows,
+            [s.parts["solve"] for s in splits],
+            "o-",
+            color=colour,
+            label=f"{solver} solve (slope {fitted:.2f})",
+        )
+        axes.loglog(
+            rows, [s.total for s in splits], "--", color=colour, alpha=0.6, label=f"{solver} whole step"
+        )
     axes.loglog(
         [s.rows for s in next(iter(results.values()))],
         [s.parts["rows"] for s in next(iter(results.values()))],
@@ -273,7 +292,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--solvers", nargs="+", choices=sorted(SOLVERS), default=["bgs", "nncg", "lcp"])
     parser.add_argument("--batches", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=0.3, help="length of a timed batch")
-    parser.add_argument("--fit-from", type=float, default=100.0, help="rows from which the exponent is fitted")
+    parser.add_argument(
+        "--fit-from", type=float, default=100.0, help="rows from which the exponent is fitted"
+    )
     parser.add_argument("--plot", type=Path, default=HERE / "constraint_rows.png")
     parser.add_argument("--markdown", type=Path, help="also write the tables as Markdown")
     args = parser.parse_args(argv)

@@ -77,7 +77,8 @@ API void solve_in_columns(Index n, const Index* rows, const Index* cols, const d
     info[1] = C;
     for (Index first = 0; info[0] && first < columns; first += C) {
         for (int c = 0; c < C; ++c)
-            for (Index i = 0; i < n; ++i) D.rhs_columns(i, c) = first + c < columns ? b[(first + c) * n + i] : 0.0;
+            for (Index i = 0; i < n; ++i)
+                D.rhs_columns(i, c) = first + c < columns ? b[(first + c) * n + i] : 0.0;
         D.solve_columns();
         for (int c = 0; c < C && first + c < columns; ++c)
             for (Index i = 0; i < n; ++i) x_columns[(first + c) * n + i] = D.column_solution(c)[i];
@@ -249,8 +250,20 @@ def test_solves_in_columns_equal_single_solves_bit_for_bit(lib: ctypes.CDLL, llt
     in_columns, single = np.full(columns * n, np.nan), np.zeros(columns * n)
     info = np.zeros(2, dtype=np.int64)
     count = len(rows)
-    lib.solve_in_columns(n, _i(rows), _i(cols), _d(values), count, _i(fixed), int(llt), _d(b), columns,
-                         _d(in_columns), _d(single), _i(info))
+    lib.solve_in_columns(
+        n,
+        _i(rows),
+        _i(cols),
+        _d(values),
+        count,
+        _i(fixed),
+        int(llt),
+        _d(b),
+        columns,
+        _d(in_columns),
+        _d(single),
+        _i(info),
+    )
     assert info[0] == 1 and info[1] > 1
     assert np.array_equal(in_columns, single)
     a = dense_projected(n, rows, cols, values, fixed != 0)
@@ -268,8 +281,20 @@ def test_a_supernodal_factor_solves_one_column_at_a_time(lib: ctypes.CDLL) -> No
     b = np.ones(n)
     out = np.zeros(2 * n)
     info = np.zeros(2, dtype=np.int64)
-    lib.solve_in_columns(n, _i(rows), _i(cols), _d(values[: len(rows)]), len(rows), _i(fixed), 1, _d(b), 1,
-                         _d(out[:n]), _d(out[n:]), _i(info))
+    lib.solve_in_columns(
+        n,
+        _i(rows),
+        _i(cols),
+        _d(values[: len(rows)]),
+        len(rows),
+        _i(fixed),
+        1,
+        _d(b),
+        1,
+        _d(out[:n]),
+        _d(out[n:]),
+        _i(info),
+    )
     assert info[0] == 0
 
 
