@@ -96,6 +96,9 @@ def test_the_iteration_limit_is_a_warning_with_the_residual(tmp_path: Path) -> N
     with pytest.warns(RuntimeWarning, match=expected) as caught:
         sim.step(3)
     assert "SOFA's iteration count 2" in str(caught[0].message)  # sweeps + 1, as SOFA counts
+    seconds = dict(zip(CONSTRAINT_REPORT_FIELDS, sim.output("/loop.constraint_report"), strict=True))
+    assert seconds["detection_seconds"] == 0.0  # no collision pipeline: no detection timed
+    assert seconds["free_motion_seconds"] > 0 and seconds["solve_seconds"] > 0
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sim.reset()
