@@ -65,7 +65,7 @@ SCENES = (
 )
 # The parts of a step, as the report names them (without "_seconds"), in step order.
 PARTS = ("detection", "free_motion", "rows", "violation", "compliance", "solve", "correction", "finish")
-HEADINGS = {"free_motion": "free", "violation": "viol", "compliance": "W", "correction": "correct"}
+HEADINGS = {"free_motion": "free motion", "rows": "rows (J)", "compliance": "W"}
 SOLVERS = {
     "bgs": '<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="1000"/>',
     "nncg": '<NNCGConstraintSolver tolerance="1e-12" maxIterations="1000"/>',
@@ -215,7 +215,7 @@ def slope(rows: Sequence[float], ms: Sequence[float]) -> float:
 
 
 def _cell(value: float) -> str:
-    return f"{value:.4g}"
+    return f"{value:.3g}"
 
 
 def split_table(names: Sequence[str], splits: Sequence[Split], markdown: bool) -> str:
@@ -284,13 +284,10 @@ def plot(results: dict[str, list[Split]], exponents: dict[str, dict[str, float]]
         axes.loglog(
             rows, [s.total for s in splits], "--", color=colour, alpha=0.6, label=f"{solver} whole step"
         )
-    axes.loglog(
-        [s.rows for s in next(iter(results.values()))],
-        [s.parts["rows"] for s in next(iter(results.values()))],
-        ":",
-        color="grey",
-        label=f"rows phase ({next(iter(results))})",
-    )
+    first, splits = next(iter(results.items()))
+    rows = [s.rows for s in splits]
+    axes.loglog(rows, [s.parts["compliance"] for s in splits], "-.", color="grey", label=f"W build ({first})")
+    axes.loglog(rows, [s.parts["rows"] for s in splits], ":", color="grey", label=f"rows phase ({first})")
     axes.set_xlabel("constraint rows (3 per resting particle)")
     axes.set_ylabel("ms per step")
     axes.set_title("sofac: constraint solve against the rows (particles resting on a floor)")

@@ -166,7 +166,7 @@ def test_constraint_benchmark_splits_the_step(constraints: ModuleType, tmp_path:
     assert sum(split.parts.values()) <= split.total
     assert split.rest >= 0
     table = constraints.split_table(["particles"], [split], markdown=True)
-    assert table.startswith("| scene | rows/step | ms/step | detection | free |")
+    assert table.startswith("| scene | rows/step | ms/step | detection | free motion | rows (J) |")
 
 
 def test_constraint_benchmark_fits_and_plots(constraints: ModuleType, tmp_path: Path) -> None:
