@@ -45,7 +45,7 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(REPO / "tests"))
 
 import sofac  # noqa: E402
-from lagrangian_scenes import CONTACT, contact_root, static_floor  # noqa: E402
+from lagrangian_scenes import CONTACT, contact_root, particles, static_floor  # noqa: E402
 from machine import describe  # noqa: E402
 from sofac.plan.ir import CONSTRAINT_REPORT_FIELDS  # noqa: E402
 
@@ -179,20 +179,11 @@ def particles_scene(side: int, solver: str) -> str:
     (off the floor's diagonal), friction 0.5: 3 side^2 constraint rows every step."""
     i, k = np.meshgrid(np.arange(side), np.arange(side), indexing="ij")
     points = np.column_stack([-2.5 + 0.1 * i.ravel(), np.full(side * side, CONTACT), -2.45 + 0.1 * k.ravel()])
-    position = "  ".join(" ".join(f"{c:.17g}" for c in p) for p in points)
     return (
         contact_root(SOLVERS[solver], 0.5)
         + static_floor("-3 0 -3  3 0 -3  3 0 3  -3 0 3")
-        + f"""    <Node name="Particles">
-        <EulerImplicitSolver rayleighStiffness="0" rayleighMass="0" />
-        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-20" />
-        <MechanicalObject name="dofs" position="{position}" />
-        <UniformMass vertexMass="{MASS!r}" />
-        <UncoupledConstraintCorrection compliance="{1.0 / MASS!r}" />
-        <PointCollisionModel />
-    </Node>
-</Node>
-"""
+        + particles("Particles", points, MASS)
+        + "</Node>\n"
     )
 
 
