@@ -1,4 +1,5 @@
-"""The performance benchmarks (benchmarks/workloads.py) still run: tiny sizes, no timing assertions."""
+"""The performance benchmarks (benchmarks/workloads.py, constraints.py) still run: tiny sizes, no timing
+assertions."""
 
 from __future__ import annotations
 
@@ -15,13 +16,18 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-@pytest.fixture(scope="module")
-def workloads() -> Iterator[ModuleType]:
+def _benchmark(name: str) -> Iterator[ModuleType]:
+    """A script of benchmarks/ imported as a module (the folder on sys.path meanwhile)."""
     sys.path.insert(0, str(BENCHMARKS))
     try:
-        yield importlib.import_module("workloads")
+        yield importlib.import_module(name)
     finally:
         sys.path.remove(str(BENCHMARKS))
+
+
+@pytest.fixture(scope="module")
+def workloads() -> Iterator[ModuleType]:
+    yield from _benchmark("workloads")
 
 
 def test_cloth_matches_the_workload_definition(workloads: ModuleType) -> None:
@@ -143,11 +149,7 @@ def test_sphere_floor_workload_runs_agrees_and_rests(workloads: ModuleType, tmp_
 
 @pytest.fixture(scope="module")
 def constraints() -> Iterator[ModuleType]:
-    sys.path.insert(0, str(BENCHMARKS))
-    try:
-        yield importlib.import_module("constraints")
-    finally:
-        sys.path.remove(str(BENCHMARKS))
+    yield from _benchmark("constraints")
 
 
 @pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
