@@ -93,6 +93,7 @@ CODES: dict[str, CodeInfo] = {
     "E227": _e("duplicate name"),
     "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),
     "E246": _e("Lagrangian constraint on a state without a constraint correction"),
+    "W247": _w("constraint correction without a compliance (SOFA's default is used)"),
     # --- usage
     "E002": _e("usage error"),
 }
@@ -146,11 +147,14 @@ class Diagnostics:
         self.downgrade_unsupported = False
 
     def add(self, code: str, loc: SourceLoc, message: str, hint: str = "") -> Diagnostic:
+        """Adds a diagnostic, once: the same one found again (a refusal reached from several
+        places) is not repeated."""
         severity = CODES[code].severity
         if code == "E222" and self.downgrade_unsupported:
             severity = Severity.WARNING
         diag = Diagnostic(code, loc, message, hint, severity)
-        self._items.append(diag)
+        if diag not in self._items:
+            self._items.append(diag)
         return diag
 
     def extend(self, other: Iterable[Diagnostic]) -> None:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import sofac
 from sofac.build.compiler import build_scene
+from sofac.check.checker import check_file as check_only
 from sofac.diagnostics import SceneError
 from sofac.pipeline import check_file, generate, plan_checked, plan_file
 from sofac.plan.ir import REPORT_FIELDS, Plan
@@ -275,15 +276,15 @@ def test_assembled_solve_of_static_contacts_is_warned(tmp_path: Path, solver: st
         assert not found
 
 
-def test_alarm_distance_below_contact_distance_is_refused(tmp_path: Path) -> None:
+def test_alarm_distance_below_contact_distance_is_refused_by_check(tmp_path: Path) -> None:
     scene = tmp_path / "alarm.scn"
     scene.write_text(FLOOR.read_text().replace('alarmDistance="0.5"', 'alarmDistance="0.1"'))
-    with pytest.raises(SceneError) as error:
+    _, diagnostics = check_only(scene)  # `sofac check` says it, as a compile would
+    (diagnostic,) = [d for d in diagnostics.sorted() if d.code == "E207"]
+    assert (diagnostic.loc.line, diagnostic.loc.attribute) == (9, "alarmDistance")
+    assert "alarmDistance=0.1 must be >= contactDistance=0.2" in diagnostic.message
+    with pytest.raises(SceneError):
         plan_file(scene)
-    (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E207"]
-    assert (
-        diagnostic.loc.line == 9 and "alarmDistance=0.1 must be >= contactDistance=0.2" in diagnostic.message
-    )
 
 
 # SOFA's regression scenes held together by contacts: they pass only with SOFA's contact order,

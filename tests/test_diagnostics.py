@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from sofac.check.checker import check_file
 from sofac.cli.main import main
-from sofac.diagnostics import CODES, Diagnostic, Diagnostics, SceneError, Severity
+from sofac.diagnostics import CODES, Diagnostic, Diagnostics, SceneError, Severity, SourceLoc
 from sofac.front.parse import parse_scene
 
 COMPILER = Path(__file__).resolve().parents[1] / "compiler"
@@ -493,8 +493,9 @@ CASES = [
 # Codes tested by the dedicated tests further down (they need another entry point than check_file),
 # and the Python scene codes, tested in test_pyscene.py.
 # W245 (a planner warning) and E246 (its scenes also carry E222 while constraint rows are not
-# compiled) are tested in test_free_motion.py; W232 (a planner warning) in test_contacts.py.
-SPECIAL_CODES = {"E100", "E103", "E002", "E113", "E114", "W245", "E246", "W232"}
+# compiled) are tested in test_free_motion.py; W232 (a planner warning) in test_contacts.py; W247
+# (a correction without compliance) in test_lagrangian_contact.py.
+SPECIAL_CODES = {"E100", "E103", "E002", "E113", "E114", "W245", "E246", "W232", "W247"}
 
 # Codes listed in CODES that no stage emits yet: no source file of the package spells them (checked
 # by test_unreachable_codes_are_never_emitted, which fails as soon as one of them is used).
@@ -649,6 +650,14 @@ def test_allow_unsupported_turns_e222_into_a_warning(
     assert "error E222" in capsys.readouterr().out
     assert main(["check", "--allow-unsupported", str(scene)]) == 0
     assert "warning E222" in capsys.readouterr().out
+
+
+def test_a_diagnostic_found_twice_is_reported_once() -> None:
+    diagnostics = Diagnostics()
+    for _ in range(3):  # one refusal reached from three places
+        diagnostics.add("E222", SourceLoc("a.scn", 4), "unsupported component X at line 4: why")
+    diagnostics.add("E222", SourceLoc("a.scn", 5), "unsupported component X at line 4: why")
+    assert [d.loc.line for d in diagnostics] == [4, 5]
 
 
 def test_every_code_is_covered() -> None:

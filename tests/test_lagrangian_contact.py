@@ -5,6 +5,7 @@ answers and SOFA's regression references."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -118,12 +119,29 @@ def test_the_effects_and_schedule_list_the_contact_rows(tmp_path: Path) -> None:
     assert "local_min_distance::triangle_point, FrictionContactConstraint mu=0.4: 3 constraint row(s)" in text
 
 
-def test_a_negative_mu_is_an_error_with_its_line(tmp_path: Path) -> None:
-    with pytest.raises(SceneError) as error:
-        plan_of(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=-0.5))
-    (diagnostic,) = [d for d in error.value.diagnostics if d.code == "E207"]
+def test_a_negative_mu_is_an_error_of_check_with_its_line(tmp_path: Path) -> None:
+    _, diagnostics = check_file(scene(tmp_path, FLAT, (0.3, 0.1, 0.2), mu=-0.5))
+    (diagnostic,) = [d for d in diagnostics.sorted() if d.code == "E207"]
     assert diagnostic.loc.line == 9 and diagnostic.loc.attribute == "responseParams"
     assert "mu=-0.5 must be >= 0" in diagnostic.message
+
+
+def test_a_correction_without_compliance_is_said_as_sofa_says_it(tmp_path: Path) -> None:
+    # A point state: SOFA warns and gives every DOF defaultCompliance's default (W247).
+    points = scene(tmp_path, FLAT, (0.3, 0.1, 0.2))
+    points.write_text(points.read_text().replace(f'compliance="{1.0 / MASS}"', ""))
+    _, diagnostics = check_file(points)
+    (warning,) = [d for d in diagnostics.sorted() if d.code == "W247"]
+    assert warning.loc.line == 15 and "defaultCompliance's default, 1e-05" in warning.message
+    assert not diagnostics.has_errors()
+    # A rigid state without a UniformMass has no compliance at all: an error of check (E226).
+    dofs = 'name="dofs" template="Rigid3d"'
+    rigid = re.sub(r'name="dofs" position="[^"]*"', dofs, points.read_text(), count=1)
+    rigid = rigid.replace(f'<UniformMass totalMass="{MASS}" />', "").replace("<PointCollisionModel />", "")
+    points.write_text(rigid)
+    _, diagnostics = check_file(points)
+    (error,) = [d for d in diagnostics.sorted() if d.code == "E226"]
+    assert error.loc.line == 15 and "no UniformMass to compute it from" in error.message
 
 
 def test_a_constraint_below_the_root_with_contacts_is_refused(tmp_path: Path) -> None:

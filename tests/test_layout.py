@@ -1,5 +1,6 @@
 """Facts shared by the planner and the C++ runtime are stated once, in the runtime's headers, and
-checked here: the planner's copies (block size, per-element data sizes, FEM method codes) must be
+checked here: the planner's copies (block size, per-element data sizes, FEM method codes,
+constraint resolutions) must be
 what the headers say, so a change on one side cannot silently desynchronise the other."""
 
 from __future__ import annotations
@@ -8,7 +9,7 @@ import subprocess
 from pathlib import Path
 
 from sofac.build import compiler as build
-from sofac.plan.ir import FemMethod
+from sofac.plan.ir import FemMethod, Resolution
 from sofac.plan.lower.beams import BEAM_FRAME_SIZE, BEAM_STIFFNESS_SIZE
 from sofac.plan.lower.common import TETRA_LANES
 from sofac.plan.lower.fem import DATA_SIZE_FUNCTIONS, FEM_KINDS, QUAD_BENDING_DATA
@@ -20,7 +21,7 @@ def _runtime_values(tmp_path: Path, expressions: list[str]) -> list[int]:
     body = "\n".join(f'    std::printf("%d\\n", int({e}));' for e in expressions)
     source = (
         '#include <cstdio>\n#include "sofac/fem.h"\n#include "sofac/shell.h"\n'
-        '#include "sofac/quad_bending.h"\n#include "sofac/beam.h"\n'
+        '#include "sofac/quad_bending.h"\n#include "sofac/beam.h"\n#include "sofac/constraints.h"\n'
         f"int main() {{\n{body}\n}}\n"
     )
     (tmp_path / "layout.cpp").write_text(source)
@@ -47,6 +48,10 @@ def test_planner_layout_matches_the_runtime(tmp_path: Path) -> None:
     for method in FemMethod:
         expressions.append(f"sofac::FEM_{method.name}")
         expected.append(int(method))
+    for resolution in Resolution:
+        enumerator = resolution.name.title().replace("_", "")  # BILATERAL_3 -> Bilateral3
+        expressions.append(f"sofac::Resolution::{enumerator}")
+        expected.append(int(resolution))
     for prefix, (_, _, _, sizes) in FEM_KINDS.items():
         for method, size in sizes.items():
             expressions.append(f"sofac::{DATA_SIZE_FUNCTIONS[prefix]}({method})")

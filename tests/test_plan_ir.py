@@ -149,8 +149,14 @@ def test_calls_are_spelled_out_only_by_codegen() -> None:
         "sofac::SpringFlags::None>("
         "sofac::Springs{S.b3_t.data(), Index(S.b3_t.size() / 2), 4}, S.b1_x.data(), S.b2_y.data(), nullptr);"
     )
-    energy = call("spring_energy", x, np.float64(0.5), np.int64(3), into=Env.POTENTIAL)
-    assert statement(energy) == "potential += sofac::spring_energy(S.b1_x.data(), 0.5, 3);"
+    energy = call("example_energy", x, np.float64(0.5), np.int64(3), into=Env.POTENTIAL)
+    assert statement(energy) == "potential += sofac::example_energy(S.b1_x.data(), 0.5, 3);"
+    # A number passed to a runtime kernel is labelled with the header's parameter name.
+    weight = call(kernel("mass_gravity", "Vec3d"), x, 2, y, 0, table)
+    assert statement(weight) == (
+        "sofac::mass_gravity<sofac::Vec3d>(S.b1_x.data(), /*n=*/2, S.b2_y.data(), /*mass_stride=*/0, "
+        "S.b3_t.data());"
+    )
     mapping = call("rigid_apply_j", PARENT, CHILD, table, 7)
     with pytest.raises(TypeError, match="unbound"):
         statement(mapping)

@@ -170,6 +170,7 @@ class _Checker:
         self._check_mappings()
         self._check_solvers()
         self._check_constraint_corrections()
+        self._check_uncoupled_compliance()
         self._add_data_repositories()
         for checked in self.checked:
             if checked.spec is not None:
@@ -225,6 +226,44 @@ class _Checker:
                     "add an UncoupledConstraintCorrection (or a LinearSolverConstraintCorrection) in the "
                     f"node of {independent.path!r}",
                 )
+
+    def _check_uncoupled_compliance(self) -> None:
+        """UncoupledConstraintCorrection without `compliance` or `defaultCompliance`: SOFA's init
+        warns and uses defaultCompliance's default for a point state; a rigid one takes its
+        compliance from its node's UniformMass, and without one it has none (an error here)."""
+        for checked in self.checked:
+            spec, component = checked.spec, checked.component
+            if spec is None or spec.variant is not Variant.UNCOUPLED:
+                continue
+            if component.get("compliance") is not None or component.get("defaultCompliance") is not None:
+                continue
+            linked = checked.links.get("mstate")
+            state = linked if isinstance(linked, Component) else self._node_state(component.node)
+            datatype = self.checked.of(state).datatype if state is not None else checked.datatype
+            if datatype is not None and datatype.rigid:
+                if any(
+                    self.checked.of(other).spec is not None
+                    and self.checked.of(other).spec.name == "UniformMass"  # type: ignore[union-attr]
+                    for other in component.node.objects
+                ):
+                    continue
+                self.diags.add(
+                    "E226",
+                    component.loc,
+                    f"{component.type_name} on a rigid state needs its compliance: neither 'compliance' "
+                    "(7 values) nor 'defaultCompliance' is set, and its node has no UniformMass to compute "
+                    "it from",
+                    "add a UniformMass next to it, or set defaultCompliance",
+                )
+                continue
+            default = spec.field("defaultCompliance")
+            self.diags.add(
+                "W247",
+                component.loc,
+                f"{component.type_name}: neither 'defaultCompliance' nor 'compliance' is set; SOFA (and "
+                f"sofac) give every DOF defaultCompliance's default, {default.default if default else ''}",
+                "set defaultCompliance (about dt^2 / mass for a point of that mass) or compliance",
+            )
 
     # --- names -------------------------------------------------------------------------------
     def _resolve_spec(self, component: Component) -> CheckedComponent:

@@ -9,6 +9,7 @@ the code.
 from __future__ import annotations
 
 import contextlib
+import enum
 import functools
 import re
 from pathlib import Path
@@ -27,6 +28,7 @@ from sofac.plan.ir import (
     Aggregate,
     Arg,
     Buffer,
+    BuiltSolver,
     Call,
     Collision,
     CollisionModel,
@@ -136,6 +138,8 @@ def _argument(arg: Arg) -> str:
         return _ENV[arg]
     if isinstance(arg, FemMethod):
         return f"sofac::FEM_{arg.name}"
+    if isinstance(arg, BuiltSolver):
+        return f"sofac::BuiltSolver::{arg.value}"
     if isinstance(arg, bool):
         return "true" if arg else "false"
     if isinstance(arg, (int, float)):
@@ -143,11 +147,21 @@ def _argument(arg: Arg) -> str:
     raise TypeError(f"an unbound {arg!r} reached code generation")
 
 
+def _is_literal(arg: Arg) -> bool:
+    """A number or flag printed as such (a reader cannot tell what it is without its name)."""
+    return isinstance(arg, (bool, int, float)) and not isinstance(arg, enum.Enum)
+
+
 def statement(item: Statement) -> str:
     """One C++ statement (or comment line) of the step."""
     if isinstance(item, Note):
         return f"// {_comment(item.text)}"
-    text = f"sofac::{item.kernel}{_templates(item.templates)}({', '.join(_argument(a) for a in item.args)});"
+    count = len(item.args)
+    arguments = ", ".join(
+        (_label(item.kernel, i, count) if _is_literal(a) else "") + _argument(a)
+        for i, a in enumerate(item.args)
+    )
+    text = f"sofac::{item.kernel}{_templates(item.templates)}({arguments});"
     if item.into is not None:
         text = f"{_ENV[item.into]} += {text}"
     if item.while_recording:
@@ -179,6 +193,55 @@ def _header_of() -> dict[str, str]:
         for function, struct in _DEFINITION.findall(header.read_text()):
             index.setdefault(function or struct, header.name)
     return index
+
+
+@functools.cache
+def _parameter_names() -> dict[str, list[tuple[list[str], int]]]:
+    """Each runtime function's parameter names, per overload, with the number it requires (the
+    others have defaults), read from the headers: literal arguments are labelled with them."""
+    signatures: dict[str, list[tuple[list[str], int]]] = {}
+    for header in sorted((resource_dir("runtime") / "sofac").glob("*.h")):
+        text = header.read_text()
+        for match in _DEFINITION.finditer(text):
+            if match.group(1) is None:
+                continue
+            parameters = _top_level_split(text, match.end())
+            names = [_PARAMETER_NAME.findall(p.split("=")[0])[-1:] for p in parameters]
+            required = sum(1 for p in parameters if "=" not in p)
+            signatures.setdefault(match.group(1), []).append(([n[0] if n else "" for n in names], required))
+    return signatures
+
+
+def _top_level_split(text: str, start: int) -> list[str]:
+    """The comma-separated parameters of the list opened just before ``start``."""
+    depth, parts, current = 0, [], start
+    for index in range(start, len(text)):
+        char = text[index]
+        if char in "(<{[":
+            depth += 1
+        elif char in ")>}]":
+            if depth == 0:
+                last = text[current:index].strip()
+                return [*parts, last] if last or parts else parts
+            depth -= 1
+        elif char == "," and depth == 0:
+            parts.append(text[current:index].strip())
+            current = index + 1
+    return parts
+
+
+_PARAMETER_NAME = re.compile(r"\b([A-Za-z_]\w*)\s*(?:\[[^\]]*\])?\s*$")
+
+
+def _label(kernel: str, position: int, count: int) -> str:
+    """``/*name=*/`` for a literal argument, when every overload of ``kernel`` taking ``count``
+    arguments names that parameter alike (nothing otherwise)."""
+    candidates = {
+        names[position]
+        for names, required in _parameter_names().get(kernel, [])
+        if required <= count <= len(names) and names[position]
+    }
+    return f"/*{candidates.pop()}=*/" if len(candidates) == 1 else ""
 
 
 def _names(item: Statement) -> list[str]:
@@ -230,6 +293,28 @@ def _headers(plan: Plan) -> list[str]:
 def _lap(field: str) -> int:
     """The constraint report's field a PhaseClock lap adds to."""
     return CONSTRAINT_REPORT_FIELDS.index(field)
+
+
+def _uses(ops: list[Op], *values: Env) -> bool:
+    """Whether a call of ``ops`` reads one of the scope's ``values`` (as an argument, also inside
+    an aggregate, or as the sum it adds to): a function's parameter is named unused otherwise."""
+
+    def within(arg: Arg) -> bool:
+        if isinstance(arg, Aggregate):
+            return any(within(f) for f in arg.fields)
+        return isinstance(arg, Env) and arg in values
+
+    return any(
+        isinstance(c, Call) and (c.into in values or any(within(a) for a in c.args))
+        for op in ops
+        for c in op.calls
+    )
+
+
+def _maybe_unused(used: bool) -> str:
+    """The attribute a parameter or a local takes when the code generated for this scene may not
+    read it (the functions keep one signature whatever the scene holds)."""
+    return "" if used else "[[maybe_unused]] "
 
 
 class _OpView:
@@ -379,6 +464,28 @@ class _GroupView:
         ]
         for phase in (*STEP_PHASES, "init"):
             setattr(self, phase, [_OpView(op) for op in getattr(group, phase)])
+        # Which of its functions' parameters this group's calls read (the others are marked unused).
+        geometric = [Op("", [m.geometric]) for m in group.mappings if m.geometric is not None]
+        products = [*group.mass_dx, *group.stiffness_dx, *geometric]
+        self.reads = {
+            "assemble": {
+                "A": _uses(group.assemble, Env.ASSEMBLER),
+                "T": _uses(group.assemble, Env.BAND),
+                "mfact": _uses(group.assemble, Env.MFACT),
+                "kfact": _uses(group.assemble, Env.KFACT),
+            },
+            "mbk": {
+                "mfact": bool(group.mass_dx),  # its `if (mfact != 0.0)` guard
+                "kfact": _uses(products, Env.KFACT),
+                "bfact": _uses(products, Env.BFACT),
+            },
+            "energy": {
+                "S": bool(group.energy),
+                "kinetic": _uses(group.energy, Env.KINETIC, Env.KINETIC_OUT),
+                "potential": _uses(group.energy, Env.POTENTIAL, Env.POTENTIAL_OUT),
+            },
+            "finish": bool(group.mappings) or any(p.position or p.velocity for p in group.projections),
+        }
         for view, state in zip(self.states, group.states, strict=True):
             view.offset = group.offset(state)
         self.trapezoidal = "0.5" if group.trapezoidal else "1.0"
@@ -576,6 +683,13 @@ def _cone_views(collision: Collision, used: list[int]) -> list[str]:
     return lines
 
 
+def _initialises(group: Group) -> bool:
+    """Whether sofac_init does anything for a group: its init calls, its system's pattern, its
+    projections of x, its mappings."""
+    matrix = group.direct or group.preconditioned or group.assembled_cg
+    return bool(group.init or matrix or group.mappings or any(p.position for p in group.projections))
+
+
 def generate_source(plan: Plan) -> str:
     """The C++ source of a plan's step (deterministic: same plan, same text). Compiled for
     threads, groups that share no buffer step in parallel (Plan.parallel_groups)."""
@@ -584,6 +698,8 @@ def generate_source(plan: Plan) -> str:
         {"ident": b.ident, "kind": b.kind, "comment": _comment(f"{b.key} ({b.role})")} for b in plan.buffers
     ]
 
+    collisions = [_CollisionView(c, k) for k, c in enumerate(plan.collisions) if c.pairs]
+    on_read = any(g.on_read or any(m.mapped_when_near for m in g.mappings) for g in plan.groups)
     source = template.render(
         version=__version__,
         scene_file=_comment(plan.scene_file),
@@ -598,17 +714,19 @@ def generate_source(plan: Plan) -> str:
         else [],
         constraint_laps={part: _lap(f"{part}_seconds") for part in ("detection", "free_motion", "finish")},
         any_direct=any(g.direct or g.preconditioned for g in plan.groups),
-        on_read=any(g.on_read or any(m.mapped_when_near for m in g.mappings) for g in plan.groups),
+        on_read=on_read,
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),
         headers=_headers(plan),
         dt=plan.dt,
         threads=plan.threads,
         guard=plan.contact_guard,
-        collisions=[_CollisionView(c, k) for k, c in enumerate(plan.collisions) if c.pairs],
+        collisions=collisions,
         lagrangian=any(c.response == "friction_contact" and c.pairs for c in plan.collisions),
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,
+        maybe_unused=_maybe_unused,
+        init_reads_instance=bool(collisions) or on_read or any(_initialises(g) for g in plan.groups),
     )
     # Comments name scene files relative to the scene's folder: a moved scene keeps its source,
     # and so its cache entry. (Nothing else in the source comes from a path.)

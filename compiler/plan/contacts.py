@@ -10,7 +10,6 @@ trees refit, broad and narrow phase, SOFA's contact order, the contacts' forces.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -18,25 +17,18 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category, Variant
+from sofac.registry.components.collision import response_params
 
 from .ir import (
-    CHILD,
-    PARENT,
     REPORT_FIELDS,
-    Buffer,
-    Call,
     Collision,
     CollisionModel,
     ContactPair,
     ElementTest,
     Env,
     Group,
-    LazyPoints,
-    MappingOp,
     Op,
-    Statement,
-    bind,
-    buffers_of,
+    Scheme,
     call,
     origin_of,
 )
@@ -275,29 +267,8 @@ def _plan_collision(
             bool(value(i, "useLMDFilters")),
         )
     if response == "friction_contact":
-        params = _response_params(str(value(manager, "responseParams") or ""))
-        collision.mu = float(params.get("mu", 0.8))
-        if collision.mu < 0:
-            attribute = manager.attributes.get("responseParams")
-            planner.diags.add(
-                "E207",
-                attribute.loc if attribute is not None else manager.loc,
-                f"{manager.type_name}: mu={collision.mu!r} must be >= 0 (Coulomb's friction coefficient)",
-                'give responseParams="mu=0.8" or another non-negative value',
-            )
-            return None
-    if collision.alarm_distance < collision.contact_distance:
-        component = intersection.component
-        attribute = component.attributes.get("alarmDistance") or component.attributes.get("contactDistance")
-        planner.diags.add(
-            "E207",
-            attribute.loc if attribute is not None else component.loc,
-            f"{component.type_name}: alarmDistance={collision.alarm_distance!r} must be >= "
-            f"contactDistance={collision.contact_distance!r} (pairs are detected within the alarm "
-            "distance and pushed apart up to the contact distance)",
-            "raise alarmDistance or lower contactDistance",
-        )
-        return None
+        params = response_params(str(value(manager, "responseParams") or ""))
+        collision.mu = float(params.get("mu", 0.8))  # >= 0: the contact manager's spec checks it
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
     for later in range(len(models)):
         for earlier in range(later):
@@ -360,16 +331,6 @@ def _plan_collision(
         return collision
     _place(planner, collision, number, owner)
     return collision
-
-
-def _response_params(text: str) -> dict[str, str]:
-    """CollisionResponse's responseParams, 'name=value&name=value'."""
-    params = {}
-    for item in text.split("&"):
-        name, _, given = item.partition("=")
-        if name.strip():
-            params[name.strip()] = given.strip()
-    return params
 
 
 def _node_ranks(root: Node) -> dict[int, int]:
@@ -580,7 +541,7 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     "while they touch",
                     "BTDLinearSolver and a matrix-free CGLinearSolver reproduce SOFA here",
                 )
-        if group.scheme == "implicit" and static_partner and state.dx is not None:
+        if group.scheme is Scheme.IMPLICIT and static_partner and state.dx is not None:
             group.stiffness_dx.append(
                 Op(
                     where,
@@ -591,92 +552,3 @@ def _place(planner: Planner, collision: Collision, pipeline: int, owner: dict[in
                     ],
                 )
             )
-
-
-def map_contact_states_while_touching(planner: Planner, groups: list[Group]) -> None:
-    """A collision models' state that nothing but their contacts reads (a surface mapped onto the
-    mechanics for collision only): the J and J^T of its mapping, in every force evaluation and
-    every product of the solve, run only while one of its models has a contact; its forces are
-    zero otherwise. When its mapping is linear (each point a weighted sum of parent points), its
-    positions and velocities are mapped in the step only while in contact too, and otherwise by
-    the detection when a pair may meet (``Collision.lazy``) and on read from Python."""
-    models_of: dict[int, list[tuple[int, int]]] = {}
-    for number, collision in enumerate(planner.collisions):
-        if collision.response != "penalty":
-            continue
-        for index, model in enumerate(collision.models):
-            models_of.setdefault(id(model.state), []).append((number, index))
-
-    def not_contacts(calls: list[Statement]) -> set[str]:
-        return buffers_of([c for c in calls if not (isinstance(c, Call) and c.kernel.startswith("contact_"))])
-
-    # positions and velocities read by any step but the contacts' (the other groups', the
-    # constraints', the contact guard's)
-    read = not_contacts([c for g in groups for c in g.calls()])
-    if planner.constraints is not None:
-        read |= buffers_of(planner.constraints.calls())
-    if planner.guard is not None:
-        read |= {state.x.ident for _, state in planner.guard.models}
-    for group in groups:
-        used = not_contacts(group.calls())
-        for mapping in group.mappings:
-            child = mapping.child
-            if id(child) not in models_of:
-                continue
-            a_parent = any(m.parent is child or child in m.inputs for m in group.mappings)
-            vectors = {b.ident for b in (child.f, child.dx, child.df) if b is not None}
-            if a_parent or vectors & used:
-                continue
-            mapping.while_in_contact = tuple(models_of[id(child)])
-            projected = any(p.state is child for p in group.projections)
-            if not projected and not {child.x.ident, child.v.ident} & read:
-                _map_when_near(planner, mapping)
-
-
-def _map_when_near(planner: Planner, mapping: MappingOp) -> None:
-    """Makes a linear mapping's collision points lazy (see LazyPoints) when all its models are of
-    one penalty pipeline and none is a sphere (their boxes grow by radii the enclosure leaves out)."""
-    pipelines = {number for number, _ in mapping.while_in_contact}
-    if len(pipelines) != 1 or mapping.inputs:
-        return
-    (number,) = pipelines
-    collision = planner.collisions[number]
-    indices = [index for _, index in mapping.while_in_contact]
-    if any(collision.models[i].kind is Variant.SPHERE for i in indices):
-        return
-    parent, child, jacobian = mapping.parent, mapping.child, mapping.jacobian
-    if jacobian.kernel != "linear_map_apply" or mapping.apply != [
-        bind(jacobian, {PARENT: parent.x, CHILD: child.x}),
-        bind(jacobian, {PARENT: parent.v, CHILD: child.v}),
-    ]:
-        return  # not the linear map of x and v the enclosure is derived for
-    weights = next(a for a in jacobian.args if isinstance(a, Buffer) and a.kind == "f64")
-    table = np.asarray(weights.initial, dtype=float).reshape(child.size, -1)
-    spread = float(np.max(np.sum(np.maximum(-table, 0.0), axis=1), initial=0.0))
-    off = max((abs(math.fsum(row) - 1.0) for row in table), default=0.0)
-    # A mapped coordinate sum_j w_j x_j lies within [lo - spread ext - off X, hi + spread ext + off X]
-    # of the parent's box (lo, hi, extent ext, X = max(|lo|, |hi|)); its k roundings add at most
-    # k eps sum_j |w_j x_j| <= k eps (1 + off + 2 spread) X. Twice that, and a few eps more for the
-    # growth's own arithmetic, is the rounding term.
-    k = table.shape[1]
-    rounding = off * (1.0 + 1e-6) + (2 * k + 8) * _EPS * (1.0 + off + 2.0 * spread)
-    saved = planner.buffer(
-        child.component, "lazy_parent", np.zeros_like(parent.x.initial), columns=3, role="scratch"
-    )
-    mapping.mapped_when_near = True
-    collision.lazy.append(
-        LazyPoints(
-            origin=mapping.origin,
-            models=indices,
-            parent_points=parent.size,
-            spread=spread * (1.0 + 8 * _EPS),
-            rounding=rounding,
-            current=bind(jacobian, {PARENT: parent.x, CHILD: child.x}),
-            previous=bind(jacobian, {PARENT: saved, CHILD: child.x}),
-            parent=parent.x,
-            saved=saved,
-        )
-    )
-
-
-_EPS = float(np.finfo(float).eps)

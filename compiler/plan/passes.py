@@ -319,6 +319,9 @@ def add_point_forces(planner: Planner, groups: list[Group]) -> None:
             group.forces.append(Op(f"point force on {state.path} (set from Python)", [pull]))
 
 
+_IR_PACKAGE = Call.__module__.rpartition(".")[0] + "."  # the plan's own types: sofac.plan.ir.*
+
+
 def _buffers_held(value: Any) -> Iterator[str]:
     """The idents of every buffer a call in ``value`` takes, or a plan object (a collision model, a
     guard) holds, walking the plan's own types; a state's own vectors are not a use of them."""
@@ -334,7 +337,7 @@ def _buffers_held(value: Any) -> Iterator[str]:
             yield from _buffers_held(item)
     elif (
         dataclasses.is_dataclass(value)
-        and type(value).__module__ == Call.__module__
+        and type(value).__module__.startswith(_IR_PACKAGE)
         and not isinstance(value, StatePlan)
     ):
         for field in dataclasses.fields(value):
@@ -346,9 +349,7 @@ def drop_unread_rest_positions(planner: Planner, groups: list[Group]) -> None:
     RestShapeSpringsForceField, a mapping's set-up): read from the plan itself, the calls of the
     groups (step, init, mappings computed in the step or on read, projections) and what the
     collision pipeline and the contact guard hold."""
-    used = set(
-        _buffers_held([groups, planner.collisions, planner.guard, getattr(planner, "constraints", None)])
-    )
+    used = set(_buffers_held([groups, planner.collisions, planner.guard, planner.constraints]))
     for state in planner.states.values():
         if state.rest is not None and state.rest.ident not in used:
             rest = state.rest

@@ -21,7 +21,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent, CheckedScene
 from sofac.diagnostics import Diagnostics, SceneError
 from sofac.front.model import Component, Node
-from sofac.plan.contacts import contact_setup_refusal, map_contact_states_while_touching, plan_collisions
+from sofac.plan.contacts import contact_setup_refusal, plan_collisions
 from sofac.plan.ir import (
     COMPILED_DATATYPES,
     Buffer,
@@ -31,11 +31,14 @@ from sofac.plan.ir import (
     Group,
     Op,
     Plan,
+    Scheme,
     StatePlan,
     independent_groups,
 )
+from sofac.plan.lazy_contacts import map_contact_states_while_touching
 from sofac.plan.lower import LOWERINGS
 from sofac.plan.lower.common import _mapping_inputs, _topology_of
+from sofac.plan.lower.constraint_context import ConstraintLowering
 from sofac.plan.lower.constraints import finish_constraint_phase
 from sofac.plan.passes import (
     add_point_forces,
@@ -96,6 +99,8 @@ class Planner:
         self.states: dict[int, StatePlan] = {}
         self.ignored: list[tuple[Component, str]] = []
         self.constraints: ConstraintPhase | None = None  # FreeMotionAnimationLoop's constraint phase
+        # What the constraint lowerings share while they run (plan/lower/constraint_context.py).
+        self.constraint_lowering: ConstraintLowering | None = None
 
     # --- helpers -------------------------------------------------------------------------------
     def value(self, component: Component, name: str) -> Any:
@@ -336,7 +341,7 @@ class Planner:
             owner[id(state.component)] = group
         self._attach_mapped(owner)
         for group in groups.values():
-            if group.scheme == "implicit":
+            if group.scheme is Scheme.IMPLICIT:
                 for state in (*group.states, *group.mapped):
                     zeros = np.zeros_like(state.v.initial)
                     state.dx = self.buffer(
@@ -346,11 +351,11 @@ class Planner:
                         state.component, "df", zeros, columns=state.v.columns, role="scratch"
                     )
             names = {
-                "euler": (),
-                "rk2": ("x0", "v0"),
-                "rk4": ("x0", "v0", "dx", "dv"),
+                Scheme.EULER: (),
+                Scheme.RK2: ("x0", "v0"),
+                Scheme.RK4: ("x0", "v0", "dx", "dv"),
                 # The right-hand side b (CG's residual); PCG's direction p and z (CG's p is dx, q is df).
-                "implicit": ("r", "p", "z") if group.pcg else ("r",),
+                Scheme.IMPLICIT: ("r", "p", "z") if group.pcg else ("r",),
             }[group.scheme]
             if group.inert_preconditioner is not None:
                 names = ("r",)  # b only: no CG iteration

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sofac.plan.ir import (
     Plan,
+    Scheme,
     origin_of,
 )
 
@@ -22,10 +23,10 @@ def format_schedule(plan: Plan) -> str:
     ]
     for group in plan.groups:
         scheme = {
-            "euler": "symplectic Euler" if group.symplectic else "explicit Euler",
-            "rk2": "RK2 (midpoint)",
-            "rk4": "RK4",
-            "implicit": "static equilibrium (Newton-Raphson)"
+            Scheme.EULER: "symplectic Euler" if group.symplectic else "explicit Euler",
+            Scheme.RK2: "RK2 (midpoint)",
+            Scheme.RK4: "RK4",
+            Scheme.IMPLICIT: "static equilibrium (Newton-Raphson)"
             if group.static
             else "Newmark"
             if group.newmark
@@ -48,7 +49,7 @@ def format_schedule(plan: Plan) -> str:
             ("reset forces, accumulate forces and gravity", [op.origin for op in group.forces]),
             ("map forces up (J^T), child first", [m.origin for m in reversed(group.mappings) if m.transpose]),
         ]
-        if group.scheme == "implicit":
+        if group.scheme is Scheme.IMPLICIT:
             if group.static:
                 rhs, system = "b = f, projected", "Newton iterations: solve -K dx = f, x += alpha dx"
             elif group.newmark:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from sofac import registry
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
-from sofac.plan.ir import Group, Preconditioner
+from sofac.plan.ir import Group, Preconditioner, Scheme
 from sofac.registry import Category, Variant
 from sofac.registry.components.common import GRAPH_SCATTERED
 
@@ -63,17 +63,17 @@ def _subtree(node: Any) -> list[Any]:
 def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group | None:
     lowering = solver.spec.lowering if solver.spec else ""
     scheme = {
-        "euler_explicit": "euler",
-        "runge_kutta2": "rk2",
-        "runge_kutta4": "rk4",
-        "euler_implicit": "implicit",
-        "static": "implicit",
-        "newmark": "implicit",
-        "variational": "implicit",
+        "euler_explicit": Scheme.EULER,
+        "runge_kutta2": Scheme.RK2,
+        "runge_kutta4": Scheme.RK4,
+        "euler_implicit": Scheme.IMPLICIT,
+        "static": Scheme.IMPLICIT,
+        "newmark": Scheme.IMPLICIT,
+        "variational": Scheme.IMPLICIT,
     }.get(lowering)
     if scheme is None:
         return None  # reported by _screen
-    symplectic = bool(planner.value(solver.component, "symplectic")) if scheme == "euler" else False
+    symplectic = bool(planner.value(solver.component, "symplectic")) if scheme is Scheme.EULER else False
     group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
     if lowering == "static" and not plan_static(planner, solver, group):
         return None
@@ -83,7 +83,7 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
         return None
     if lowering == "variational" and not plan_variational(planner, solver, group):
         return None
-    if scheme == "euler":  # its linear solver serves only a non-diagonal mass: M a = f
+    if scheme is Scheme.EULER:  # its linear solver serves only a non-diagonal mass: M a = f
         linear = solver.links.get("linearSolver")
         if not isinstance(linear, Component):
             linear = planner.checked.linear_solver_below(solver.component.node)

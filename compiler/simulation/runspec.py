@@ -103,7 +103,7 @@ def run_spec(scene_plan: Plan) -> RunSpec:
         SolverSpec(
             origin_of(g.solver),
             g.solver.type_name,
-            g.scheme,
+            g.scheme.value,
             g.direct,
             g.linear_solver.type_name if g.linear_solver is not None else "",
         )

@@ -375,6 +375,14 @@ inline ConstraintResult nncg(ConstraintProblem& p, const ConstraintSettings& s) 
     return result;
 }
 
+// The built solvers of the loop's constraint rows (BlockGaussSeidelConstraintSolver, NNCGConstraintSolver).
+enum class BuiltSolver { BlockGaussSeidel, Nncg };
+
+// One solve by a built solver of the loop (its solver's component decides which).
+inline ConstraintResult solve_built(BuiltSolver solver, ConstraintProblem& p, const ConstraintSettings& settings) {
+    return solver == BuiltSolver::Nncg ? nncg(p, settings) : block_gauss_seidel(p, settings);
+}
+
 // UnbuiltGaussSeidelConstraintSolver::doSolve. W holds only the blocks' diagonal blocks;
 // `corrections` gives each block's displacement from the forces so far and takes force changes:
 //   corrections.add_displacement(d, first, last)   d[first..last] += J C (J^T f) of those rows
@@ -743,7 +751,7 @@ inline void stopper_violation(double* dfree, Index row, const double* x, Index i
 // error of the last solve, solves that hit the iteration limit, and the time, error and iterations
 // of the last such solve.
 template <int K>
-inline void solve_constraints(int method, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
+inline void solve_constraints(BuiltSolver solver, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
                               const Index* first, const Index* kind, const double* parameter, const Index* kept,
                               double* previous, double max_iterations, double tolerance, double sor,
                               double scale_tolerance, double all_verified, double regularization, double* report,
@@ -761,8 +769,7 @@ inline void solve_constraints(int method, double* W, double* dfree, double* f, d
     ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
-    const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
-    record_solve(report, result, time);
+    record_solve(report, solve_built(solver, p, settings), time);
 }
 
 // RigidMapping::applyJT on constraint rows: entry e of the frame's rows gets (n, r x n), n the

@@ -518,7 +518,7 @@ inline void lagrangian_correct(LagrangianPipeline& L, Index body, double* x, dou
 
 // The loop's solve on the static blocks and this step's contact blocks (see solve_constraints).
 template <int K>
-inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, double* dfree, double* f, double* d,
+inline void lagrangian_solve(LagrangianPipeline& L, BuiltSolver solver, double* W, double* dfree, double* f, double* d,
                              double* scratch, Index /*capacity*/, const Index* first, const Index* kind, const double* parameter,
                              const Index* kept, double* previous, double max_iterations, double tolerance,
                              double sor, double scale_tolerance, double all_verified, double regularization,
@@ -530,8 +530,7 @@ inline void lagrangian_solve(LagrangianPipeline& L, int method, double* W, doubl
     ConstraintProblem p{n, W, dfree, f, d, blocks, L->block_count(), scratch};
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
-    const ConstraintResult result = method == 1 ? nncg(p, settings) : block_gauss_seidel(p, settings);
-    record_solve(report, result, time, n > 0);
+    record_solve(report, solve_built(solver, p, settings), time, n > 0);
 }
 
 // An unbuilt correction and the body its contact rows go to.

@@ -51,12 +51,49 @@ struct Instance {
     std::vector<double> b35_offsets;  // /rigidBody/rigidParticles/Map23.offsets (scratch)
 };
 
+// The buffers Python hands over at creation and reads back, in the plan's order.
+constexpr sofac::BufferMember<Instance> kBuffers[] = {
+    {&Instance::b0_dt, nullptr},
+    {&Instance::b1_gravity, nullptr},
+    {&Instance::b2_position, nullptr},
+    {&Instance::b3_velocity, nullptr},
+    {&Instance::b4_force, nullptr},
+    {&Instance::b6_acceleration, nullptr},
+    {&Instance::b7_position, nullptr},
+    {&Instance::b8_velocity, nullptr},
+    {&Instance::b9_force, nullptr},
+    {&Instance::b11_acceleration, nullptr},
+    {&Instance::b12_position, nullptr},
+    {&Instance::b13_velocity, nullptr},
+    {&Instance::b14_force, nullptr},
+    {nullptr, &Instance::b16_indices1},
+    {nullptr, &Instance::b17_indices2},
+    {&Instance::b18_stiffness, nullptr},
+    {&Instance::b19_damping, nullptr},
+    {&Instance::b20_lengths, nullptr},
+    {nullptr, &Instance::b21_elongationOnly},
+    {nullptr, &Instance::b22_enabled},
+    {&Instance::b23_vertexMass, nullptr},
+    {nullptr, &Instance::b24_indices},
+    {nullptr, &Instance::b25_indices1},
+    {nullptr, &Instance::b26_indices2},
+    {&Instance::b27_stiffness, nullptr},
+    {&Instance::b28_damping, nullptr},
+    {&Instance::b29_lengths, nullptr},
+    {nullptr, &Instance::b30_elongationOnly},
+    {nullptr, &Instance::b31_enabled},
+    {&Instance::b32_vertexMass, nullptr},
+    {&Instance::b33_initialPoints, nullptr},
+    {nullptr, &Instance::b34_rigidIndexPerPoint},
+    {&Instance::b35_offsets, nullptr},
+};
+
 // ---- group g0: EulerExplicitSolver '/S' (hybrid_pendulum.scn:49)
 // Positions and velocities down the mappings, parent before child.
 void propagate_g0(Instance& S) {
     // RigidMapping '/rigidBody/rigidParticles/Map23' (hybrid_pendulum.scn:69)
-    sofac::rigid_apply(S.b7_position.data(), S.b12_position.data(), S.b33_initialPoints.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), 1);
-    sofac::rigid_apply_j(S.b8_velocity.data(), S.b13_velocity.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), 1);
+    sofac::rigid_apply(S.b7_position.data(), S.b12_position.data(), S.b33_initialPoints.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), /*n=*/1);
+    sofac::rigid_apply_j(S.b8_velocity.data(), S.b13_velocity.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), /*n=*/1);
 }
 
 // f(x, v) on every state of the group, then mapped forces up to the independent states (J^T).
@@ -67,13 +104,13 @@ void forces_g0(Instance& S) {
     // SpringForceField '/F13' (hybrid_pendulum.scn:51)
     sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b12_position.data(), S.b13_velocity.data(), S.b14_force.data(), nullptr);
     // UniformMass '/deformableBody/M1' (hybrid_pendulum.scn:56)
-    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 2, S.b23_vertexMass.data(), 0, S.b1_gravity.data());
+    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), /*n=*/2, S.b23_vertexMass.data(), /*mass_stride=*/0, S.b1_gravity.data());
     // SpringForceField '/deformableBody/F1' (hybrid_pendulum.scn:58)
     sofac::spring_forces<sofac::Vec3d, sofac::Vec3d, sofac::SpringDamping::Damped, sofac::SpringFlags::None>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), S.b2_position.data(), S.b3_velocity.data(), S.b4_force.data(), nullptr);
     // UniformMass '/rigidBody/M2' (hybrid_pendulum.scn:64)
-    sofac::mass_gravity<sofac::Rigid3d>(S.b9_force.data(), 1, S.b32_vertexMass.data(), 0, S.b1_gravity.data());
+    sofac::mass_gravity<sofac::Rigid3d>(S.b9_force.data(), /*n=*/1, S.b32_vertexMass.data(), /*mass_stride=*/0, S.b1_gravity.data());
     // J^T: RigidMapping '/rigidBody/rigidParticles/Map23' (hybrid_pendulum.scn:69)
-    sofac::rigid_apply_jt(S.b9_force.data(), S.b14_force.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), 1);
+    sofac::rigid_apply_jt(S.b9_force.data(), S.b14_force.data(), S.b34_rigidIndexPerPoint.data(), S.b35_offsets.data(), /*n=*/1);
 }
 
 
@@ -82,24 +119,23 @@ void accelerations_g0(Instance& S) {
     propagate_g0(S);
     forces_g0(S);
     // UniformMass '/deformableBody/M1' (hybrid_pendulum.scn:56)
-    sofac::mass_acceleration<sofac::Vec3d>(S.b6_acceleration.data(), S.b4_force.data(), 2, S.b23_vertexMass.data(), 0);
+    sofac::mass_acceleration<sofac::Vec3d>(S.b6_acceleration.data(), S.b4_force.data(), /*n=*/2, S.b23_vertexMass.data(), /*mass_stride=*/0);
     // UniformMass '/rigidBody/M2' (hybrid_pendulum.scn:64)
-    sofac::mass_acceleration<sofac::Rigid3d>(S.b11_acceleration.data(), S.b9_force.data(), 1, S.b32_vertexMass.data(), 0);
+    sofac::mass_acceleration<sofac::Rigid3d>(S.b11_acceleration.data(), S.b9_force.data(), /*n=*/1, S.b32_vertexMass.data(), /*mass_stride=*/0);
     // FixedProjectiveConstraint '/deformableBody/C' (hybrid_pendulum.scn:57)
     sofac::project_fixed<sofac::Vec3d>(S.b6_acceleration.data(), S.b24_indices.data(), Index(S.b24_indices.size()));
 }
 
 // Kinetic and potential energy of the group's states, added to the totals.
-void energy_g0([[maybe_unused]] const Instance& S, [[maybe_unused]] double& kinetic,
-                [[maybe_unused]] double& potential) {
+void energy_g0(const Instance& S, double& kinetic, double& potential) {
     // SpringForceField '/F13' (hybrid_pendulum.scn:51)
     potential += sofac::spring_energy<sofac::Vec3d, sofac::Vec3d>(sofac::Springs{S.b16_indices1.data(), S.b17_indices2.data(), S.b18_stiffness.data(), S.b19_damping.data(), S.b20_lengths.data(), S.b21_elongationOnly.data(), S.b22_enabled.data(), 1}, S.b2_position.data(), S.b12_position.data());
     // UniformMass '/deformableBody/M1' (hybrid_pendulum.scn:56)
-    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 2, S.b23_vertexMass.data(), 0, S.b1_gravity.data(), &kinetic, &potential);
+    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), /*n=*/2, S.b23_vertexMass.data(), /*mass_stride=*/0, S.b1_gravity.data(), &kinetic, &potential);
     // SpringForceField '/deformableBody/F1' (hybrid_pendulum.scn:58)
     potential += sofac::spring_energy<sofac::Vec3d, sofac::Vec3d>(sofac::Springs{S.b25_indices1.data(), S.b26_indices2.data(), S.b27_stiffness.data(), S.b28_damping.data(), S.b29_lengths.data(), S.b30_elongationOnly.data(), S.b31_enabled.data(), 1}, S.b2_position.data(), S.b2_position.data());
     // UniformMass '/rigidBody/M2' (hybrid_pendulum.scn:64)
-    sofac::mass_energy<sofac::Rigid3d>(S.b7_position.data(), S.b8_velocity.data(), 1, S.b32_vertexMass.data(), 0, S.b1_gravity.data(), &kinetic, &potential);
+    sofac::mass_energy<sofac::Rigid3d>(S.b7_position.data(), S.b8_velocity.data(), /*n=*/1, S.b32_vertexMass.data(), /*mass_stride=*/0, S.b1_gravity.data(), &kinetic, &potential);
 }
 
 void step_g0(Instance& S, double dt) {
@@ -112,7 +148,7 @@ void step_g0(Instance& S, double dt) {
     propagate_g0(S);
 }
 
-double total_energy([[maybe_unused]] const Instance& S, double* kinetic_out, double* potential_out) {
+double total_energy(const Instance& S, double* kinetic_out, double* potential_out) {
     double kinetic = 0.0, potential = 0.0;
     energy_g0(S, kinetic, potential);
     *kinetic_out = kinetic;
@@ -127,49 +163,17 @@ extern "C" {
 
 SOFAC_EXPORT int sofac_abi_version() { return SOFAC_ABI_VERSION; }
 
-SOFAC_EXPORT int sofac_buffer_count() { return 33; }
+SOFAC_EXPORT int sofac_buffer_count() { return int(std::size(kBuffers)); }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill(S->b0_dt, data[0], sizes[0]);
-    sofac::fill(S->b1_gravity, data[1], sizes[1]);
-    sofac::fill(S->b2_position, data[2], sizes[2]);
-    sofac::fill(S->b3_velocity, data[3], sizes[3]);
-    sofac::fill(S->b4_force, data[4], sizes[4]);
-    sofac::fill(S->b6_acceleration, data[5], sizes[5]);
-    sofac::fill(S->b7_position, data[6], sizes[6]);
-    sofac::fill(S->b8_velocity, data[7], sizes[7]);
-    sofac::fill(S->b9_force, data[8], sizes[8]);
-    sofac::fill(S->b11_acceleration, data[9], sizes[9]);
-    sofac::fill(S->b12_position, data[10], sizes[10]);
-    sofac::fill(S->b13_velocity, data[11], sizes[11]);
-    sofac::fill(S->b14_force, data[12], sizes[12]);
-    sofac::fill(S->b16_indices1, data[13], sizes[13]);
-    sofac::fill(S->b17_indices2, data[14], sizes[14]);
-    sofac::fill(S->b18_stiffness, data[15], sizes[15]);
-    sofac::fill(S->b19_damping, data[16], sizes[16]);
-    sofac::fill(S->b20_lengths, data[17], sizes[17]);
-    sofac::fill(S->b21_elongationOnly, data[18], sizes[18]);
-    sofac::fill(S->b22_enabled, data[19], sizes[19]);
-    sofac::fill(S->b23_vertexMass, data[20], sizes[20]);
-    sofac::fill(S->b24_indices, data[21], sizes[21]);
-    sofac::fill(S->b25_indices1, data[22], sizes[22]);
-    sofac::fill(S->b26_indices2, data[23], sizes[23]);
-    sofac::fill(S->b27_stiffness, data[24], sizes[24]);
-    sofac::fill(S->b28_damping, data[25], sizes[25]);
-    sofac::fill(S->b29_lengths, data[26], sizes[26]);
-    sofac::fill(S->b30_elongationOnly, data[27], sizes[27]);
-    sofac::fill(S->b31_enabled, data[28], sizes[28]);
-    sofac::fill(S->b32_vertexMass, data[29], sizes[29]);
-    sofac::fill(S->b33_initialPoints, data[30], sizes[30]);
-    sofac::fill(S->b34_rigidIndexPerPoint, data[31], sizes[31]);
-    sofac::fill(S->b35_offsets, data[32], sizes[32]);
+    sofac::fill_buffers(*S, kBuffers, data, sizes);
     return S;
 }
 
 // Mapped states start where their mappings put them, as after SOFA's init.
 SOFAC_EXPORT void sofac_init(void* instance) {
-    [[maybe_unused]] auto& S = *static_cast<Instance*>(instance);
+    auto& S = *static_cast<Instance*>(instance);
     propagate_g0(S);
 }
 
@@ -177,43 +181,7 @@ SOFAC_EXPORT void sofac_init(void* instance) {
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    auto& S = *static_cast<Instance*>(instance);
-    switch (index) {
-        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
-        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
-        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
-        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
-        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
-        case 5: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
-        case 6: *size = std::int64_t(S.b7_position.size()); return S.b7_position.data();
-        case 7: *size = std::int64_t(S.b8_velocity.size()); return S.b8_velocity.data();
-        case 8: *size = std::int64_t(S.b9_force.size()); return S.b9_force.data();
-        case 9: *size = std::int64_t(S.b11_acceleration.size()); return S.b11_acceleration.data();
-        case 10: *size = std::int64_t(S.b12_position.size()); return S.b12_position.data();
-        case 11: *size = std::int64_t(S.b13_velocity.size()); return S.b13_velocity.data();
-        case 12: *size = std::int64_t(S.b14_force.size()); return S.b14_force.data();
-        case 13: *size = std::int64_t(S.b16_indices1.size()); return S.b16_indices1.data();
-        case 14: *size = std::int64_t(S.b17_indices2.size()); return S.b17_indices2.data();
-        case 15: *size = std::int64_t(S.b18_stiffness.size()); return S.b18_stiffness.data();
-        case 16: *size = std::int64_t(S.b19_damping.size()); return S.b19_damping.data();
-        case 17: *size = std::int64_t(S.b20_lengths.size()); return S.b20_lengths.data();
-        case 18: *size = std::int64_t(S.b21_elongationOnly.size()); return S.b21_elongationOnly.data();
-        case 19: *size = std::int64_t(S.b22_enabled.size()); return S.b22_enabled.data();
-        case 20: *size = std::int64_t(S.b23_vertexMass.size()); return S.b23_vertexMass.data();
-        case 21: *size = std::int64_t(S.b24_indices.size()); return S.b24_indices.data();
-        case 22: *size = std::int64_t(S.b25_indices1.size()); return S.b25_indices1.data();
-        case 23: *size = std::int64_t(S.b26_indices2.size()); return S.b26_indices2.data();
-        case 24: *size = std::int64_t(S.b27_stiffness.size()); return S.b27_stiffness.data();
-        case 25: *size = std::int64_t(S.b28_damping.size()); return S.b28_damping.data();
-        case 26: *size = std::int64_t(S.b29_lengths.size()); return S.b29_lengths.data();
-        case 27: *size = std::int64_t(S.b30_elongationOnly.size()); return S.b30_elongationOnly.data();
-        case 28: *size = std::int64_t(S.b31_enabled.size()); return S.b31_enabled.data();
-        case 29: *size = std::int64_t(S.b32_vertexMass.size()); return S.b32_vertexMass.data();
-        case 30: *size = std::int64_t(S.b33_initialPoints.size()); return S.b33_initialPoints.data();
-        case 31: *size = std::int64_t(S.b34_rigidIndexPerPoint.size()); return S.b34_rigidIndexPerPoint.data();
-        case 32: *size = std::int64_t(S.b35_offsets.size()); return S.b35_offsets.data();
-        default: *size = 0; return nullptr;
-    }
+    return sofac::buffer_at(*static_cast<Instance*>(instance), kBuffers, index, size);
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

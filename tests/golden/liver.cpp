@@ -43,42 +43,68 @@ struct Instance {
     std::vector<Index> b22_indices;  // /Liver/ligaments.indices (data)
 };
 
+// The buffers Python hands over at creation and reads back, in the plan's order.
+constexpr sofac::BufferMember<Instance> kBuffers[] = {
+    {&Instance::b0_dt, nullptr},
+    {&Instance::b1_gravity, nullptr},
+    {&Instance::b2_position, nullptr},
+    {&Instance::b3_velocity, nullptr},
+    {&Instance::b4_force, nullptr},
+    {&Instance::b5_rest_position, nullptr},
+    {&Instance::b6_acceleration, nullptr},
+    {&Instance::b7_rayleighStiffness, nullptr},
+    {&Instance::b8_rayleighMass, nullptr},
+    {&Instance::b9_vdamping, nullptr},
+    {nullptr, &Instance::b10_iterations},
+    {&Instance::b11_tolerance, nullptr},
+    {&Instance::b12_threshold, nullptr},
+    {nullptr, &Instance::b13_solves},
+    {&Instance::b14_dx, nullptr},
+    {&Instance::b15_df, nullptr},
+    {&Instance::b16_r, nullptr},
+    {&Instance::b17_vertexMass, nullptr},
+    {nullptr, &Instance::b18_tetrahedra},
+    {&Instance::b19_youngModulus, nullptr},
+    {&Instance::b20_poissonRatio, nullptr},
+    {&Instance::b21_elements, nullptr},
+    {nullptr, &Instance::b22_indices},
+};
+
 // ---- group g0: EulerImplicitSolver '/Liver/odesolver' (liver.scn:41)
 
 // f(x, v) on every state of the group, then mapped forces up to the independent states (J^T).
 void forces_g0(Instance& S) {
     sofac::clear(S.b4_force.data(), Index(S.b4_force.size()));
     // DiagonalMass '/Liver/mass' (liver.scn:47)
-    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), 253, S.b17_vertexMass.data(), 1, S.b1_gravity.data());
+    sofac::mass_gravity<sofac::Vec3d>(S.b4_force.data(), /*n=*/253, S.b17_vertexMass.data(), /*mass_stride=*/1, S.b1_gravity.data());
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_add_force(S.b18_tetrahedra.data(), 876, S.b2_position.data(), S.b4_force.data(), S.b21_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_force(S.b18_tetrahedra.data(), /*n=*/876, S.b2_position.data(), S.b4_force.data(), S.b21_elements.data(), sofac::FEM_LARGE);
 }
 
 
 // df = (mfact M + bfact B + kfact K) dx, through the mappings (dx down with J, df up with J^T); projected
 // on request (B: the implicit damping of UniformVelocityDampingForceField).
 // With `accumulate`, the independent states' df is added to (it holds f when b is built).
-void mbk_g0(Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double kfact, bool project, bool accumulate,
+void mbk_g0(Instance& S, double mfact, double kfact, bool project, bool accumulate,
               [[maybe_unused]] double bfact = 0.0) {
     if (!accumulate) sofac::clear(S.b15_df.data(), Index(S.b15_df.size()));
     if (mfact != 0.0) {  // as SOFA's Mass::addMBKdx: no mass pass for a zero factor (rayleighMass = 0)
         // DiagonalMass '/Liver/mass' (liver.scn:47)
-        sofac::mass_multiply<sofac::Vec3d>(S.b15_df.data(), S.b14_dx.data(), 253, S.b17_vertexMass.data(), 1, mfact);
+        sofac::mass_multiply<sofac::Vec3d>(S.b15_df.data(), S.b14_dx.data(), /*n=*/253, S.b17_vertexMass.data(), /*mass_stride=*/1, mfact);
     }
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_add_dforce(S.b18_tetrahedra.data(), 876, S.b14_dx.data(), S.b15_df.data(), kfact, S.b21_elements.data(), sofac::FEM_LARGE);
+    sofac::tetra_fem_add_dforce(S.b18_tetrahedra.data(), /*n=*/876, S.b14_dx.data(), S.b15_df.data(), kfact, S.b21_elements.data(), sofac::FEM_LARGE);
     if (project) {
         sofac::project_fixed<sofac::Vec3d>(S.b15_df.data(), S.b22_indices.data(), Index(S.b22_indices.size()));  // FixedProjectiveConstraint '/Liver/ligaments' (liver.scn:49)
     }
 }
 
 // Kinetic and potential energy of the group's states, added to the totals.
-void energy_g0([[maybe_unused]] const Instance& S, [[maybe_unused]] double& kinetic,
-                [[maybe_unused]] double& potential) {
+void energy_g0(const Instance& S, double& kinetic, double& potential) {
     // DiagonalMass '/Liver/mass' (liver.scn:47)
-    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), 253, S.b17_vertexMass.data(), 1, S.b1_gravity.data(), &kinetic, &potential);
+    sofac::mass_energy<sofac::Vec3d>(S.b2_position.data(), S.b3_velocity.data(), /*n=*/253, S.b17_vertexMass.data(), /*mass_stride=*/1, S.b1_gravity.data(), &kinetic, &potential);
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    potential += sofac::tetra_fem_energy(S.b18_tetrahedra.data(), 876, S.b2_position.data(), S.b21_elements.data(), sofac::FEM_LARGE);
+    potential += sofac::tetra_fem_energy(S.b18_tetrahedra.data(), /*n=*/876, S.b2_position.data(), S.b21_elements.data(), sofac::FEM_LARGE);
 }
 
 // The independent states as the solvers see them (their DataTypes, and points per state).
@@ -86,8 +112,8 @@ using Space_g0 = sofac::StateSpace<sofac::Vec3d>;
 constexpr Space_g0 space_g0({253});
 
 // acc = A^-1 r, A = mfact M + bfact B + kfact K: CGLinearSolver '/Liver/linearsolver' (liver.scn:42).
-void solve_g0([[maybe_unused]] Instance& S, [[maybe_unused]] double mfact, [[maybe_unused]] double kfact,
-             [[maybe_unused]] double bfact) {
+void solve_g0(Instance& S, double mfact, double kfact,
+             double bfact) {
     // The search direction p lives in dx, the vector the product reads (no copy).
     const sofac::CgControls controls{S.b10_iterations[0], S.b11_tolerance[0], S.b12_threshold[0],
                                      S.b13_solves[0] == 0};
@@ -117,7 +143,7 @@ sofac::SchemeVectors<Space_g0> vectors_g0(Instance& S) {
 }
 
 // One step of EulerImplicitSolver '/Liver/odesolver' (liver.scn:41), before the projections of x and v that end it.
-void integrate_g0(Instance& S, [[maybe_unused]] double dt) {
+void integrate_g0(Instance& S, double dt) {
     const Operations_g0 operations{S};
     const sofac::ImplicitEulerControls controls{dt,
                                                 1.0,  // trapezoidalScheme: 0.5, else 1
@@ -132,7 +158,7 @@ void step_g0(Instance& S, double dt) {
     integrate_g0(S, dt);
 }
 
-double total_energy([[maybe_unused]] const Instance& S, double* kinetic_out, double* potential_out) {
+double total_energy(const Instance& S, double* kinetic_out, double* potential_out) {
     double kinetic = 0.0, potential = 0.0;
     energy_g0(S, kinetic, potential);
     *kinetic_out = kinetic;
@@ -147,74 +173,26 @@ extern "C" {
 
 SOFAC_EXPORT int sofac_abi_version() { return SOFAC_ABI_VERSION; }
 
-SOFAC_EXPORT int sofac_buffer_count() { return 23; }
+SOFAC_EXPORT int sofac_buffer_count() { return int(std::size(kBuffers)); }
 
 SOFAC_EXPORT void* sofac_create(const void* const* data, const std::int64_t* sizes) {
     auto* S = new Instance();
-    sofac::fill(S->b0_dt, data[0], sizes[0]);
-    sofac::fill(S->b1_gravity, data[1], sizes[1]);
-    sofac::fill(S->b2_position, data[2], sizes[2]);
-    sofac::fill(S->b3_velocity, data[3], sizes[3]);
-    sofac::fill(S->b4_force, data[4], sizes[4]);
-    sofac::fill(S->b5_rest_position, data[5], sizes[5]);
-    sofac::fill(S->b6_acceleration, data[6], sizes[6]);
-    sofac::fill(S->b7_rayleighStiffness, data[7], sizes[7]);
-    sofac::fill(S->b8_rayleighMass, data[8], sizes[8]);
-    sofac::fill(S->b9_vdamping, data[9], sizes[9]);
-    sofac::fill(S->b10_iterations, data[10], sizes[10]);
-    sofac::fill(S->b11_tolerance, data[11], sizes[11]);
-    sofac::fill(S->b12_threshold, data[12], sizes[12]);
-    sofac::fill(S->b13_solves, data[13], sizes[13]);
-    sofac::fill(S->b14_dx, data[14], sizes[14]);
-    sofac::fill(S->b15_df, data[15], sizes[15]);
-    sofac::fill(S->b16_r, data[16], sizes[16]);
-    sofac::fill(S->b17_vertexMass, data[17], sizes[17]);
-    sofac::fill(S->b18_tetrahedra, data[18], sizes[18]);
-    sofac::fill(S->b19_youngModulus, data[19], sizes[19]);
-    sofac::fill(S->b20_poissonRatio, data[20], sizes[20]);
-    sofac::fill(S->b21_elements, data[21], sizes[21]);
-    sofac::fill(S->b22_indices, data[22], sizes[22]);
+    sofac::fill_buffers(*S, kBuffers, data, sizes);
     return S;
 }
 
 // Mapped states start where their mappings put them, as after SOFA's init.
 SOFAC_EXPORT void sofac_init(void* instance) {
-    [[maybe_unused]] auto& S = *static_cast<Instance*>(instance);
+    auto& S = *static_cast<Instance*>(instance);
     // TetrahedronFEMForceField '/Liver/FEM' (liver.scn:48)
-    sofac::tetra_fem_init(S.b18_tetrahedra.data(), 876, S.b5_rest_position.data(), S.b19_youngModulus.data(), Index(S.b19_youngModulus.size()), S.b20_poissonRatio.data(), Index(S.b20_poissonRatio.size()), sofac::FEM_LARGE, S.b21_elements.data());
+    sofac::tetra_fem_init(S.b18_tetrahedra.data(), /*n_tetra=*/876, S.b5_rest_position.data(), S.b19_youngModulus.data(), Index(S.b19_youngModulus.size()), S.b20_poissonRatio.data(), Index(S.b20_poissonRatio.size()), sofac::FEM_LARGE, S.b21_elements.data());
 }
 
 
 SOFAC_EXPORT void sofac_destroy(void* instance) { delete static_cast<Instance*>(instance); }
 
 SOFAC_EXPORT void* sofac_buffer(void* instance, int index, std::int64_t* size) {
-    auto& S = *static_cast<Instance*>(instance);
-    switch (index) {
-        case 0: *size = std::int64_t(S.b0_dt.size()); return S.b0_dt.data();
-        case 1: *size = std::int64_t(S.b1_gravity.size()); return S.b1_gravity.data();
-        case 2: *size = std::int64_t(S.b2_position.size()); return S.b2_position.data();
-        case 3: *size = std::int64_t(S.b3_velocity.size()); return S.b3_velocity.data();
-        case 4: *size = std::int64_t(S.b4_force.size()); return S.b4_force.data();
-        case 5: *size = std::int64_t(S.b5_rest_position.size()); return S.b5_rest_position.data();
-        case 6: *size = std::int64_t(S.b6_acceleration.size()); return S.b6_acceleration.data();
-        case 7: *size = std::int64_t(S.b7_rayleighStiffness.size()); return S.b7_rayleighStiffness.data();
-        case 8: *size = std::int64_t(S.b8_rayleighMass.size()); return S.b8_rayleighMass.data();
-        case 9: *size = std::int64_t(S.b9_vdamping.size()); return S.b9_vdamping.data();
-        case 10: *size = std::int64_t(S.b10_iterations.size()); return S.b10_iterations.data();
-        case 11: *size = std::int64_t(S.b11_tolerance.size()); return S.b11_tolerance.data();
-        case 12: *size = std::int64_t(S.b12_threshold.size()); return S.b12_threshold.data();
-        case 13: *size = std::int64_t(S.b13_solves.size()); return S.b13_solves.data();
-        case 14: *size = std::int64_t(S.b14_dx.size()); return S.b14_dx.data();
-        case 15: *size = std::int64_t(S.b15_df.size()); return S.b15_df.data();
-        case 16: *size = std::int64_t(S.b16_r.size()); return S.b16_r.data();
-        case 17: *size = std::int64_t(S.b17_vertexMass.size()); return S.b17_vertexMass.data();
-        case 18: *size = std::int64_t(S.b18_tetrahedra.size()); return S.b18_tetrahedra.data();
-        case 19: *size = std::int64_t(S.b19_youngModulus.size()); return S.b19_youngModulus.data();
-        case 20: *size = std::int64_t(S.b20_poissonRatio.size()); return S.b20_poissonRatio.data();
-        case 21: *size = std::int64_t(S.b21_elements.size()); return S.b21_elements.data();
-        case 22: *size = std::int64_t(S.b22_indices.size()); return S.b22_indices.data();
-        default: *size = 0; return nullptr;
-    }
+    return sofac::buffer_at(*static_cast<Instance*>(instance), kBuffers, index, size);
 }
 
 SOFAC_EXPORT double* sofac_time(void* instance) { return &static_cast<Instance*>(instance)->time; }

@@ -20,6 +20,7 @@ from sofac.plan.ir import (
     Group,
     MappingOp,
     Op,
+    Scheme,
     origin_of,
 )
 from sofac.plan.lower.common import _assemble, _call, _default, _mapping_ends, _target, _topology_cells
@@ -137,7 +138,7 @@ def lower_beam_fem(planner: Planner, checked: CheckedComponent, owner: dict[int,
             ],
         )
     )
-    if group.scheme != "implicit":
+    if group.scheme is not Scheme.IMPLICIT:
         return
     group.stiffness_dx.append(
         Op(

@@ -22,6 +22,7 @@ from sofac.plan.ir import (
     FemMethod,
     Group,
     Op,
+    Scheme,
     SpringDamping,
     SpringFlags,
     StatePlan,
@@ -283,7 +284,7 @@ def _add_mass(
         state,
         _call(kernel("assemble_mass", t), Env.ASSEMBLER, OFFSET, n, buffer, stride_value, Env.MFACT),
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         if planner.rigid_model == "exact" and state.datatype.name == "Rigid3d":
             planner.unsupported(checked, "the exact rigid model is compiled for explicit solvers only")
         group.mass_dx.append(
@@ -380,7 +381,7 @@ def _add_springs(
     )
     origin = origin_of(component)
     jacobians: Buffer | Env = Env.NONE
-    if group.scheme == "implicit":  # dF/dx per spring, stored by the force pass, used by K dx
+    if group.scheme is Scheme.IMPLICIT:  # dF/dx per spring, stored by the force pass, used by K dx
         dim = {"Rigid3d": 3, "Rigid2d": 2}.get(first.datatype.name, min(first.datatype.coord_size, 3))
         blocks = planner.buffer(component, "dfdx", np.zeros(count * (dim + 2)), role="scratch")  # factored
         jacobians = blocks

@@ -16,16 +16,20 @@ from sofac.plan.ir import (
     ConstraintPhase,
     Env,
     Group,
+    Resolution,
     StatePlan,
     origin_of,
 )
+from sofac.plan.lower.constraint_context import (
+    BilateralViolation,
+    ConstraintLowering,
+    CoordinateViolation,
+    SlidingRows,
+    StopperViolation,
+)
+from sofac.plan.lower.constraint_solve import values_of
 from sofac.plan.lower.constraints import (
-    BILATERAL_1,
-    BILATERAL_3,
-    STOPPER_1,
-    UNILATERAL_1,
-    constraint_phase,
-    values_of,
+    constraint_lowering,
 )
 from sofac.plan.lower.corrections import rigidly_mapped
 
@@ -33,19 +37,19 @@ if TYPE_CHECKING:
     from sofac.plan.planner import Planner
 
 
-def _phase_for(
+def _lowering_for(
     planner: Planner, checked: CheckedComponent, datatype: str | None = None
-) -> ConstraintPhase | None:
-    """The constraint phase a constraint model's rows go to; None once it is refused (no
-    FreeMotionAnimationLoop, or not the ``datatype`` it is compiled for)."""
-    phase = constraint_phase(planner)
-    if phase is None:
+) -> ConstraintLowering | None:
+    """The constraint phase a constraint model's rows go to, with its pending rows; None once it
+    is refused (no FreeMotionAnimationLoop, or not the ``datatype`` it is compiled for)."""
+    lowering = constraint_lowering(planner)
+    if lowering is None:
         planner.unsupported(checked, "Lagrangian constraints act only under FreeMotionAnimationLoop")
         return None
     if datatype is not None and (checked.datatype is None or checked.datatype.name != datatype):
         planner.unsupported(checked, f"it is compiled for {datatype} only")
         return None
-    return phase
+    return lowering
 
 
 def _has_end_time(planner: Planner, checked: CheckedComponent) -> bool:
@@ -59,10 +63,10 @@ def _has_end_time(planner: Planner, checked: CheckedComponent) -> bool:
 def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """BilateralLagrangianConstraint<Vec3d>: three rows per pair of points, -e_k on object1's point
     and +e_k on object2's (buildConstraintMatrix), the violation x2_free - x1_free (- rest)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
+    lowering = _lowering_for(planner, checked, "Vec3d")
+    if lowering is None:
         return
+    phase, component = lowering.phase, checked.component
     if planner.value(component, "activate") is False:
         planner.ignored.append((component, "activate=0: no constraint"))
         return
@@ -102,7 +106,7 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
     phase.kept.initial = np.zeros(kept_offset + 3 * pairs)
     load = float(planner.value(component, "load"))
     for p in range(pairs):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, load, kept_offset + 3 * p, 0.0))
+        phase.blocks.append((first_row + 3 * p, Resolution.BILATERAL_3, load, kept_offset + 3 * p, 0.0))
         for k in range(3):
             unit = tuple(1.0 if c == k else 0.0 for c in range(3))
             row = first_row + 3 * p + k
@@ -115,17 +119,9 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
     m1 = planner.buffer(component, "first_point", first_points[:pairs], "i64")
     m2 = planner.buffer(component, "second_point", second_points[:pairs], "i64")
     rest_buffer = planner.buffer(component, "rest_vector", rest, columns=3)
-    planner.pending_violations.append(  # type: ignore[attr-defined]
-        (
-            origin_of(component),
-            first_row,
-            states[0],
-            states[1],
-            m1,
-            m2,
-            pairs,
-            rest_buffer,
-            len(rest),
+    lowering.bilateral.append(
+        BilateralViolation(
+            origin_of(component), first_row, states[0], states[1], m1, m2, pairs, rest_buffer, len(rest)
         )
     )
 
@@ -154,10 +150,10 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
     """FixedLagrangianConstraint<Vec3d>: rows +e_x, +e_y, +e_z on each fixed DOF (indices, or every
     DOF with fixAll), violation x_free - rest_position, one BilateralConstraintResolution3Dof per DOF
     with its kept forces (FixedLagrangianConstraint.cpp's Vec3 specialisation)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
+    lowering = _lowering_for(planner, checked, "Vec3d")
+    if lowering is None:
         return
+    phase, component = lowering.phase, checked.component
     if _has_end_time(planner, checked):
         return
     state = _constrained_state(planner, checked)
@@ -179,25 +175,28 @@ def lower_fixed_lagrangian(planner: Planner, checked: CheckedComponent, owner: d
     phase.capacity += 3 * count
     kept_offset = _kept_forces(planner, phase, 3 * count)
     for p, dof in enumerate(indices):
-        phase.blocks.append((first_row + 3 * p, BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
+        phase.blocks.append((first_row + 3 * p, Resolution.BILATERAL_3, 1.0, kept_offset + 3 * p, 0.0))
         for k in range(3):
             unit = tuple(1.0 if c == k else 0.0 for c in range(3))
             phase.entries.setdefault(state.ident, []).append((first_row + 3 * p + k, int(dof), unit))
     fixed = planner.buffer(component, "fixed_indices", indices, "i64")
     no_rest = planner.buffer(component, "no_rest_vector", np.zeros((0, 3)), columns=3)
     # x_free[i] - rest[i]: the bilateral violation with object1 the rest positions, object2 the state
-    planner.pending_violations.append(  # type: ignore[attr-defined]
-        (origin_of(component), first_row, state.rest, state, fixed, fixed, count, no_rest, 0)
+    assert state.rest is not None
+    lowering.bilateral.append(
+        BilateralViolation(
+            origin_of(component), first_row, state.rest, state, fixed, fixed, count, no_rest, 0
+        )
     )
 
 
 def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """StopperLagrangianConstraint<Vec1d>: one row +1 on DOF `index`, violation x_free[index], its
     resolution keeping the free displacement in [min, max] (StopperLagrangianConstraintResolution1Dof)."""
-    phase = _phase_for(planner, checked)
-    component = checked.component
-    if phase is None:
+    lowering = _lowering_for(planner, checked)
+    if lowering is None:
         return
+    phase, component = lowering.phase, checked.component
     if _has_end_time(planner, checked):
         return
     state = _constrained_state(planner, checked)
@@ -212,19 +211,19 @@ def lower_stopper(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     phase.capacity += 1
     low, high = float(planner.value(component, "min")), float(planner.value(component, "max"))
     _kept_forces(planner, phase, 0)  # (no warm start, but the solve takes the kept forces' buffer)
-    phase.blocks.append((row, STOPPER_1, low, -1, high))
+    phase.blocks.append((row, Resolution.STOPPER_1, low, -1, high))
     phase.entries.setdefault(state.ident, []).append((row, index, (1.0,)))
-    planner.pending_stoppers.append((origin_of(component), row, state, index))  # type: ignore[attr-defined]
+    lowering.stoppers.append(StopperViolation(origin_of(component), row, state, index))
 
 
 def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """UniformLagrangianConstraint<Vec1d>: a row +1 on every coordinate of every DOF, violation
     x_free (- rest_position with constrainToRestPos), one BilateralConstraintResolution per row
     (iterative) without kept forces."""
-    phase = _phase_for(planner, checked)
-    component = checked.component
-    if phase is None:
+    lowering = _lowering_for(planner, checked)
+    if lowering is None:
         return
+    phase, component = lowering.phase, checked.component
     if _has_end_time(planner, checked):
         return
     if not planner.value(component, "iterative"):
@@ -250,11 +249,11 @@ def lower_uniform(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     for i in range(state.size):
         for j in range(width):
             row = first + width * i + j
-            phase.blocks.append((row, BILATERAL_1, 1.0, -1, 0.0))
+            phase.blocks.append((row, Resolution.BILATERAL_1, 1.0, -1, 0.0))
             unit = tuple(1.0 if c == j else 0.0 for c in range(width))
             phase.entries.setdefault(state.ident, []).append((row, i, unit))
     rest = state.rest if planner.value(component, "constrainToRestPos") else Env.NONE
-    planner.pending_coordinates.append((origin_of(component), first, state, rest, count))  # type: ignore[attr-defined]
+    lowering.coordinates.append(CoordinateViolation(origin_of(component), first, state, rest, count))
 
 
 def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -262,10 +261,10 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     Four rows built each step from the free positions (runtime sliding_rows): two bilateral across
     the axis, two unilateral at its ends (SOFA's BilateralConstraintResolution and
     UnilateralConstraintResolution, no kept forces)."""
-    phase = _phase_for(planner, checked, "Vec3d")
-    component = checked.component
-    if phase is None:
+    lowering = _lowering_for(planner, checked, "Vec3d")
+    if lowering is None:
         return
+    phase, component = lowering.phase, checked.component
     if _has_end_time(planner, checked):
         return
     states = []
@@ -294,7 +293,9 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
     first = phase.capacity
     phase.capacity += 4
     _kept_forces(planner, phase, 0)
-    for row, kind in enumerate((BILATERAL_1, BILATERAL_1, UNILATERAL_1, UNILATERAL_1)):
+    for row, kind in enumerate(
+        (Resolution.BILATERAL_1, Resolution.BILATERAL_1, Resolution.UNILATERAL_1, Resolution.UNILATERAL_1)
+    ):
         phase.blocks.append((first + row, kind, 1.0, -1, 0.0))
     rows = list(range(first, first + 4))
     low, high = min(a, b), max(a, b)
@@ -313,8 +314,6 @@ def lower_sliding(planner: Planner, checked: CheckedComponent, owner: dict[int, 
         )
         aggregates.append((state, Aggregate("JacobianRows", (4, *buffers)), values))
     degenerate = planner.buffer(component, "degenerate_segments", np.zeros(1), role="state")
-    planner.pending_sliding.append(  # type: ignore[attr-defined]
-        (checked, first, aggregates, point, a, b, degenerate)
-    )
+    lowering.sliding.append(SlidingRows(checked, first, aggregates, point, (a, b), degenerate))
     for state in states:
         phase.entries.setdefault(state.ident, [])

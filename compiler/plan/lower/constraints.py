@@ -24,27 +24,24 @@ from sofac.plan.ir import (
     Collision,
     ConstraintPhase,
     Correction,
-    Element,
     Env,
     Group,
     Op,
+    Scheme,
     StatePlan,
     call,
-    kernel,
     origin_of,
 )
+from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem
+from sofac.plan.lower.constraint_solve import solve_constraints, solver_refusal, uncoupled_correction
 from sofac.plan.lower.corrections import (
     carry_through_rigid_mappings,
-    increasing_subset,
+    contact_bodies,
+    lagrangian_collision,
     linear_solver_correction,
     mapped_free_motion,
-    mapping_of_state,
-    moved_vectors,
-    rigid_compliance,
-    rigidly_mapped,
 )
 from sofac.registry import Category, Variant
-from sofac.registry.components.lagrangian import BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER
 from sofac.registry.spec import Effect
 
 if TYPE_CHECKING:
@@ -103,11 +100,11 @@ def _loop_solver(planner: Planner, loop: CheckedComponent) -> CheckedComponent |
     return below[0] if below else None
 
 
-def constraint_phase(planner: Planner) -> ConstraintPhase | None:
-    """The plan's constraint phase, made the first time a lowering asks (None: not FreeMotion)."""
-    phase: ConstraintPhase | None = getattr(planner, "constraint_phase", None)
-    if phase is not None:
-        return phase
+def constraint_lowering(planner: Planner) -> ConstraintLowering | None:
+    """The constraint lowerings' shared context, made the first time a lowering asks (None: the
+    scene's animation loop is not FreeMotionAnimationLoop)."""
+    if planner.constraint_lowering is not None:
+        return planner.constraint_lowering
     loop = _free_motion_loop(planner)
     if loop is None:
         return None
@@ -130,29 +127,25 @@ def constraint_phase(planner: Planner) -> ConstraintPhase | None:
         settings=settings,
         report=report,
     )
-    planner.constraint_phase = phase  # type: ignore[attr-defined]
-    planner.pending_violations = []  # type: ignore[attr-defined]
-    planner.pending_stoppers = []  # type: ignore[attr-defined]
-    planner.pending_coordinates = []  # type: ignore[attr-defined]
-    planner.pending_sliding = []  # type: ignore[attr-defined]
-    planner.constraint_solver = solver  # type: ignore[attr-defined]
-    return phase
+    planner.constraint_lowering = ConstraintLowering(phase, solver)
+    return planner.constraint_lowering
 
 
 def lower_constraint_solver(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    phase = constraint_phase(planner)
-    if phase is None:
+    lowering = constraint_lowering(planner)
+    if lowering is None:
         planner.unsupported(checked, _ONLY_UNDER_FREE_MOTION)
         return
-    if getattr(planner, "constraint_solver", None) is not checked:
+    if lowering.solver is not checked:
         planner.ignored.append((checked.component, "not the animation loop's constraint solver"))
 
 
 def lower_constraint_correction(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
-    phase = constraint_phase(planner)
-    if phase is None:
+    lowering = constraint_lowering(planner)
+    if lowering is None:
         planner.unsupported(checked, _ONLY_UNDER_FREE_MOTION)
         return
+    phase = lowering.phase
     linked = checked.links.get("mstate")
     component = (
         linked if isinstance(linked, Component) else planner.checked.node_state(checked.component.node)
@@ -177,7 +170,7 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
             "wire_optimization",
         )
         return
-    if kind == Variant.LINEAR_SOLVER and (group.scheme != "implicit" or group.linear_solver is None):
+    if kind == Variant.LINEAR_SOLVER and (group.scheme is not Scheme.IMPLICIT or group.linear_solver is None):
         planner.unsupported(
             checked,
             "it needs the linear solver of an implicit ODE solver (EulerImplicitSolver + a linear solver)",
@@ -189,47 +182,48 @@ def lower_constraint_correction(planner: Planner, checked: CheckedComponent, own
     phase.corrections.append(Correction(origin_of(checked.component), kind, state, group, checked))
 
 
-# The runtime's Resolution values (runtime/sofac/constraints.h).
-BILATERAL_3 = 0
-BILATERAL_1 = 1
-UNILATERAL_1 = 2
-STOPPER_1 = 4
-
-# The solvers the compiled phase runs on constraint rows (runtime/sofac/constraints.h, method codes).
-_ROW_SOLVERS = {"block_gauss_seidel": 0, "nncg": 1, "unbuilt_gauss_seidel": 2}
-
-
-def values_of(planner: Planner, component: Component, name: str, dtype: type) -> np.ndarray:
-    """A list field's values (empty when unset)."""
-    value = planner.value(component, name)
-    return np.asarray(value if value is not None else [], dtype=dtype).ravel()
-
-
-def _sliding_rows(planner: Planner, phase: ConstraintPhase, dfree: Buffer) -> None:
+def _sliding_rows(planner: Planner, lowering: ConstraintLowering, dfree: Buffer) -> None:
     """The sliding constraints' rows (after the rigid mappings' rows are known): each state's J is
     the constraint's own, so a state it acts on takes no other constraint's rows."""
-    for checked, first, aggregates, point, a, b, degenerate in planner.pending_sliding:  # type: ignore[attr-defined]
-        (s1, J1, values1), (s2, J2, values2) = aggregates
-        if any(phase.entries.get(s.ident) or s.ident in planner.rigid_rows for s in (s1, s2)):  # type: ignore[attr-defined]
+    phase = lowering.phase
+    for sliding in lowering.sliding:
+        (s1, J1, values1), (s2, J2, values2) = sliding.jacobians
+        if any(phase.entries.get(s.ident) or s.ident in lowering.computed_rows for s in (s1, s2)):
             planner.unsupported(
-                checked,
+                sliding.checked,
                 "a state with a SlidingLagrangianConstraint and other constraint rows is not compiled yet",
             )
             continue
-        planner.rigid_rows[s1.ident] = J1  # type: ignore[attr-defined]
-        planner.rigid_rows[s2.ident] = J2  # type: ignore[attr-defined]
-        rows = call("sliding_rows", values1, values2, dfree, first, s1.x, s2.x, point, a, b, degenerate)
-        phase.rows.append(Op(origin_of(checked.component), [rows]))
+        lowering.computed_rows[s1.ident] = J1
+        lowering.computed_rows[s2.ident] = J2
+        a, b = sliding.segment
+        rows = call(
+            "sliding_rows",
+            values1,
+            values2,
+            dfree,
+            sliding.first_row,
+            s1.x,
+            s2.x,
+            sliding.point,
+            a,
+            b,
+            sliding.degenerate,
+        )
+        phase.rows.append(Op(origin_of(sliding.checked.component), [rows]))
 
 
 def _jacobian_rows(
-    planner: Planner, state: StatePlan, entries: list[tuple[int, int, tuple[float, ...]]]
+    planner: Planner,
+    lowering: ConstraintLowering,
+    state: StatePlan,
+    entries: list[tuple[int, int, tuple[float, ...]]],
 ) -> Aggregate:
     """A state's J as SOFA's MatrixDeriv holds it: rows ascending, each row's DOFs ascending, the
     values of one (row, DOF) summed (addCol). A rigid state's rows come from its mapped points
     (``carry_through_rigid_mappings``), their values computed each step."""
-    if state.ident in getattr(planner, "rigid_rows", {}):
-        return planner.rigid_rows[state.ident]  # type: ignore[attr-defined]
+    if state.ident in lowering.computed_rows:
+        return lowering.computed_rows[state.ident]
     merged: dict[tuple[int, int], list[float]] = {}
     for row, dof, values in entries:
         if (row, dof) in merged:
@@ -254,12 +248,45 @@ def _jacobian_rows(
     return Aggregate("JacobianRows", (len(rows), *buffers))
 
 
-def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
+def _phase_with_rows(planner: Planner, lowering: ConstraintLowering) -> None:
     """The calls of a phase that has rows: violations, W from the corrections, the solve, the
     corrections, on buffers sized by the rows."""
-    solver = getattr(planner, "constraint_solver", None)
-    lagrangian = _lagrangian_collision(planner)
-    n = phase.capacity + (lagrangian.row_capacity if lagrangian is not None else 0)
+    phase = lowering.phase
+    lagrangian = lagrangian_collision(planner)
+    if not _rows_compiled(planner, lowering, lagrangian):
+        return
+    problem = _problem(planner, phase, lagrangian)
+    contact_states = {m.state.ident for m in lagrangian.models} if lagrangian is not None else set()
+    free_x = mapped_free_motion(planner, lowering, contact_states)
+    _violations(lowering, problem.dfree, free_x)
+    if lagrangian is not None:
+        phase.violation.append(
+            Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, problem.dfree)])
+        )
+    carry_through_rigid_mappings(planner, lowering)
+    _sliding_rows(planner, lowering, problem.dfree)
+    bodies = contact_bodies(planner, lowering, lagrangian, free_x) if lagrangian is not None else set()
+    uncoupled = []
+    for body, correction in enumerate(phase.corrections):
+        entries = phase.entries.get(correction.state.ident)
+        if entries is None and body in bodies:
+            entries = []
+        if entries is None or not _correction_compiled(planner, correction, lagrangian is not None):
+            continue
+        J = _jacobian_rows(planner, lowering, correction.state, entries)
+        if correction.kind == Variant.LINEAR_SOLVER:
+            linear_solver_correction(planner, lowering, correction, body, J, lagrangian is not None, problem)
+            continue
+        item = uncoupled_correction(planner, lowering, correction, body, J, problem, lagrangian is not None)
+        if item is not None:
+            uncoupled.append(item)
+    solve_constraints(planner, lowering, problem, uncoupled, lagrangian is not None)
+
+
+def _rows_compiled(planner: Planner, lowering: ConstraintLowering, lagrangian: Collision | None) -> bool:
+    """Whether the phase's rows and solver are compiled (refused at the component otherwise); with
+    Lagrangian contacts, the phase's capacity grows by the contacts' reserved rows."""
+    phase, solver = lowering.phase, lowering.solver
     if lagrangian is not None:
         root = planner.checked.scene.root
         for checked in planner.checked:
@@ -273,359 +300,104 @@ def _phase_with_rows(planner: Planner, phase: ConstraintPhase) -> None:
                     "with Lagrangian contacts, sofac places the scene's own constraint rows before the "
                     "contacts', which SOFA does for constraints in the root node only; move it to the root",
                 )
-                return
+                return False
         lagrangian.static_rows = phase.capacity
-        phase.capacity = n
+        phase.capacity += lagrangian.row_capacity
         if phase.kept is None:
             phase.kept = planner.buffer(
                 planner.checked.scene.root.path, "constraint_kept_forces", [], role="state"
             )
-    if lagrangian is not None and phase.method == Variant.LCP and solver is not None:
-        why = _lcp_refusal(planner, solver, phase, lagrangian)
-        if why:
-            planner.unsupported(solver, why)
-            return
-    elif lagrangian is not None and phase.method not in _ROW_SOLVERS:
-        if solver is not None:
-            planner.unsupported(solver, f"{solver.spec.name} with Lagrangian contacts is not compiled yet")
-        return
-    if phase.method not in _ROW_SOLVERS and not (lagrangian is not None and phase.method == Variant.LCP):
-        if solver is not None:
-            planner.unsupported(solver, f"{solver.spec.name} on constraint rows is not compiled yet")
-        return
-    W = planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch")
-    dfree = planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch")
-    # with contacts, the last solve's forces are an output (`/.constraint_f`: impulses, rows in order)
-    f = planner.buffer(
-        "/", "constraint_f", np.zeros(n), role="state" if lagrangian is not None else "scratch"
+    why = solver_refusal(planner, lowering, lagrangian)
+    if why and solver is not None:
+        planner.unsupported(solver, why)
+    return not why
+
+
+def _problem(planner: Planner, phase: ConstraintPhase, lagrangian: Collision | None) -> ConstraintProblem:
+    """W, dfree, f, d and the solvers' scratch, sized by the phase's rows, cleared first each step."""
+    n = phase.capacity
+    problem = ConstraintProblem(
+        W=planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch"),
+        dfree=planner.buffer("/", "constraint_dfree", np.zeros(n), role="scratch"),
+        # with contacts, the last solve's forces are an output (`/.constraint_f`: impulses, rows in order)
+        f=planner.buffer(
+            "/", "constraint_f", np.zeros(n), role="state" if lagrangian is not None else "scratch"
+        ),
+        d=planner.buffer("/", "constraint_d", np.zeros(n), role="scratch"),
+        scratch=planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch"),
+        rows=n,
     )
-    d = planner.buffer("/", "constraint_d", np.zeros(n), role="scratch")
-    scratch = planner.buffer("/", "constraint_scratch", np.zeros(3 * n), role="scratch")
     if lagrangian is not None:
-        lagrangian.problem = [W, dfree, f, d, scratch]
-        clear = call("lagrangian_begin", Env.LAGRANGIAN, W, dfree, f, d)
+        lagrangian.problem = [problem.W, problem.dfree, problem.f, problem.d, problem.scratch]
+        clear = call("lagrangian_begin", Env.LAGRANGIAN, problem.W, problem.dfree, problem.f, problem.d)
     else:
-        clear = call("constraint_clear", W, dfree, f, d, n)
+        clear = call("constraint_clear", problem.W, problem.dfree, problem.f, problem.d, n)
     phase.rows.append(Op(phase.loop, [clear]))
-    contact_states = {m.state.ident for m in lagrangian.models} if lagrangian is not None else set()
-    free_x = mapped_free_motion(planner, phase, contact_states)
-    for origin, first, s1, s2, m1, m2, pairs, rest, rest_count in planner.pending_violations:  # type: ignore[attr-defined]
+    return problem
+
+
+def _violations(lowering: ConstraintLowering, dfree: Buffer, free_x: dict[str, Buffer]) -> None:
+    """Each constraint model's rows of dfree, from the free positions (mapped states': ``free_x``)."""
+    phase = lowering.phase
+    for bilateral in lowering.bilateral:
         # object1 given as a Buffer: constant positions (FixedLagrangianConstraint's rest positions)
-        x1 = s1 if isinstance(s1, Buffer) else free_x.get(s1.ident, s1.x)
-        x2 = free_x.get(s2.ident, s2.x)
-        phase.violation.append(
-            Op(origin, [call("bilateral_violation", dfree, first, x1, x2, m1, m2, pairs, rest, rest_count)])
+        first = bilateral.object1
+        x1 = first if isinstance(first, Buffer) else free_x.get(first.ident, first.x)
+        x2 = free_x.get(bilateral.object2.ident, bilateral.object2.x)
+        violation = call(
+            "bilateral_violation",
+            dfree,
+            bilateral.first_row,
+            x1,
+            x2,
+            bilateral.points1,
+            bilateral.points2,
+            bilateral.pairs,
+            bilateral.rest,
+            bilateral.rest_count,
         )
-    for origin, row, state, rest, count in planner.pending_coordinates:  # type: ignore[attr-defined]
-        phase.violation.append(Op(origin, [call("coordinate_violation", dfree, row, state.x, rest, count)]))
-    for origin, row, state, index in planner.pending_stoppers:  # type: ignore[attr-defined]
-        phase.violation.append(Op(origin, [call("stopper_violation", dfree, row, state.x, index)]))
-    if lagrangian is not None:
-        phase.violation.append(Op(lagrangian.origin, [call("lagrangian_violation", Env.LAGRANGIAN, dfree)]))
-    carry_through_rigid_mappings(planner, phase)
-    _sliding_rows(planner, phase, dfree)
-    bodies = _contact_bodies(planner, phase, lagrangian, free_x) if lagrangian is not None else set()
-    unbuilt_items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]] = []
-    for body, correction in enumerate(phase.corrections):
-        entries = phase.entries.get(correction.state.ident)
-        if entries is None and body in bodies:
-            entries = []
-        if entries is None:
-            continue
-        checked = correction.checked
-        assert checked is not None
-        state = correction.state
-        compiled = ("Vec3d", "Rigid3d") if lagrangian is not None else ("Vec3d", "Rigid3d", "Vec1d")
-        if state.datatype.name not in compiled:
-            planner.unsupported(
-                checked,
-                "with constraint rows, a correction on Vec3d or Rigid3d (Vec1d without contacts) is compiled",
-            )
-            continue
-        group = correction.group
-        if group.scheme != "implicit" or group.static or group.newmark or group.variational:
-            planner.unsupported(
-                checked, "with constraint rows, it is compiled under EulerImplicitSolver only"
-            )
-            continue
-        component = checked.component
-        J = _jacobian_rows(planner, state, entries)
-        if correction.kind == Variant.LINEAR_SOLVER:
-            linear_solver_correction(planner, phase, correction, body, J, lagrangian is not None, (W, f, n))
-            continue
-        comp = values_of(planner, component, "compliance", np.float64)
-        if not state.datatype.rigid and 0 < len(comp) != state.size:
-            # SOFA's init: a compliance not one per DOF becomes one per DOF, each the
-            # defaultCompliance if set, else the compliance's first value
-            given = component.get("defaultCompliance") is not None
-            first = float(planner.value(component, "defaultCompliance")) if given else float(comp[0])
-            comp = np.full(state.size, first)
-        if state.datatype.rigid and len(comp) != 7:
-            found = rigid_compliance(planner, checked, group, state)
-            if found is None:
-                continue
-            comp = found
-        comp_buffer = planner.buffer(component, "compliance", comp)
-        scaled = planner.buffer(component, "scaled_compliance", np.zeros(len(comp) + 1), role="scratch")
-        comp0 = Element(
-            planner.buffer(
-                component,
-                "defaultCompliance",
-                [float(planner.value(component, "defaultCompliance"))],
-                role="param",
-            )
+        phase.violation.append(Op(bilateral.origin, [violation]))
+    for coordinates in lowering.coordinates:
+        violation = call(
+            "coordinate_violation",
+            dfree,
+            coordinates.first_row,
+            coordinates.state.x,
+            coordinates.rest,
+            coordinates.count,
         )
-        dt = float(planner.dt.initial[0])
-        use_ode = bool(planner.value(component, "useOdeSolverIntegrationFactors"))
-        # EulerImplicitSolver: position factor dt, velocity factor 1 (its integration factors)
-        factor = dt if use_ode else 1.0
-        position = dt if use_ode else float(planner.value(component, "correctionPositionFactor"))
-        velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
-        t = state.datatype.name
-        unbuilt_items.append((t, J, state, comp0, comp_buffer, len(comp), body))
-        comp_args = (comp0, comp_buffer, len(comp))
-        if lagrangian is not None:
-            add = call(
-                kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled
-            )
-        else:
-            add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
-        phase.compliance.append(Op(correction.origin, [add]))
-        moved = moved_vectors(planner, component, state)
-        if lagrangian is not None:
-            correct = call(
-                kernel("lagrangian_correct", t),
-                Env.LAGRANGIAN,
-                body,
-                *moved,
-                J,
-                f,
-                state.size,
-                *comp_args,
-                position,
-                velocity,
-            )
-        else:
-            correct = call(
-                kernel("uncoupled_correct", t), *moved, J, f, state.size, *comp_args, position, velocity
-            )
-        phase.correction.append(Op(correction.origin, [correct]))
-    if phase.method == Variant.LCP:  # LCPConstraintSolver on the contacts' rows
-        names = ("maxIt", "tolerance", "mu", "minW", "maxF", "regularizationTerm", "initial_guess")
-        lcp_settings = [Element(phase.settings[name]) for name in names]
-        if solver is not None and not planner.value(solver.component, "build_lcp"):
-            _lcp_unbuilt(planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), lcp_settings)
-            return
-        lcp = call("lagrangian_solve_lcp", Env.LAGRANGIAN, W, dfree, f, d, scratch, n, *lcp_settings)
-        phase.solve.append(Op(phase.solver, [call(lcp.kernel, *lcp.args, phase.report, Env.TIME)]))
-        return
-    firsts = planner.buffer("/", "constraint_block_first", [b[0] for b in phase.blocks], "i64")
-    kinds = planner.buffer("/", "constraint_block_kind", [b[1] for b in phase.blocks], "i64")
-    parameters = planner.buffer(
-        "/", "constraint_block_parameter", [(b[2], b[4]) for b in phase.blocks], columns=2
-    )
-    kept = planner.buffer("/", "constraint_block_kept", [b[3] for b in phase.blocks], "i64")
-    assert phase.kept is not None
-    order = ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified", "regularizationTerm")
-    if phase.settings:
-        settings: list[Element | float] = [Element(phase.settings[name]) for name in order]
-    else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
-        default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
-        settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    if phase.method == Variant.UNBUILT_GAUSS_SEIDEL:
-        _unbuilt_solve(
-            planner, phase, unbuilt_items, (W, dfree, f, d, scratch, n), (firsts, kinds, parameters, kept)
+        phase.violation.append(Op(coordinates.origin, [violation]))
+    for stopper in lowering.stoppers:
+        violation = call("stopper_violation", dfree, stopper.row, stopper.state.x, stopper.index)
+        phase.violation.append(Op(stopper.origin, [violation]))
+
+
+def _correction_compiled(planner: Planner, correction: Correction, contacts: bool) -> bool:
+    """Corrections with rows are compiled on Vec3d and Rigid3d states (Vec1d without contacts) of
+    an EulerImplicitSolver group."""
+    checked = correction.checked
+    assert checked is not None
+    compiled = ("Vec3d", "Rigid3d") if contacts else ("Vec3d", "Rigid3d", "Vec1d")
+    if correction.state.datatype.name not in compiled:
+        planner.unsupported(
+            checked,
+            "with constraint rows, a correction on Vec3d or Rigid3d (Vec1d without contacts) is compiled",
         )
-        return
-    solve = (
-        call(kernel("lagrangian_solve", len(phase.blocks)), Env.LAGRANGIAN, _ROW_SOLVERS[phase.method])
-        if lagrangian is not None
-        else call(kernel("solve_constraints", len(phase.blocks)), _ROW_SOLVERS[phase.method])
-    )
-    phase.solve.append(
-        Op(
-            phase.solver or phase.loop,
-            [
-                call(
-                    (solve.kernel, solve.templates),
-                    *solve.args,
-                    W,
-                    dfree,
-                    f,
-                    d,
-                    scratch,
-                    n,
-                    firsts,
-                    kinds,
-                    parameters,
-                    kept,
-                    phase.kept,
-                    *settings,
-                    phase.report,
-                    Env.TIME,
-                )
-            ],
-        )
-    )
-
-
-def _lcp_unbuilt(
-    planner: Planner,
-    phase: ConstraintPhase,
-    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
-    problem: tuple,
-    settings: list[Element],
-) -> None:
-    """LCPConstraintSolver with build_lcp=0 and mu=0 (lcp_gaussseidel_unbuilt): no W built (the
-    compliance calls are dropped), the 1x1 blocks and displacements through the corrections."""
-    phase.compliance.clear()
-    types = {t for t, *_ in items}
-    solver = getattr(planner, "constraint_solver", None)
-    if len(types) != 1:
-        if solver is not None:
-            planner.unsupported(solver, "unbuilt, it is compiled for corrections of one DataType")
-        return
-    (t,) = types
-    aggregates = []
-    for _, J, state, comp0, comp, size, body in items:
-        zeros = np.zeros_like(state.v.initial)
-        force = planner.buffer(
-            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
-        )
-        disp = planner.buffer(
-            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
-        )
-        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
-        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)))
-    solve = call(
-        kernel("lagrangian_solve_lcp_unbuilt", t),
-        Env.LAGRANGIAN,
-        *problem,
-        *settings,
-        phase.report,
-        Env.TIME,
-        *aggregates,
-    )
-    phase.solve.append(Op(phase.solver, [solve]))
-
-
-def _lcp_refusal(
-    planner: Planner, solver: CheckedComponent, phase: ConstraintPhase, collision: Collision
-) -> str:
-    """Why an LCPConstraintSolver on Lagrangian contacts is not compiled ("" when it is)."""
-    value = planner.value
-    if collision.static_rows:
-        return "LCPConstraintSolver on rows other than contacts' is not compiled yet"
-    mu = float(value(solver.component, "mu"))
-    if not value(solver.component, "build_lcp"):
-        if (mu > 0) != (collision.mu > 0):
-            return (
-                "LCPConstraintSolver unbuilt is compiled when its mu and the contacts' are both 0 or both > 0"
-            )
-        return ""
-    if mu <= 0 or collision.mu <= 0:
-        return "LCPConstraintSolver built is compiled for contacts of three rows solved with mu > 0"
-    return ""
-
-
-def _lagrangian_collision(planner: Planner) -> Collision | None:
-    """The scene's FrictionContactConstraint contacts (their rows join the phase), if compiled."""
-    return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
-
-
-def _contact_bodies(
-    planner: Planner, phase: ConstraintPhase, collision: Collision, free_x: dict[str, Buffer]
-) -> set[int]:
-    """Where each collision model's contact rows land: the correction of its own state, or of
-    the Rigid3d state its RigidMapping follows (the rows carried through applyJT), or none (a
-    static obstacle); with the free positions the violation reads. Returns the bodies reached."""
-    index = {id(c.state): k for k, c in enumerate(phase.corrections)}
-    reached: set[int] = set()
-    for model in collision.models:
-        state = model.state
-        if not state.mapped:
-            body = index.get(id(state), -1)
-            collision.bodies.append((body, state.x, None, None, None))
-            if body >= 0:
-                reached.add(body)
-            continue
-        mapping = mapping_of_state(planner, state)
-        body = index.get(id(mapping.parent), -1) if mapping is not None else -1
-        subset = increasing_subset(planner, mapping) if mapping is not None else None
-        rigid = rigidly_mapped(planner, state)
-        if mapping is None or not (rigid or subset is not None) or state.ident not in free_x:
-            planner.unsupported(
-                planner.checked.of(state.component),
-                "Lagrangian contact on a collision state mapped other than by one RigidMapping, "
-                "IdentityMapping or SubsetMapping (increasing indices) from an independent state is not "
-                "compiled yet",
-            )
-            collision.bodies.append((-1, state.x, None, None, None))
-            continue
-        if subset is not None:
-            collision.bodies.append((body, free_x[state.ident], None, None, subset))
-        else:
-            frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
-            assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
-            collision.bodies.append((body, free_x[state.ident], frames, offsets, None))
-        if body >= 0:
-            reached.add(body)
-    return reached
-
-
-def _unbuilt_solve(
-    planner: Planner,
-    phase: ConstraintPhase,
-    items: list[tuple[str, Aggregate, StatePlan, Element, Buffer, int, int]],
-    problem: tuple,
-    blocks: tuple,
-) -> None:
-    """UnbuiltGaussSeidelConstraintSolver: W's diagonal blocks from the raw compliances, the
-    displacements through the corrections (no built W: the compliance calls are dropped)."""
-    phase.compliance.clear()
-    types = {t for t, *_ in items}
-    solver = getattr(planner, "constraint_solver", None)
-    if len(types) != 1 or (
-        solver is not None and float(planner.value(solver.component, "regularizationTerm")) > 0
-    ):
-        if solver is not None:
-            planner.unsupported(
-                solver,
-                "on constraint rows it is compiled for corrections of one DataType, without regularization",
-            )
-        return
-    (t,) = types
-    lagrangian = _lagrangian_collision(planner) is not None
-    aggregates = []
-    for _, J, state, comp0, comp, size, body in items:
-        zeros = np.zeros_like(state.v.initial)
-        force = planner.buffer(
-            state.component, "constraint_force", zeros, columns=state.v.columns, role="scratch"
-        )
-        disp = planner.buffer(
-            state.component, "constraint_disp", zeros, columns=state.v.columns, role="scratch"
-        )
-        item = Aggregate("UnbuiltUncoupled", (J, state.size, comp0, comp, size, force, disp), (t,))
-        aggregates.append(Aggregate("LagrangianUnbuilt", (body, item), (t,)) if lagrangian else item)
-    settings = [
-        Element(phase.settings[name])
-        for name in ("maxIterations", "tolerance", "sor", "scaleTolerance", "allVerified")
-    ]
-    assert phase.kept is not None
-    arguments = (*problem, *blocks, phase.kept, *settings, phase.report, Env.TIME, *aggregates)
-    if lagrangian:
-        solve = call(kernel("lagrangian_solve_unbuilt", t, len(phase.blocks)), Env.LAGRANGIAN, *arguments)
-    else:
-        solve = call(kernel("solve_unbuilt", t, len(phase.blocks)), *arguments)
-    phase.solve.append(Op(phase.solver, [solve]))
+        return False
+    group = correction.group
+    if group.scheme is not Scheme.IMPLICIT or group.static or group.newmark or group.variational:
+        planner.unsupported(checked, "with constraint rows, it is compiled under EulerImplicitSolver only")
+        return False
+    return True
 
 
 def finish_constraint_phase(planner: Planner, groups: list[Group]) -> ConstraintPhase | None:
     """The phase once every component is lowered: which independent states SOFA leaves frozen
     (no correction), with the buffers that keep their x and v over the groups' step."""
-    phase = constraint_phase(planner)
-    if phase is None:
+    lowering = constraint_lowering(planner)
+    if lowering is None:
         return None
+    phase = lowering.phase
     loop = _free_motion_loop(planner)
     assert loop is not None
     # The loop is the step's driver, not a bystander: its effects are listed, it is not "kept out".
@@ -660,7 +432,7 @@ def finish_constraint_phase(planner: Planner, groups: list[Group]) -> Constraint
                 "writes its free motion back, so it does not move",
                 "add an UncoupledConstraintCorrection or a LinearSolverConstraintCorrection next to it",
             )
-    if phase.capacity or _lagrangian_collision(planner) is not None:
-        planner.constraint_groups = groups  # type: ignore[attr-defined]
-        _phase_with_rows(planner, phase)
+    if phase.capacity or lagrangian_collision(planner) is not None:
+        lowering.groups = groups
+        _phase_with_rows(planner, lowering)
     return phase

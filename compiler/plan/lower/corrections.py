@@ -18,7 +18,7 @@ from sofac.plan.ir import (
     Aggregate,
     Buffer,
     Call,
-    ConstraintPhase,
+    Collision,
     Correction,
     Element,
     Env,
@@ -32,6 +32,7 @@ from sofac.plan.ir import (
     call,
     kernel,
 )
+from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem
 from sofac.registry import Category, Variant
 
 if TYPE_CHECKING:
@@ -92,19 +93,19 @@ def _linear_system_of(planner: Planner, checked: CheckedComponent, group: Group)
 
 def linear_solver_correction(
     planner: Planner,
-    phase: ConstraintPhase,
+    lowering: ConstraintLowering,
     correction: Correction,
     body: int,
     J: Aggregate,
     lagrangian: bool,
-    problem: tuple[Buffer, Buffer, int],
+    problem: ConstraintProblem,
 ) -> None:
     """LinearSolverConstraintCorrection on rows (runtime/sofac/linear_correction.h): W += dt J A^-1 J^T
     (+ regularizationTerm), then dx = A^-1 J^T f, x = x_free + dt dx, v = v_free + dx
     (EulerImplicitSolver's position and velocity integration factors)."""
     checked = correction.checked
     assert checked is not None
-    solver = getattr(planner, "constraint_solver", None)
+    phase, solver = lowering.phase, lowering.solver
     unbuilt = phase.method == Variant.UNBUILT_GAUSS_SEIDEL or (
         phase.method == Variant.LCP
         and solver is not None
@@ -118,7 +119,7 @@ def linear_solver_correction(
     system = _linear_system_of(planner, checked, correction.group)
     if system is None:
         return
-    W, f, n = problem
+    W, f, n = problem.W, problem.f, problem.rows
     state, component = correction.state, checked.component
     dt = float(planner.dt.initial[0])
     regularization = Element(
@@ -196,8 +197,9 @@ def increasing_subset(planner: Planner, mapping: MappingOp) -> Buffer | None:
     return indices if values.size == 0 or bool(np.all(np.diff(values) > 0)) else None
 
 
-def mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
-    for group in planner.constraint_groups:  # type: ignore[attr-defined]
+def mapping_of_state(lowering: ConstraintLowering, state: StatePlan) -> MappingOp | None:
+    """The mapping whose child is ``state`` (None: not mapped by a group's mapping)."""
+    for group in lowering.groups:
         for mapping in group.mappings:
             if mapping.child is state:
                 return mapping
@@ -205,16 +207,17 @@ def mapping_of_state(planner: Planner, state: StatePlan) -> MappingOp | None:
 
 
 def mapped_free_motion(
-    planner: Planner, phase: ConstraintPhase, also: set[str] | None = None
+    planner: Planner, lowering: ConstraintLowering, also: set[str] | None = None
 ) -> dict[str, Buffer]:
     """Free positions of the constrained mapped states, as SOFA makes them: v_free = J v_free of
     the parent (propagateDx, with the mapping's rotated points of the last apply), then
     x_free = x + dt v_free (linearised, not the mapping of the parent's x_free)."""
+    phase = lowering.phase
     free: dict[str, Buffer] = {}
     for state in planner.states.values():
         if not state.mapped or (state.ident not in phase.entries and state.ident not in (also or set())):
             continue
-        mapping = mapping_of_state(planner, state)
+        mapping = mapping_of_state(lowering, state)
         if mapping is None:
             continue
         zeros_v, zeros_x = np.zeros_like(state.v.initial), np.zeros_like(state.x.initial)
@@ -232,15 +235,15 @@ def mapped_free_motion(
     return free
 
 
-def carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> None:
+def carry_through_rigid_mappings(planner: Planner, lowering: ConstraintLowering) -> None:
     """RigidMapping::applyJT on the constraint matrix: a mapped point's entry n on a row becomes its
     frame's (n, r x n), r the point's rotated offset; rows keep their index."""
-    planner.rigid_rows = {}  # type: ignore[attr-defined]
+    phase = lowering.phase
     by_parent: dict[str, list[tuple[int, int, int, tuple[float, ...], MappingOp]]] = {}
     for state in planner.states.values():
         if not state.mapped or state.ident not in phase.entries:
             continue
-        mapping = mapping_of_state(planner, state)
+        mapping = mapping_of_state(lowering, state)
         if mapping is None:
             continue
         frames = mapping.jacobian.args[2]
@@ -290,7 +293,7 @@ def carry_through_rigid_mappings(planner: Planner, phase: ConstraintPhase) -> No
             "rigid_constraint_jacobian", values, point_buffer, direction_buffer, offsets, len(dofs)
         )
         phase.rows.append(Op(mapping.origin, [kernel_call]))
-        planner.rigid_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))  # type: ignore[attr-defined]
+        lowering.computed_rows[parent_ident] = Aggregate("JacobianRows", (len(rows), *buffers))
         phase.entries[parent_ident] = []  # rows known: the correction finds them
 
 
@@ -346,3 +349,48 @@ def rigid_compliance(
         inertia_mass = [float(v) for v in mass[1:10]]
     inverse = _invert3(inertia_mass)
     return np.array([first, *(ode_factor * inverse[i] for i in (0, 1, 2, 4, 5, 8))])
+
+
+def lagrangian_collision(planner: Planner) -> Collision | None:
+    """The scene's FrictionContactConstraint contacts (their rows join the phase), if compiled."""
+    return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
+
+
+def contact_bodies(
+    planner: Planner, lowering: ConstraintLowering, collision: Collision, free_x: dict[str, Buffer]
+) -> set[int]:
+    """Where each collision model's contact rows land: the correction of its own state, or of
+    the Rigid3d state its RigidMapping follows (the rows carried through applyJT), or none (a
+    static obstacle); with the free positions the violation reads. Returns the bodies reached."""
+    index = {id(c.state): k for k, c in enumerate(lowering.phase.corrections)}
+    reached: set[int] = set()
+    for model in collision.models:
+        state = model.state
+        if not state.mapped:
+            body = index.get(id(state), -1)
+            collision.bodies.append((body, state.x, None, None, None))
+            if body >= 0:
+                reached.add(body)
+            continue
+        mapping = mapping_of_state(lowering, state)
+        body = index.get(id(mapping.parent), -1) if mapping is not None else -1
+        subset = increasing_subset(planner, mapping) if mapping is not None else None
+        rigid = rigidly_mapped(planner, state)
+        if mapping is None or not (rigid or subset is not None) or state.ident not in free_x:
+            planner.unsupported(
+                planner.checked.of(state.component),
+                "Lagrangian contact on a collision state mapped other than by one RigidMapping, "
+                "IdentityMapping or SubsetMapping (increasing indices) from an independent state is not "
+                "compiled yet",
+            )
+            collision.bodies.append((-1, state.x, None, None, None))
+            continue
+        if subset is not None:
+            collision.bodies.append((body, free_x[state.ident], None, None, subset))
+        else:
+            frames, offsets = mapping.jacobian.args[2], mapping.jacobian.args[3]
+            assert isinstance(frames, Buffer) and isinstance(offsets, Buffer)
+            collision.bodies.append((body, free_x[state.ident], frames, offsets, None))
+        if body >= 0:
+            reached.add(body)
+    return reached

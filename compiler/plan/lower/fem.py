@@ -19,6 +19,7 @@ from sofac.plan.ir import (
     Function,
     Group,
     Op,
+    Scheme,
     kernel,
     origin_of,
 )
@@ -203,7 +204,7 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
                 [_call(f"{prefix}_energy", elements, count, state.x, data, method, into=Env.POTENTIAL)],
             )
         )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         dforce = (
             _call(
                 "tetra_fem_add_dforce_normals",
@@ -270,7 +271,7 @@ def lower_quad_bending(planner: Planner, checked: CheckedComponent, owner: dict[
     group.forces.append(
         Op(origin, [_call("quad_bending_add_force", elements, count, state.x, state.f, data)])
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -314,7 +315,7 @@ def lower_trifem_optim(planner: Planner, checked: CheckedComponent, owner: dict[
     group.forces.append(
         Op(origin, [_call("trifem_optim_add_force", elements, count, state.x, state.f, data, *material)])
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -418,7 +419,7 @@ def lower_element_fem(planner: Planner, checked: CheckedComponent, owner: dict[i
         )
     group.init.append(Op(origin, init))
     group.forces.append(Op(origin, [force]))
-    if group.scheme != "implicit":
+    if group.scheme is not Scheme.IMPLICIT:
         return
     if rotations is not None:
         dforce = _call(

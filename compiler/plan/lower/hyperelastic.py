@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from sofac.check.checker import CheckedComponent
-from sofac.plan.ir import OFFSET, Env, Group, Op, origin_of
+from sofac.plan.ir import OFFSET, Env, Group, Op, Scheme, origin_of
 from sofac.plan.lower.common import _assemble, _call, _target, _topology_cells
 from sofac.registry.components.fem import HYPERELASTIC_MATERIALS, hyperelastic_problem
 
@@ -62,7 +62,7 @@ def lower_hyperelastic(planner: Planner, checked: CheckedComponent, owner: dict[
             ],
         )
     )
-    if group.scheme != "implicit":
+    if group.scheme is not Scheme.IMPLICIT:
         return
     group.stiffness_dx.append(
         Op(

@@ -15,6 +15,7 @@ from sofac.plan.ir import (
     Env,
     Group,
     Op,
+    Scheme,
     kernel,
     origin_of,
 )
@@ -89,7 +90,7 @@ def lower_interaction_ellipsoid(planner: Planner, checked: CheckedComponent, own
             ],
         )
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         if group.assembled:
             planner.unsupported(
                 checked, f"{_matrix_solver(group)} with an ellipsoid force field is not compiled yet"
@@ -132,7 +133,7 @@ def lower_velocity_damping(planner: Planner, checked: CheckedComponent, owner: d
     group.forces.append(
         Op(origin, [_call("velocity_damping_force", state.f, state.v, scalars, Element(coefficient))])
     )
-    if planner.value(component, "implicit") and group.scheme == "implicit":
+    if planner.value(component, "implicit") and group.scheme is Scheme.IMPLICIT:
         if group.assembled:
             planner.unsupported(checked, f"implicit damping with {_matrix_solver(group)} is not compiled yet")
             return
@@ -216,7 +217,7 @@ def lower_rest_shape(planner: Planner, checked: CheckedComponent, owner: dict[in
             [_call(kernel("rest_shape_forces", t), state.f, state.x, state.rest, *arguments)],
         )
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(origin, [_call(kernel("rest_shape_dforces", t), state.df, state.dx, *arguments, Env.KFACT)])
         )
@@ -285,7 +286,7 @@ def lower_plane_force(planner: Planner, checked: CheckedComponent, owner: dict[i
             ],
         )
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         stiffness = parameters["stiffness"]
         group.stiffness_dx.append(
             Op(

@@ -14,6 +14,7 @@ from sofac.plan.ir import (
     Env,
     Group,
     Op,
+    Scheme,
     StatePlan,
     kernel,
     origin_of,
@@ -169,8 +170,8 @@ def lower_mesh_matrix_mass(planner: Planner, checked: CheckedComponent, owner: d
         planner.unsupported(checked, "MeshMatrixMass on rigid frames is not compiled yet")
         return
     lumping = bool(planner.value(component, "lumping"))
-    if group.scheme != "implicit" and not lumping:
-        if group.scheme != "euler" or not group.assembled:
+    if group.scheme is not Scheme.IMPLICIT and not lumping:
+        if group.scheme is not Scheme.EULER or not group.assembled:
             planner.unsupported(
                 checked, "a consistent mass with this solver needs a sparse direct linear solver"
             )
@@ -229,7 +230,7 @@ def lower_mesh_matrix_mass(planner: Planner, checked: CheckedComponent, owner: d
             width,
         ),
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         if lumping:
             code = _call(
                 "mesh_matrix_mass_multiply_lumped",
@@ -320,13 +321,13 @@ def lower_hexa_mass(
     from sofac.geometry import element_fem
 
     component = checked.component
-    if group.scheme != "implicit" and not (group.scheme == "euler" and group.assembled):
+    if group.scheme is not Scheme.IMPLICIT and not (group.scheme is Scheme.EULER and group.assembled):
         # SOFA's accFromF is not implemented for this class: only a solve with M works.
         planner.unsupported(
             checked, "its mass needs an implicit solver, or explicit Euler with a sparse direct linear solver"
         )
         return False
-    if group.scheme != "implicit":
+    if group.scheme is not Scheme.IMPLICIT:
         group.direct = True
     lumped = bool(planner.value(component, "lumpedMass"))
     cells = elements.initial.reshape(-1, 8)
@@ -374,7 +375,7 @@ def lower_hexa_mass(
             [_call(kernel("mass_gravity", "Vec3d"), state.f, state.size, particle, 1, planner.gravity)],
         ),
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, Env.MFACT)]))
     _assemble(
         planner, checked, group, state, _call("assemble_fem_mass", Env.ASSEMBLER, OFFSET, *csr, Env.MFACT)
@@ -408,8 +409,8 @@ def lower_fem_mass(planner: Planner, checked: CheckedComponent, owner: dict[int,
         return
     state, group, (_, corners, cells) = found
     component = checked.component
-    if group.scheme != "implicit":
-        if group.scheme != "euler" or not group.assembled:
+    if group.scheme is not Scheme.IMPLICIT:
+        if group.scheme is not Scheme.EULER or not group.assembled:
             planner.unsupported(
                 checked,
                 "FEMMass needs an implicit solver, or explicit Euler with a sparse direct linear solver",
@@ -450,7 +451,7 @@ def lower_fem_mass(planner: Planner, checked: CheckedComponent, owner: dict[int,
         )
     )
     planner.add_gravity(group, Op(origin, [_call("fem_mass_gravity", state.f, *csr, planner.gravity)]))
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.mass_dx.append(Op(origin, [_call("fem_mass_multiply", state.df, state.dx, *csr, Env.MFACT)]))
     _assemble(
         planner, checked, group, state, _call("assemble_fem_mass", Env.ASSEMBLER, OFFSET, *csr, Env.MFACT)

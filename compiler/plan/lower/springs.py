@@ -16,6 +16,7 @@ from sofac.plan.ir import (
     Env,
     Group,
     Op,
+    Scheme,
     origin_of,
 )
 from sofac.plan.lower.common import (
@@ -88,7 +89,7 @@ def lower_triangular_bending_springs(
     group.energy.append(
         Op(origin, [_call("triangular_bending_energy", springs, values, count, state.x, into=Env.POTENTIAL)])
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -191,7 +192,7 @@ def lower_bending_springs(planner: Planner, checked: CheckedComponent, owner: di
     origin = origin_of(component)
     group.forces.append(Op(origin, [_call("bending_springs_add_force", *table, state.x, state.f)]))
     group.energy.append(Op(origin, [_call("bending_springs_energy", *table, state.x, into=Env.POTENTIAL)]))
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(origin, [_call("bending_springs_add_dforce", *table, state.dx, state.df, Env.KFACT)])
         )
@@ -470,7 +471,7 @@ def lower_vector_springs(planner: Planner, checked: CheckedComponent, owner: dic
             ],
         )
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(
                 origin,
@@ -553,7 +554,7 @@ def lower_joint_springs(planner: Planner, checked: CheckedComponent, owner: dict
             [_call("joint_spring_forces", table, first.x, first.v, first.f, second.x, second.v, second.f)],
         )
     )
-    if group.scheme == "implicit":
+    if group.scheme is Scheme.IMPLICIT:
         group.stiffness_dx.append(
             Op(
                 origin,

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from ..fields import Bool, Int, Link, LinkList, Options, Real, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec, Variant
 from .common import (
@@ -145,12 +148,28 @@ _PROXIMITY = (
     ),
 )
 
+def _alarm_covers_contact(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    """An alarm distance below the contact distance: pairs would be dropped before they come as
+    near as the response keeps them (SOFA does not check it; every contact would start violated)."""
+    alarm, contact = float(value("alarmDistance")), float(value("contactDistance"))
+    if alarm >= contact:
+        return None
+    return (
+        "E207",
+        "alarmDistance",
+        f"alarmDistance={alarm!r} must be >= contactDistance={contact!r} (pairs are detected within "
+        "the alarm distance and pushed apart up to the contact distance)",
+        "raise alarmDistance or lower contactDistance",
+    )
+
+
 MIN_PROXIMITY_INTERSECTION = ComponentSpec(
     name="MinProximityIntersection",
     variant=Variant.MIN_PROXIMITY,
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests between element pairs closer than alarmDistance.",
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(
@@ -169,6 +188,7 @@ NEW_PROXIMITY_INTERSECTION = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_INTERSECTION,
     doc="Proximity tests based on triangle-triangle distances.",
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(*_PROXIMITY, FieldSpec("useLineLine", Bool(), False, "also test edge-edge pairs")),
@@ -189,6 +209,7 @@ LOCAL_MIN_DISTANCE = ComponentSpec(
     module=_INTERSECTION,
     doc="Proximity tests filtered by local minimum distance cones (used with constraint-based contacts).",
     variant=Variant.LOCAL_MIN_DISTANCE,
+    validate=_alarm_covers_contact,
     supported=True,
     effects=_COLLISION,
     fields=(
@@ -215,6 +236,35 @@ CCD_TIGHT_INCLUSION_INTERSECTION = ComponentSpec(
     ),
 )
 
+def response_params(text: str) -> dict[str, str]:
+    """A contact manager's responseParams, 'name=value&name=value' (SOFA's ContactManager)."""
+    params = {}
+    for item in text.split("&"):
+        name, _, given = item.partition("=")
+        if name.strip():
+            params[name.strip()] = given.strip()
+    return params
+
+
+def _friction_is_nonnegative(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
+    """A FrictionContactConstraint's mu (responseParams) is a Coulomb coefficient: >= 0."""
+    if str(value("response") or "") != "FrictionContactConstraint":
+        return None
+    given = response_params(str(value("responseParams") or "")).get("mu")
+    try:
+        mu = float(given) if given is not None else 0.0
+    except ValueError:
+        return ("E205", "responseParams", f"mu={given!r} is not a number", 'give responseParams="mu=0.8"')
+    if mu >= 0:
+        return None
+    return (
+        "E207",
+        "responseParams",
+        f"mu={mu!r} must be >= 0 (Coulomb's friction coefficient)",
+        'give responseParams="mu=0.8" or another non-negative value',
+    )
+
+
 _RESPONSE_FIELDS = (
     FieldSpec(
         "response",
@@ -233,6 +283,7 @@ COLLISION_RESPONSE = ComponentSpec(
     module=_RESPONSE,
     doc="Contact manager: creates a response (e.g. penalty springs) per colliding pair of models.",
     former_names=("DefaultContactManager",),
+    validate=_friction_is_nonnegative,
     supported=True,
     effects=_COLLISION,
     fields=_RESPONSE_FIELDS,
@@ -243,6 +294,7 @@ RULE_BASED_CONTACT_MANAGER = ComponentSpec(
     category=Category.COLLISION_PIPELINE,
     module=_RESPONSE,
     doc="Contact manager choosing the response per pair of model groups from rules.",
+    validate=_friction_is_nonnegative,
     former_names=("RuleBasedCollisionResponse",),
     variant=Variant.CONTACT_MANAGER,
     supported=True,
