@@ -1,8 +1,10 @@
-"""Pieces of the Lagrangian contact scenes the tests write: SOFA's pipeline under
-FreeMotionAnimationLoop with LocalMinDistance and the FrictionContactConstraint response, and a
-static floor of two triangles."""
+"""Pieces of the Lagrangian contact scenes the tests (and benchmarks/constraints.py) write: SOFA's
+pipeline under FreeMotionAnimationLoop with LocalMinDistance and the FrictionContactConstraint
+response, a static floor of two triangles, and particles with an uncoupled correction."""
 
 from __future__ import annotations
+
+import numpy as np
 
 G = 9.81
 DT = 0.01
@@ -30,5 +32,20 @@ def static_floor(points: str) -> str:
         <MechanicalObject name="dofs" position="{points}" />
         <MeshTopology triangles="0 2 1  0 3 2" />
         <TriangleCollisionModel simulated="0" moving="0" />
+    </Node>
+"""
+
+
+def particles(name: str, points: np.ndarray, mass: float) -> str:
+    """Node /``name``: the ``points``, of ``mass`` each, in one MechanicalObject (implicit Euler with
+    CG), with UncoupledConstraintCorrection (compliance 1 / mass) and a point collision model."""
+    position = "  ".join(" ".join(f"{c:.17g}" for c in p) for p in points)
+    return f"""    <Node name="{name}">
+        <EulerImplicitSolver rayleighStiffness="0" rayleighMass="0" />
+        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-20" />
+        <MechanicalObject name="dofs" position="{position}" />
+        <UniformMass vertexMass="{mass!r}" />
+        <UncoupledConstraintCorrection compliance="{1.0 / mass!r}" />
+        <PointCollisionModel />
     </Node>
 """

@@ -1,4 +1,5 @@
-"""The performance benchmarks (benchmarks/workloads.py) still run: tiny sizes, no timing assertions."""
+"""The performance benchmarks (benchmarks/workloads.py, constraints.py) still run: tiny sizes, no timing
+assertions."""
 
 from __future__ import annotations
 
@@ -15,13 +16,18 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-@pytest.fixture(scope="module")
-def workloads() -> Iterator[ModuleType]:
+def _benchmark(name: str) -> Iterator[ModuleType]:
+    """A script of benchmarks/ imported as a module (the folder on sys.path meanwhile)."""
     sys.path.insert(0, str(BENCHMARKS))
     try:
-        yield importlib.import_module("workloads")
+        yield importlib.import_module(name)
     finally:
         sys.path.remove(str(BENCHMARKS))
+
+
+@pytest.fixture(scope="module")
+def workloads() -> Iterator[ModuleType]:
+    yield from _benchmark("workloads")
 
 
 def test_cloth_matches_the_workload_definition(workloads: ModuleType) -> None:
@@ -139,3 +145,43 @@ def test_sphere_floor_workload_runs_agrees_and_rests(workloads: ModuleType, tmp_
     assert all(v < 1e-8 for k, v in found.items() if k.startswith("rest height")), found
     cells = workloads.table(rows, sofa=False)
     assert next(c for c in cells if c[:2] == ["w5-9", "hand-written C++"])[4] == "1.00"
+
+
+@pytest.fixture(scope="module")
+def constraints() -> Iterator[ModuleType]:
+    yield from _benchmark("constraints")
+
+
+@pytest.mark.skipif(shutil.which("g++") is None, reason="needs g++")
+def test_constraint_benchmark_splits_the_step(constraints: ModuleType, tmp_path: Path) -> None:
+    from sofac.plan.ir import CONSTRAINT_REPORT_FIELDS
+
+    path = tmp_path / "particles.scn"
+    path.write_text(constraints.particles_scene(2, "bgs"))
+    split = constraints.scene_split(path, steps=5, repeat=1)
+    assert split.rows == 12.0  # four particles resting on the floor from the first step, 3 rows each
+    assert split.iterations >= 1
+    assert {f"{part}_seconds" for part in split.parts} <= set(CONSTRAINT_REPORT_FIELDS)
+    assert set(split.parts) == set(constraints.PARTS)
+    # every part of the step is timed, inside the step's wall time
+    assert all(seconds > 0 for seconds in split.parts.values()), split.parts
+    assert sum(split.parts.values()) <= split.total
+    assert split.rest >= 0
+    table = constraints.split_table(["particles"], [split], markdown=True)
+    assert table.startswith("| scene | rows/step | ms/step | detection | free motion | rows (J) |")
+
+
+def test_constraint_benchmark_fits_and_plots(constraints: ModuleType, tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    parts = dict.fromkeys(constraints.PARTS, 0.1)
+    # the solve grows as rows^2, the W build as rows: the fitted exponents say so
+    splits = [
+        constraints.Split(1 + r * r * 1e-6, {**parts, "solve": r * r * 1e-6, "compliance": r * 1e-3}, rows=r)
+        for r in (12.0, 120.0, 1200.0)
+    ]
+    exponents = constraints.fits({"bgs": splits}, fit_from=100)
+    assert exponents["bgs"]["solve"] == pytest.approx(2.0)
+    assert exponents["bgs"]["compliance"] == pytest.approx(1.0)
+    plot = tmp_path / "rows.png"
+    constraints.plot({"bgs": splits}, exponents, plot)
+    assert plot.read_bytes().startswith(b"\x89PNG")

@@ -60,6 +60,36 @@ API void solve(Index n, const Index* rows, const Index* cols, const double* valu
     info[2] = D.factorization.factor()->is_super;
 }
 
+// The same kind of input, one factorisation; `columns` right-hand sides b (n each) solved
+// DirectSolver::kSolveColumns at a time by solve_columns (the last batch padded with zeros) into
+// x_columns, and one at a time by solve() into x_single. info = {can_solve_columns, kSolveColumns}.
+API void solve_in_columns(Index n, const Index* rows, const Index* cols, const double* values, Index count,
+                          const Index* fixed, int llt, const double* b, Index columns, double* x_columns,
+                          double* x_single, Index* info) {
+    sofac::DirectSolver D;
+    record_pattern(D, n, rows, cols, count, fixed);
+    D.analyze(llt ? sofac::Factorization::LLT : sofac::Factorization::LDLT);
+    D.assembler.start_values(D.matrix);
+    for (Index k = 0; k < count; ++k) D.assembler.add(rows[k], cols[k], values[k]);
+    D.factor();
+    constexpr int C = sofac::DirectSolver::kSolveColumns;
+    info[0] = D.can_solve_columns();
+    info[1] = C;
+    for (Index first = 0; info[0] && first < columns; first += C) {
+        for (int c = 0; c < C; ++c)
+            for (Index i = 0; i < n; ++i)
+                D.rhs_columns(i, c) = first + c < columns ? b[(first + c) * n + i] : 0.0;
+        D.solve_columns();
+        for (int c = 0; c < C && first + c < columns; ++c)
+            for (Index i = 0; i < n; ++i) x_columns[(first + c) * n + i] = D.column_solution(c)[i];
+    }
+    for (Index k = 0; k < columns; ++k) {
+        for (Index i = 0; i < n; ++i) D.rhs[i] = b[k * n + i];
+        D.solve();
+        for (Index i = 0; i < n; ++i) x_single[k * n + i] = D.solution[i];
+    }
+}
+
 // The same kind of input, L L^T, one pass per set of values: sofac's supernodal factor (L->x)
 // against cholmod_super_numeric's on the same symbolic factor, and sofac's solve. Out per pass:
 // {max |L_sofac - L_cholmod|, max |L_cholmod|, ||A x - b|| / (||A||_F ||x|| + ||b||)}; info =
@@ -113,6 +143,8 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.solve.argtypes = [ctypes.c_int64, I64, I64, D, ctypes.c_int64, I64, ctypes.c_int, D, D, I64]
     sizes = [ctypes.c_int64, ctypes.c_int64]
     library.compare_supernodal.argtypes = [ctypes.c_int64, I64, I64, D, *sizes, I64, D, D, D]
+    solve_in_columns = [ctypes.c_int64, I64, I64, D, ctypes.c_int64, I64, ctypes.c_int, D, ctypes.c_int64]
+    library.solve_in_columns.argtypes = [*solve_in_columns, D, D, I64]
     return library
 
 
@@ -188,6 +220,82 @@ def test_direct_solver_solves_the_projected_system(
         got = x[p * n : (p + 1) * n]
         assert np.abs(got - expected).max() < 1e-12 * np.abs(expected).max(), (p, llt, supernodal)
         assert np.all(got[fixed != 0] == 0.0)
+
+
+@pytest.mark.parametrize("llt", [False, True])
+def test_solves_in_columns_equal_single_solves_bit_for_bit(lib: ctypes.CDLL, llt: bool) -> None:
+    """LinearSolverConstraintCorrection's W solves its rows kSolveColumns at a time
+    (DirectSolver::solve_columns): on a simplicial factor (L D L^T of a 3-D beam; L L^T of a thin
+    banded matrix, where CHOLMOD's analysis keeps the simplicial kernel), sparse right-hand sides like
+    a contact row's J^T, and dense ones, give exactly solve()'s solutions."""
+    if llt:
+        rows, cols, values = block_system(40, 3, seed=4)
+        values = values[: len(rows)]
+        n, nodes, clamped = 120, 40, 3
+    else:
+        nx, ny, nz = 4, 4, 12
+        rows, cols, values = hexahedral_beam(nx, ny, nz, seed=4)
+        n, nodes, clamped = 3 * nx * ny * nz, nx * ny * nz, 3 * nx * ny
+    fixed = np.zeros(n, dtype=np.int64)
+    fixed[:clamped] = 1
+    rng = np.random.default_rng(11)
+    columns = 8  # not a multiple of kSolveColumns: the last batch is padded
+    b = np.zeros((columns, n))
+    for k in range(columns - 2):  # three DOFs of one node, as a contact's normal row
+        node = rng.integers(clamped // 3, nodes)
+        b[k, 3 * node : 3 * node + 3] = rng.standard_normal(3)
+    b[-2:] = rng.standard_normal((2, n))
+    b[:, fixed != 0] = 0.0
+    b = b.ravel()
+    in_columns, single = np.full(columns * n, np.nan), np.zeros(columns * n)
+    info = np.zeros(2, dtype=np.int64)
+    count = len(rows)
+    lib.solve_in_columns(
+        n,
+        _i(rows),
+        _i(cols),
+        _d(values),
+        count,
+        _i(fixed),
+        int(llt),
+        _d(b),
+        columns,
+        _d(in_columns),
+        _d(single),
+        _i(info),
+    )
+    assert info[0] == 1 and info[1] > 1
+    assert np.array_equal(in_columns, single)
+    a = dense_projected(n, rows, cols, values, fixed != 0)
+    expected = np.linalg.solve(a, b.reshape(columns, n).T).T.ravel()
+    assert np.abs(single - expected).max() < 1e-10 * np.abs(expected).max()
+
+
+def test_a_supernodal_factor_solves_one_column_at_a_time(lib: ctypes.CDLL) -> None:
+    """CHOLMOD's supernodal solve of several columns runs other BLAS kernels than a one-column
+    solve: solve_columns is not offered (W then takes one solve per row)."""
+    blocks, width = 12, 40
+    n = blocks * width
+    rows, cols, values = block_system(blocks, width, seed=5)
+    fixed = np.zeros(n, dtype=np.int64)
+    b = np.ones(n)
+    out = np.zeros(2 * n)
+    info = np.zeros(2, dtype=np.int64)
+    lib.solve_in_columns(
+        n,
+        _i(rows),
+        _i(cols),
+        _d(values[: len(rows)]),
+        len(rows),
+        _i(fixed),
+        1,
+        _d(b),
+        1,
+        _d(out[:n]),
+        _d(out[n:]),
+        _i(info),
+    )
+    assert info[0] == 0
 
 
 def test_a_matrix_that_is_not_positive_definite_gives_nan(lib: ctypes.CDLL) -> None:

@@ -20,6 +20,7 @@ from sofac import __version__
 from sofac.plan.ir import (
     CHILD,
     CONSTRAINT_PHASES,
+    CONSTRAINT_REPORT_FIELDS,
     OFFSET,
     PARENT,
     STEP_PHASES,
@@ -281,11 +282,18 @@ def _headers(plan: Plan) -> list[str]:
             statements += [c for c in extra if c is not None]
     index = _header_of()
     needed = {index["BlockTridiagonal"]} if any(group.btd for group in plan.groups) else set()
+    if plan.constraints is not None and plan.constraints.capacity:
+        needed.add(index["PhaseClock"])  # the constraint step's timers (templates/scene.cpp.j2)
     for name in {n for item in statements for n in _names(item)}:
         if name not in index:
             raise KeyError(f"no runtime header defines sofac::{name}")
         needed.add(index[name])
     return sorted(needed - set(_ALWAYS_INCLUDED))
+
+
+def _lap(field: str) -> int:
+    """The constraint report's field a PhaseClock lap adds to."""
+    return CONSTRAINT_REPORT_FIELDS.index(field)
 
 
 def _uses(ops: list[Op], *values: Env) -> bool:
@@ -739,10 +747,12 @@ def generate_source(plan: Plan) -> str:
         groups=[_GroupView(g, plan.constraints) for g in plan.groups],
         constraints=plan.constraints,
         constraint_phases=[
-            (name, [_OpView(op) for op in getattr(plan.constraints, name)]) for name in CONSTRAINT_PHASES
+            (name, [_OpView(op) for op in getattr(plan.constraints, name)], _lap(f"{name}_seconds"))
+            for name in CONSTRAINT_PHASES
         ]
         if plan.constraints
         else [],
+        constraint_laps={part: _lap(f"{part}_seconds") for part in ("detection", "free_motion", "finish")},
         any_direct=any(g.direct or g.preconditioned for g in plan.groups),
         on_read=on_read,
         any_assembled_cg=any(g.assembled_cg for g in plan.groups),

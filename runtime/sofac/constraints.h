@@ -22,6 +22,7 @@
 // Storage is the caller's (instance buffers sized at compile time): nothing here allocates.
 #pragma once
 
+#include <chrono>
 #include <cmath>
 #include <limits>
 
@@ -98,6 +99,23 @@ inline void record_solve(double* report, const ConstraintResult& result, double 
         report[6] = double(result.iterations);
     }
 }
+
+// The constraint step's timer: each lap adds the steady-clock seconds since the previous lap (or
+// since construction) to one of the run report's *_seconds fields (plan ir.CONSTRAINT_REPORT_FIELDS).
+// Reading the clock changes nothing the step computes and allocates nothing.
+struct PhaseClock {
+    explicit PhaseClock(double* report) : report_(report), last_(std::chrono::steady_clock::now()) {}
+
+    void lap(int field) {
+        const auto now = std::chrono::steady_clock::now();
+        report_[field] += std::chrono::duration<double>(now - last_).count();
+        last_ = now;
+    }
+
+  private:
+    double* report_;
+    std::chrono::steady_clock::time_point last_;
+};
 
 // SOFA's type::invertMatrix for 3x3 (cofactors over the determinant; false when |det| <= eps).
 inline bool invert3(const double m[9], double out[9]) {

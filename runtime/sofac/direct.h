@@ -231,6 +231,8 @@ struct DirectSolver {
         cholmod_free_dense(&x_, &factorization.cholmod());
         cholmod_free_dense(&y_, &factorization.cholmod());
         cholmod_free_dense(&e_, &factorization.cholmod());
+        cholmod_free_dense(&x_columns_, &factorization.cholmod());
+        cholmod_free_dense(&y_columns_, &factorization.cholmod());
         cholmod_free_sparse(&permuted_, &factorization.cholmod());
     }
 
@@ -254,12 +256,18 @@ struct DirectSolver {
         cholmod_common& common = factorization.cholmod();
         if (kind == Factorization::LDLT) {
             factorization.setMode(Eigen::CholmodLDLt);  // simplicial, L D L^T, the factor kept as is
-            factorization.analyzePattern(matrix);
-            return;
+        } else {
+            factorization.setMode(Eigen::CholmodAuto);  // supernodal or simplicial, kept as is
+            common.final_ll = 1;                        // simplicial: L L^T as well
         }
-        factorization.setMode(Eigen::CholmodAuto);  // supernodal or simplicial, kept as is
-        common.final_ll = 1;                        // simplicial: L L^T as well
         factorization.analyzePattern(matrix);
+        const cholmod_factor* L = factorization.factor();
+        if (L != nullptr && !L->is_super) {  // solve_columns' right-hand sides and CHOLMOD's X and Y
+            const std::size_t n = L->n;
+            rhs_columns.setZero(Index(n), kSolveColumns);
+            cholmod_ensure_dense(&x_columns_, n, kSolveColumns, n, CHOLMOD_REAL, &common);
+            cholmod_ensure_dense(&y_columns_, 4, n, 4, CHOLMOD_REAL, &common);  // (4 columns' room)
+        }
     }
 
     // Projective constraints: rows and columns of constrained DOFs cleared, diagonal 1.
@@ -350,7 +358,39 @@ struct DirectSolver {
         std::copy_n(static_cast<const double*>(x_->x), rhs.size(), solution.data());
     }
 
+    // kSolveColumns right-hand sides at once, rhs_columns -> column_solution(c), when
+    // can_solve_columns() (a simplicial factor, factorised; else solve one column at a time); a
+    // failed solve yields NaN, as solve()'s. CHOLMOD's simplicial solve runs up to four columns per
+    // pass over L; with three, each column gets the operations of a one-column solve in the same
+    // order (its four-column L^T solve rounds differently), so every column's solution is solve()'s
+    // bit for bit (tests/test_direct_solver.py), for a third of the passes over L.
+    static constexpr int kSolveColumns = 3;
+    Eigen::Matrix<double, Eigen::Dynamic, kSolveColumns> rhs_columns;  // sized by analyze()
+
+    bool can_solve_columns() const { return ok && !svd_ && x_columns_ != nullptr && !factorization.factor()->is_super; }
+
+    void solve_columns() {
+        y_columns_->nrow = y_columns_->d = 4;  // the shape CHOLMOD allocates Y with (see solve())
+        cholmod_dense b{};
+        b.nrow = b.d = static_cast<std::size_t>(rhs_columns.rows());
+        b.ncol = kSolveColumns;
+        b.nzmax = b.nrow * b.ncol;
+        b.x = rhs_columns.data();
+        b.xtype = CHOLMOD_REAL;
+        b.dtype = CHOLMOD_DOUBLE;
+        if (!cholmod_solve2(CHOLMOD_A, factorization.factor(), &b, nullptr, &x_columns_, nullptr, &y_columns_,
+                            &e_columns_unused_, &factorization.cholmod()))
+            std::fill_n(static_cast<double*>(x_columns_->x), x_columns_->nzmax, std::numeric_limits<double>::quiet_NaN());
+    }
+
+    const double* column_solution(int column) const {
+        return static_cast<const double*>(x_columns_->x) + x_columns_->d * static_cast<std::size_t>(column);
+    }
+
 private:
+    cholmod_dense* x_columns_ = nullptr;  // solve_columns' solution and workspace, allocated by analyze()
+    cholmod_dense* y_columns_ = nullptr;
+    cholmod_dense* e_columns_unused_ = nullptr;  // (the supernodal solve's: stays null)
     cholmod_dense* x_ = nullptr;  // cholmod_solve2's solution and workspaces, reused
     cholmod_dense* y_ = nullptr;
     cholmod_dense* e_ = nullptr;

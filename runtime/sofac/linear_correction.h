@@ -15,6 +15,7 @@
 // vectors, nothing allocated per step.
 #pragma once
 
+#include <algorithm>
 #include <limits>
 
 #include "constraints.h"
@@ -23,38 +24,64 @@
 
 namespace sofac {
 
-// J_row^T into the solver's right-hand side (the state's DOFs start at `offset`), fixed DOFs cleared.
+// J_row^T into a right-hand side of the solver's size (the state's DOFs start at `offset`), fixed
+// DOFs cleared.
 template <class DT>
-inline void linear_scatter_row(DirectSolver& D, const JacobianRows& J, Index r, Index offset) {
-    D.rhs.setZero();
+inline void linear_scatter_row(double* rhs, const DirectSolver& D, const JacobianRows& J, Index r, Index offset) {
+    std::fill_n(rhs, D.rhs.size(), 0.0);
     for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
-        for (int c = 0; c < DT::deriv; ++c) D.rhs[offset + DT::deriv * J.dof[e] + c] += J.values[DT::deriv * e + c];
+        for (int c = 0; c < DT::deriv; ++c) rhs[offset + DT::deriv * J.dof[e] + c] += J.values[DT::deriv * e + c];
     for (Index i = 0; i < Index(D.fixed.size()); ++i)
-        if (D.fixed[static_cast<std::size_t>(i)]) D.rhs[i] = 0.0;
+        if (D.fixed[static_cast<std::size_t>(i)]) rhs[i] = 0.0;
 }
 
-// W += factor J A^-1 J^T over the state's rows (n the rows of W), then the regularization.
+// W(a, b) += factor J_b . y for the rows b >= a, mirrored; y = A^-1 J_a^T.
+template <class DT>
+inline void linear_add_row(double* W, Index n, const JacobianRows& J, Index a, const double* y, Index offset,
+                           double factor) {
+    const Index row = J.row_index[a];
+    for (Index b = a; b < J.rows; ++b) {
+        double w = 0.0;
+        for (Index e = J.start[b]; e < J.start[b + 1]; ++e)
+            for (int c = 0; c < DT::deriv; ++c) w += J.values[DT::deriv * e + c] * y[offset + DT::deriv * J.dof[e] + c];
+        const Index column = J.row_index[b];
+        W[n * column + row] += factor * w;
+        if (column != row) W[n * row + column] += factor * w;
+    }
+}
+
+// W += factor J A^-1 J^T over the state's rows (n the rows of W), then the regularization. The
+// solves go DirectSolver::kSolveColumns rows at a time when the factor allows (the same solutions,
+// W filled in the same order), else one row at a time.
 template <class DT>
 inline void linear_add_compliance(double* W, Index n, const JacobianRows& J, DirectSolver& D, Index offset,
                                   double factor, double regularization) {
-    for (Index a = 0; a < J.rows; ++a) {
-        if (J.start[a] == J.start[a + 1]) continue;
-        linear_scatter_row<DT>(D, J, a, offset);
-        D.solve();
-        const Index row = J.row_index[a];
-        for (Index b = a; b < J.rows; ++b) {
-            double w = 0.0;
-            for (Index e = J.start[b]; e < J.start[b + 1]; ++e)
-                for (int c = 0; c < DT::deriv; ++c)
-                    w += J.values[DT::deriv * e + c] * D.solution[offset + DT::deriv * J.dof[e] + c];
-            const Index column = J.row_index[b];
-            W[n * column + row] += factor * w;
-            if (column != row) W[n * row + column] += factor * w;
+    constexpr int C = DirectSolver::kSolveColumns;
+    const auto empty = [&](Index a) { return J.start[a] == J.start[a + 1]; };
+    if (D.can_solve_columns()) {
+        for (Index a = 0; a < J.rows;) {
+            Index batch[C];
+            int count = 0;
+            for (; a < J.rows && count < C; ++a)
+                if (!empty(a)) batch[count++] = a;
+            for (int c = 0; c < C; ++c) {
+                if (c < count) linear_scatter_row<DT>(D.rhs_columns.col(c).data(), D, J, batch[c], offset);
+                else D.rhs_columns.col(c).setZero();
+            }
+            D.solve_columns();
+            for (int c = 0; c < count; ++c) linear_add_row<DT>(W, n, J, batch[c], D.column_solution(c), offset, factor);
+        }
+    } else {
+        for (Index a = 0; a < J.rows; ++a) {
+            if (empty(a)) continue;
+            linear_scatter_row<DT>(D.rhs.data(), D, J, a, offset);
+            D.solve();
+            linear_add_row<DT>(W, n, J, a, D.solution.data(), offset, factor);
         }
     }
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index a = 0; a < J.rows; ++a)
-            if (J.start[a] != J.start[a + 1]) W[n * J.row_index[a] + J.row_index[a]] += regularization;
+            if (!empty(a)) W[n * J.row_index[a] + J.row_index[a]] += regularization;
 }
 
 // lambda = J^T f, dx = A^-1 lambda, then x = x_free + position_factor dx, v = v_free + velocity_factor dx

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sofac
-from lagrangian_scenes import CONTACT, DT, G, contact_root, static_floor
+from lagrangian_scenes import CONTACT, DT, G, contact_root, particles, static_floor
 from sofac.simulation.loader import ContactWarning
 
 MASS = 0.01  # each particle's
@@ -23,20 +23,6 @@ MASS = 0.01  # each particle's
 
 def _header(mu: float, solver: str) -> str:
     return contact_root(solver, mu) + static_floor("-3 0 -3  3 0 -3  3 0 3  -3 0 3")
-
-
-def _particles(name: str, points: np.ndarray, mass: float) -> str:
-    """Points of `mass` each in one MechanicalObject, with their collision model."""
-    position = "  ".join(" ".join(f"{c:.17g}" for c in p) for p in points)
-    return f"""    <Node name="{name}">
-        <EulerImplicitSolver rayleighStiffness="0" rayleighMass="0" />
-        <CGLinearSolver iterations="25" tolerance="1e-12" threshold="1e-20" />
-        <MechanicalObject name="dofs" position="{position}" />
-        <UniformMass vertexMass="{mass!r}" />
-        <UncoupledConstraintCorrection compliance="{1.0 / mass!r}" />
-        <PointCollisionModel />
-    </Node>
-"""
 
 
 def grid(n: int, x0: float, z0: float) -> np.ndarray:
@@ -56,8 +42,8 @@ LCP = '<LCPConstraintSolver maxIt="1000" tolerance="1e-12" initial_guess="true" 
 def grids_scene(path: Path, solver: str = BGS) -> Path:
     """A 20 x 20 grid (400 contacts of 3 rows: 1200 rows, past the 384 reserved) and a 5 x 5 one."""
     text = _header(0.5, solver)
-    text += _particles("Big", grid(20, -2.5, 0.05), MASS)
-    text += _particles("Small", grid(5, 1.0, -1.9), MASS)
+    text += particles("Big", grid(20, -2.5, 0.05), MASS)
+    text += particles("Small", grid(5, 1.0, -1.9), MASS)
     path.write_text(text + "</Node>\n")
     return path
 
@@ -70,7 +56,7 @@ def stack_scene(path: Path) -> Path:
     rigid cube resting on its four bottom corners (12 rows on 6 DOFs)."""
     text = _header(0.5, BGS)
     for k in range(STACK):
-        text += _particles(f"P{k}", np.array([[-1.0, CONTACT * (k + 1), 0.5]]), MASS)
+        text += particles(f"P{k}", np.array([[-1.0, CONTACT * (k + 1), 0.5]]), MASS)
     half = 0.1
     corners = [[sx * half, -half, sz * half] for sx in (-1, 1) for sz in (-1, 1)]
     text += f"""    <Node name="Cube">
@@ -101,10 +87,10 @@ def ratio_scene(path: Path) -> Path:
     (it converges at once)."""
     solver = f'<BlockGaussSeidelConstraintSolver tolerance="1e-12" maxIterations="{LIMIT}"/>'
     text = _header(0.5, solver)
-    text += _particles("Light", np.array([[0.5, CONTACT, 0.2]]), LIGHT)
-    text += _particles("Heavy", np.array([[0.5, 2 * CONTACT, 0.2]]), HEAVY)
-    text += _particles("Base", np.array([[-0.5, CONTACT, 0.7]]), HEAVY)
-    text += _particles("Top", np.array([[-0.5, 2 * CONTACT, 0.7]]), LIGHT)
+    text += particles("Light", np.array([[0.5, CONTACT, 0.2]]), LIGHT)
+    text += particles("Heavy", np.array([[0.5, 2 * CONTACT, 0.2]]), HEAVY)
+    text += particles("Base", np.array([[-0.5, CONTACT, 0.7]]), HEAVY)
+    text += particles("Top", np.array([[-0.5, 2 * CONTACT, 0.7]]), LIGHT)
     path.write_text(text + "</Node>\n")
     return path
 

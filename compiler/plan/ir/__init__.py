@@ -47,6 +47,7 @@ from .calls import (
 )
 from .contacts import (
     CONSTRAINT_PHASES,
+    CONSTRAINT_REPORT_FIELDS,
     REPORT_FIELDS,
     Collision,
     CollisionModel,
@@ -116,6 +117,7 @@ __all__ = [
     "CHILD",
     "COMPILED_DATATYPES",
     "CONSTRAINT_PHASES",
+    "CONSTRAINT_REPORT_FIELDS",
     "INPUT_OFFSET",
     "OFFSET",
     "PARENT",

@@ -44,6 +44,25 @@ class Resolution(enum.IntEnum):
 # from the free vectors, W from the corrections, the solve, then each correction's x, v update.
 CONSTRAINT_PHASES = ("rows", "violation", "compliance", "solve", "correction")
 
+# ``<loop>.constraint_report``: the solves (runtime record_solve: their count, the last one's
+# iterations and residual, the solves that hit the iteration limit and the last such one's time,
+# residual and iterations), then the seconds spent since creation or reset (steady clock) in each
+# part of the step: the collision pipelines, the groups' free motion, each of CONSTRAINT_PHASES,
+# and the groups' projections and mappings after the correction.
+CONSTRAINT_REPORT_FIELDS = (
+    "solves",
+    "iterations",
+    "residual",
+    "limited_solves",
+    "limited_time",
+    "limited_residual",
+    "limited_iterations",
+    "detection_seconds",
+    "free_motion_seconds",
+    *(f"{phase}_seconds" for phase in CONSTRAINT_PHASES),
+    "finish_seconds",
+)
+
 
 @dataclass
 class Correction:
@@ -70,8 +89,9 @@ class ConstraintPhase:
     method: str  # "block_gauss_seidel", "unbuilt_gauss_seidel", "nncg", "lcp"
     # maxIterations, tolerance, sor, regularization, scaleTolerance, allVerified (LCP: mu, minW...)
     settings: dict[str, Buffer]
-    # f64 [7]: solves, iterations and residual of the last solve, solves that hit the iteration
-    # limit, and the time, residual and iterations of the last such solve (the run's warning)
+    # f64 CONSTRAINT_REPORT_FIELDS: solves, iterations and residual of the last solve, solves that
+    # hit the iteration limit, the time, residual and iterations of the last such solve (the run's
+    # warning), and the seconds spent in each part of the step (with rows only)
     report: Buffer
     corrections: list[Correction] = field(default_factory=list)
     frozen: list[tuple[StatePlan, Group]] = field(default_factory=list)

@@ -18,6 +18,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
 from sofac.plan.ir import (
+    CONSTRAINT_REPORT_FIELDS,
     Aggregate,
     Buffer,
     Collision,
@@ -117,7 +118,9 @@ def constraint_lowering(planner: Planner) -> ConstraintLowering | None:
         for name in names:
             value = planner.value(solver.component, name)
             settings[name] = planner.buffer(solver.component, name, [float(value)], role="param")
-    report = planner.buffer(loop.component, "constraint_report", np.zeros(7), role="state")
+    report = planner.buffer(
+        loop.component, "constraint_report", np.zeros(len(CONSTRAINT_REPORT_FIELDS)), role="state"
+    )
     phase = ConstraintPhase(
         loop=origin_of(loop.component),
         solver=origin_of(solver.component) if solver is not None else "",
