@@ -276,6 +276,31 @@ def test_assembled_solve_of_static_contacts_is_warned(tmp_path: Path, solver: st
         assert not found
 
 
+def test_parallel_phases_compute_what_the_sequential_ones_do(tmp_path: Path) -> None:
+    # Without self-collision pairs ParallelBruteForceBroadPhase hands on the sequential pairs in
+    # their order, and ParallelBVHNarrowPhase fills each pair's outputs as BVHNarrowPhase does.
+    scene = DATA / "contact_two_particles.scn"
+    text = scene.read_text()
+    assert "<BruteForceBroadPhase/>" in text and "<BVHNarrowPhase/>" in text
+    parallel = tmp_path / "parallel.scn"
+    parallel.write_text(
+        text.replace("<BruteForceBroadPhase/>", '<ParallelBruteForceBroadPhase nbThreads="2"/>').replace(
+            "<BVHNarrowPhase/>", '<ParallelBVHNarrowPhase nbThreads="2"/>'
+        )
+    )
+    a, b = sofac.load(scene), sofac.load(parallel)
+    touching = 0
+    for _ in range(200):  # the particles meet, push each other apart and fly off
+        a.step(5)
+        b.step(5)
+        for key in ("/Left/dofs", "/Right/dofs"):
+            assert np.array_equal(a[key].position, b[key].position)
+            assert np.array_equal(a[key].velocity, b[key].velocity)
+        assert _contacts(a) == _contacts(b)
+        touching += _contacts(a) > 0
+    assert touching > 0
+
+
 def test_alarm_distance_below_contact_distance_is_refused_by_check(tmp_path: Path) -> None:
     scene = tmp_path / "alarm.scn"
     scene.write_text(FLOOR.read_text().replace('alarmDistance="0.5"', 'alarmDistance="0.1"'))

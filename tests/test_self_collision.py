@@ -204,3 +204,25 @@ def test_unsupported_self_collision_setups_are_refused(tmp_path: Path) -> None:
     text = folded_cloth(solver_at_root=True, linear_solver="<SparseLDLSolver/>")
     ((line, message),) = _refusals(write(tmp_path, "ldl.scn", text))
     assert line == 10 and "SparseLDLSolver" in message and "pattern" in message
+
+
+def test_the_parallel_broad_phase_hands_on_self_pairs_first(tmp_path: Path) -> None:
+    """ParallelBruteForceBroadPhase adds each model's pair with itself as the models come, and the
+    other pairs after its tasks (in the sequential order): the self pairs lead the contact order."""
+    parallel = folded_cloth(method="NewProximityIntersection").replace(
+        "<BruteForceBroadPhase/>", "<ParallelBruteForceBroadPhase/>"
+    )
+    plan = plan_file(
+        write(tmp_path, "parallel.scn", parallel.replace("<BVHNarrowPhase/>", "<ParallelBVHNarrowPhase/>"))
+    )
+    (collision,) = plan.collisions
+    names = [m.origin.split("'")[1].rsplit("/", 1)[1] for m in collision.models]
+    triangles, lines, points = names
+    assert [(names[p.first], names[p.second]) for p in collision.pairs] == [
+        (triangles, triangles),
+        (lines, lines),
+        (points, points),
+        (triangles, lines),
+        (triangles, points),
+        (lines, points),
+    ]

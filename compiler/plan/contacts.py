@@ -111,7 +111,20 @@ _PARTS = {
 
 def _role(checked: CheckedComponent) -> str | None:
     role = checked.spec.variant if checked.spec else None
+    if role is Variant.PARALLEL_BROAD_PHASE:
+        return Variant.BROAD_PHASE
     return "intersection" if role in _TESTS else role
+
+
+def _broad_phase_order(setup: _Setup, count: int) -> list[tuple[int, int]]:
+    """The (later, earlier) model pairs in the order the broad phase hands them to the narrow
+    phase: BruteForceBroadPhase::addCollisionModel adds a model against itself, then against each
+    earlier one; ParallelBruteForceBroadPhase adds the self pairs as the models come and the others
+    after its tasks, in the same order."""
+    spec = setup.parts["broad_phase"].spec
+    if spec is not None and spec.variant is Variant.PARALLEL_BROAD_PHASE:
+        return [(i, i) for i in range(count)] + [(later, e) for later in range(count) for e in range(later)]
+    return [(later, e) for later in range(count) for e in (later, *range(later))]
 
 
 def _setups(planner: Planner) -> list[_Setup] | str:
@@ -179,6 +192,8 @@ def contact_setup_refusal(planner: Planner) -> str:
             spec = checked.spec
             if spec is None or not spec.supported or (role == "intersection" and spec.variant not in _TESTS):
                 return f"{checked.component.type_name} is not compiled yet"
+            if role == Variant.BROAD_PHASE and checked.component.get("box") is not None:
+                return f"{checked.component.type_name}'s box (models outside it left out) is not compiled yet"
         manager = setup.parts["contact_manager"]
         if manager.spec is not None and manager.spec.name == "RuleBasedContactManager":
             # its rules are triplets "name1 name2 response"; SOFA's parser stops at the first
@@ -378,62 +393,60 @@ def _plan_collision(
     # Pairs of two simulated models go to the pipeline's node: explicit when no solver integrates
     # it, else into that solver's group (penalty; the Lagrangian response places rows itself).
     home = pipeline_group(planner, pipeline, owner) if response == "penalty" else None
-    for later in range(len(models)):
-        # BruteForceBroadPhase::addCollisionModel: the model against itself first, then each earlier one
-        for earlier in (later, *range(later)):
-            a, b = models[later], models[earlier]
-            a_checked, b_checked = checked_models[later], checked_models[earlier]
-            if later == earlier:
-                why = _never_self(planner, a_checked, a)
-                if why is None:
-                    continue  # no selfCollision: nothing to list
-            else:
-                why = _never(planner, a_checked, b_checked, a, b)
-            first, second = (later, earlier) if _first_in_order(a, b) else (earlier, later)
-            kinds = (models[first].kind, models[second].kind)
-            if not why and kinds not in tests:
-                why = f"{method} has no {kinds[0]}-{kinds[1]} test"
-            if why:
-                collision.left_out.append((a.origin, b.origin, why))
-                continue
-            one_node = a_checked.component.node is b_checked.component.node
-            self_filter = (
-                _self_filter(planner, checked_models[first], checked_models[second], later == earlier)
-                if one_node
-                else SelfFilter.NONE
+    for later, earlier in _broad_phase_order(setup, len(models)):
+        a, b = models[later], models[earlier]
+        a_checked, b_checked = checked_models[later], checked_models[earlier]
+        if later == earlier:
+            why = _never_self(planner, a_checked, a)
+            if why is None:
+                continue  # no selfCollision: nothing to list
+        else:
+            why = _never(planner, a_checked, b_checked, a, b)
+        first, second = (later, earlier) if _first_in_order(a, b) else (earlier, later)
+        kinds = (models[first].kind, models[second].kind)
+        if not why and kinds not in tests:
+            why = f"{method} has no {kinds[0]}-{kinds[1]} test"
+        if why:
+            collision.left_out.append((a.origin, b.origin, why))
+            continue
+        one_node = a_checked.component.node is b_checked.component.node
+        self_filter = (
+            _self_filter(planner, checked_models[first], checked_models[second], later == earlier)
+            if one_node
+            else SelfFilter.NONE
+        )
+        options: tuple[bool, ...] = ()
+        if kinds == ("triangle", "triangle"):
+            options = (later == earlier, use_line_line)
+        elif kinds == ("triangle", "line") and method == Variant.NEW_PROXIMITY:
+            options = (use_line_line,)
+        elif kinds == ("triangle", "point") and method == Variant.MIN_PROXIMITY:
+            options = (bool(value(intersection.component, "useSurfaceNormals")),)
+        guard = {SelfFilter.NONE: "", SelfFilter.NEVER: "never"}.get(self_filter, "filter")
+        test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options, guard)
+        if test not in collision.tests:
+            collision.tests.append(test)
+        m1, m2 = models[first], models[second]
+        if self_filter in (SelfFilter.SAME_LINES, SelfFilter.LINE_POINT):
+            add_edges_around_vertex(planner, m1, checked_models[first])
+        if kinds == ("triangle", "triangle"):
+            id_bound = 3 * m1.elements + 12 * m2.elements
+        else:
+            id_bound = max(m1.elements, m2.elements) + 1
+        both = m1.simulated and m2.simulated
+        collision.pairs.append(
+            ContactPair(
+                first,
+                second,
+                collision.tests.index(test),
+                both and home is None,
+                id_bound,
+                grouped=both and home is not None,
+                self_filter=self_filter,
+                one_node=one_node,
+                respond=response != "penalty" or _responds(planner, a_checked, b_checked),
             )
-            options: tuple[bool, ...] = ()
-            if kinds == ("triangle", "triangle"):
-                options = (later == earlier, use_line_line)
-            elif kinds == ("triangle", "line") and method == Variant.NEW_PROXIMITY:
-                options = (use_line_line,)
-            elif kinds == ("triangle", "point") and method == Variant.MIN_PROXIMITY:
-                options = (bool(value(intersection.component, "useSurfaceNormals")),)
-            guard = {SelfFilter.NONE: "", SelfFilter.NEVER: "never"}.get(self_filter, "filter")
-            test = ElementTest(f"{method}::{kinds[0]}_{kinds[1]}", options, guard)
-            if test not in collision.tests:
-                collision.tests.append(test)
-            m1, m2 = models[first], models[second]
-            if self_filter in (SelfFilter.SAME_LINES, SelfFilter.LINE_POINT):
-                add_edges_around_vertex(planner, m1, checked_models[first])
-            if kinds == ("triangle", "triangle"):
-                id_bound = 3 * m1.elements + 12 * m2.elements
-            else:
-                id_bound = max(m1.elements, m2.elements) + 1
-            both = m1.simulated and m2.simulated
-            collision.pairs.append(
-                ContactPair(
-                    first,
-                    second,
-                    collision.tests.index(test),
-                    both and home is None,
-                    id_bound,
-                    grouped=both and home is not None,
-                    self_filter=self_filter,
-                    one_node=one_node,
-                    respond=response != "penalty" or _responds(planner, a_checked, b_checked),
-                )
-            )
+        )
     if not collision.pairs:
         return collision
     used = sorted({i for p in collision.pairs for i in (p.first, p.second)})

@@ -100,6 +100,8 @@ class Variant(enum.StrEnum):
     COMPOSITE_PIPELINE = "composite_pipeline"
     SUB_PIPELINE = "sub_pipeline"
     BROAD_PHASE = "broad_phase"
+    # ParallelBruteForceBroadPhase: the same pairs, but a model's pair with itself comes first
+    PARALLEL_BROAD_PHASE = "parallel_broad_phase"
     NARROW_PHASE = "narrow_phase"
     CONTACT_MANAGER = "contact_manager"
     MIN_PROXIMITY = "min_proximity"

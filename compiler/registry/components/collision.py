@@ -100,15 +100,15 @@ BVH_NARROW_PHASE = ComponentSpec(
     effects=_COLLISION,
 )
 
-_MULTITHREADING = "components of the MultiThreading plugin are not supported (use the sequential ones)"
-
 PARALLEL_BRUTE_FORCE_BROAD_PHASE = ComponentSpec(
     name="ParallelBruteForceBroadPhase",
-    variant=Variant.BROAD_PHASE,
+    variant=Variant.PARALLEL_BROAD_PHASE,
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
-    doc="MultiThreading plugin: parallel BruteForceBroadPhase.",
-    unsupported_reason=_MULTITHREADING,
+    doc="MultiThreading plugin: BruteForceBroadPhase's pair tests in tasks, concatenated in order; "
+    "compiled as the sequential one (its threads change no result), with every model's pair with "
+    "itself before the others, as its tasks hand them on.",
+    supported=True,
     effects=_COLLISION,
     fields=(
         FieldSpec("box", Reals(6), doc="optional AABB: models outside it are ignored"),
@@ -121,8 +121,9 @@ PARALLEL_BVH_NARROW_PHASE = ComponentSpec(
     variant=Variant.NARROW_PHASE,
     category=Category.COLLISION_PIPELINE,
     module="MultiThreading",
-    doc="MultiThreading plugin: parallel BVHNarrowPhase.",
-    unsupported_reason=_MULTITHREADING,
+    doc="MultiThreading plugin: BVHNarrowPhase with a task per pair, each into its own output vector "
+    "created in pair order: the sequential one's outputs and order, compiled as it.",
+    supported=True,
     effects=_COLLISION,
     fields=TASK_SCHEDULER_FIELDS,
 )
