@@ -48,6 +48,7 @@ from sofac.plan.ir import (
     Plan,
     Preconditioner,
     Projection,
+    Response,
     SelfFilter,
     Slot,
     SpringDamping,
@@ -561,7 +562,7 @@ class _CollisionView:
             self.updates.append(
                 f"if (C.needs_update({i})) sofac::collide::update_tree({tree}, {view}{normals});"
             )
-        self.lagrangian = collision.response == "friction_contact"
+        self.lagrangian = collision.response is Response.FRICTION_CONTACT
         self.handle = "*S.lagrangian" if self.lagrangian else f"*S.contacts[{index}]"
         if collision.lmd is not None:
             self.views += _cone_views(collision, used)
@@ -761,7 +762,7 @@ def generate_source(plan: Plan) -> str:
         threads=plan.threads,
         guard=plan.contact_guard,
         collisions=collisions,
-        lagrangian=any(c.response == "friction_contact" and c.pairs for c in plan.collisions),
+        lagrangian=any(c.response is Response.FRICTION_CONTACT and c.pairs for c in plan.collisions),
         parallel_groups=plan.parallel_groups,
         ptr=_ptr,
         size=_size,

@@ -21,6 +21,7 @@ from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category, Variant
 from sofac.registry.components.collision import response_params
+from sofac.registry.spec import Effect
 
 from .collision_models import add_cone, add_edges_around_vertex, collision_model, node_ranks
 from .contact_placement import pipeline_group, place_contacts, place_in_group
@@ -31,6 +32,7 @@ from .ir import (
     ContactPair,
     ElementTest,
     Group,
+    Response,
     SelfFilter,
     origin_of,
 )
@@ -78,7 +80,11 @@ _TESTS[Variant.LOCAL_MIN_DISTANCE] = {
 # Lagrangian contacts whose rows are reserved in the constraint problem at creation; a step with more
 # doubles the reserve (lagrangian_contact.h, FrictionContacts::fit), a growth in the pipeline's report.
 _CONTACT_CAPACITY = 128
-_RESPONSES = {"PenalityContactForceField": "penalty", "FrictionContactConstraint": "friction_contact"}
+# The contact responses compiled, by the name a contact manager's `response` gives.
+_RESPONSES = {
+    "PenalityContactForceField": Response.PENALTY,
+    "FrictionContactConstraint": Response.FRICTION_CONTACT,
+}
 # A model's own contactResponse under the penalty response: SOFA's contact factory name, or
 # "nullptr", SOFA's way to make no contact for the pair (CollisionResponse::createNewContacts).
 _MODEL_RESPONSES = ("PenalityContactForceField", "nullptr")
@@ -183,10 +189,10 @@ def contact_setup_refusal(planner: Planner) -> str:
             f"penalty contact is compiled for {setups}: BruteForceBroadPhase, BVHNarrowPhase, "
             "MinProximityIntersection or NewProximityIntersection and a CollisionResponse"
         )
-    loops = [
-        c.spec.name for c in planner.checked if c.category is Category.ANIMATION_LOOP and c.spec is not None
-    ]
-    loop = loops[0] if loops else "DefaultAnimationLoop"
+    loops = [c.spec for c in planner.checked if c.category is Category.ANIMATION_LOOP and c.spec is not None]
+    loop = loops[0].name if loops else "DefaultAnimationLoop"
+    # FreeMotionAnimationLoop gives the free positions and the constraint phase contact rows need
+    solves_constraints = bool(loops) and Effect.CONSTRAINT_SOLVE in loops[0].effects
     for setup in setups:
         for role, checked in setup.parts.items():
             spec = checked.spec
@@ -208,13 +214,13 @@ def contact_setup_refusal(planner: Planner) -> str:
                 f"the contact response {response!r} is not compiled yet (PenalityContactForceField and "
                 "FrictionContactConstraint are)"
             )
-        if kind == "penalty" and loop != "DefaultAnimationLoop":
+        if kind is Response.PENALTY and solves_constraints:
             return f"penalty contact under {loop} is not compiled yet (DefaultAnimationLoop is)"
-        if kind == "friction_contact" and loop != "FreeMotionAnimationLoop":
+        if kind is Response.FRICTION_CONTACT and not solves_constraints:
             return (
                 f"FrictionContactConstraint under {loop}: it needs FreeMotionAnimationLoop (free positions)"
             )
-        if kind == "friction_contact" and len(setups) > 1:
+        if kind is Response.FRICTION_CONTACT and len(setups) > 1:
             return "Lagrangian contact from several collision pipelines is not compiled yet"
         for checked in setup.models:
             spec = checked.spec
@@ -223,20 +229,22 @@ def contact_setup_refusal(planner: Planner) -> str:
                 return f"{spec.name} takes no part in compiled contacts"
             intersection = setup.parts["intersection"].spec
             if (
-                kind == "friction_contact"
+                kind is Response.FRICTION_CONTACT
                 and spec.variant is Variant.SPHERE
                 and intersection is not None
                 and intersection.variant is Variant.LOCAL_MIN_DISTANCE
             ):
                 return "LocalMinDistance's sphere tests (Lagrangian contact on spheres) are not compiled yet"
             datatype = checked.datatype.name if checked.datatype is not None else "Vec3d"
-            rigid_sphere = datatype == "Rigid3d" and spec.variant is Variant.SPHERE and kind == "penalty"
+            rigid_sphere = (
+                datatype == "Rigid3d" and spec.variant is Variant.SPHERE and kind is Response.PENALTY
+            )
             if datatype != "Vec3d" and not rigid_sphere:
                 return (
                     f"{spec.name}<{datatype}> contacts are not compiled yet (Vec3d models and "
                     "SphereCollisionModel<Rigid3d> are)"
                 )
-            if kind == "friction_contact" and planner.value(checked.component, "selfCollision"):
+            if kind is Response.FRICTION_CONTACT and planner.value(checked.component, "selfCollision"):
                 return "self-collision under FrictionContactConstraint is not compiled yet (penalty is)"
         why = _one_node_refusal(planner, setup)
         if why:
@@ -259,7 +267,7 @@ def contact_response_refusals(planner: Planner) -> list[tuple[CheckedComponent, 
             given = _own_response(planner, checked)
             if not given:
                 continue
-            if kind == "friction_contact":
+            if kind is Response.FRICTION_CONTACT:
                 refused.append(
                     (checked, f"contactResponse={given!r}: a model's own response under "
                      "FrictionContactConstraint is not compiled yet")
@@ -386,13 +394,13 @@ def _plan_collision(
             float(value(i, "coneFactor")),
             bool(value(i, "useLMDFilters")),
         )
-    if response == "friction_contact":
+    if response is Response.FRICTION_CONTACT:
         params = response_params(str(value(manager, "responseParams") or ""))
         collision.mu = float(params.get("mu", 0.8))  # >= 0: the contact manager's spec checks it
     use_line_line = method == Variant.NEW_PROXIMITY and bool(value(intersection.component, "useLineLine"))
     # Pairs of two simulated models go to the pipeline's node: explicit when no solver integrates
     # it, else into that solver's group (penalty; the Lagrangian response places rows itself).
-    home = pipeline_group(planner, pipeline, owner) if response == "penalty" else None
+    home = pipeline_group(planner, pipeline, owner) if response is Response.PENALTY else None
     for later, earlier in _broad_phase_order(setup, len(models)):
         a, b = models[later], models[earlier]
         a_checked, b_checked = checked_models[later], checked_models[earlier]
@@ -444,7 +452,7 @@ def _plan_collision(
                 grouped=both and home is not None,
                 self_filter=self_filter,
                 one_node=one_node,
-                respond=response != "penalty" or _responds(planner, a_checked, b_checked),
+                respond=response is not Response.PENALTY or _responds(planner, a_checked, b_checked),
             )
         )
     if not collision.pairs:
@@ -461,7 +469,7 @@ def _plan_collision(
     collision.report = planner.buffer(
         pipeline.component, "contactReport", np.zeros(len(REPORT_FIELDS)), role="state"
     )
-    if response == "friction_contact":
+    if response is Response.FRICTION_CONTACT:
         ranks = node_ranks(planner.checked.scene.root)
         nodes = [c.component.node for c in checked_models]
         for model, node in zip(models, nodes, strict=True):

@@ -14,7 +14,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 from sofac.registry import Variant
 
-from .ir import CHILD, PARENT, Buffer, Call, Group, LazyPoints, MappingOp, Statement, bind, buffers_of
+from .ir import (
+    CHILD,
+    PARENT,
+    Buffer,
+    Call,
+    Group,
+    LazyPoints,
+    MappingOp,
+    Response,
+    Statement,
+    bind,
+    buffers_of,
+)
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -29,7 +41,7 @@ def map_contact_states_while_touching(planner: Planner, groups: list[Group]) -> 
     the detection when a pair may meet (``Collision.lazy``) and on read from Python."""
     models_of: dict[int, list[tuple[int, int]]] = {}
     for number, collision in enumerate(planner.collisions):
-        if collision.response != "penalty":
+        if collision.response is not Response.PENALTY:
             continue
         for index, model in enumerate(collision.models):
             models_of.setdefault(id(model.state), []).append((number, index))

@@ -21,6 +21,7 @@ from sofac.plan.ir import (
     Note,
     Offset,
     Op,
+    Response,
     SelfFilter,
     Statement,
     StatePlan,
@@ -141,7 +142,7 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
             if not pair.respond:
                 where += '; contactResponse "nullptr": detected, no contact'
             test = collision.tests[pair.test].name
-            if collision.response == "friction_contact":
+            if collision.response is Response.FRICTION_CONTACT:
                 rows = 3 if collision.mu > 0 else 1
                 where = f"FrictionContactConstraint mu={collision.mu!r}: {rows} constraint row(s) per contact"
                 effects.append(("contact pair", f"{first.origin} / {second.origin}", f"{test}, {where}"))

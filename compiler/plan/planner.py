@@ -31,6 +31,7 @@ from sofac.plan.ir import (
     Group,
     Op,
     Plan,
+    Response,
     Scheme,
     StatePlan,
     independent_groups,
@@ -398,7 +399,7 @@ class Planner:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:
             add_point_forces(self, list(groups.values()))
-        if any(c.response == "penalty" for c in self.collisions):  # after the point forces
+        if any(c.response is Response.PENALTY for c in self.collisions):  # after the point forces
             map_contact_states_while_touching(self, list(groups.values()))
         drop_unread_rest_positions(self, list(groups.values()))
         return list(groups.values())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from sofac.plan.ir import (
     Plan,
+    Response,
     Scheme,
     origin_of,
 )
@@ -101,7 +102,7 @@ def format_schedule(plan: Plan) -> str:
 def _contact_rows(plan: Plan) -> str:
     """How many of the phase's rows its Lagrangian contacts are reserved, and where they come from."""
     for collision in plan.collisions:
-        if collision.response == "friction_contact" and collision.pairs:
+        if collision.response is Response.FRICTION_CONTACT and collision.pairs:
             per = 3 if collision.mu > 0 else 1
             return (
                 f" (reserved: {collision.static_rows} of the scene's constraints, then "

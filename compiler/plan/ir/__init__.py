@@ -59,6 +59,7 @@ from .contacts import (
     ElementTest,
     LazyPoints,
     Resolution,
+    Response,
     SelfFilter,
 )
 from .groups import (
@@ -154,6 +155,7 @@ __all__ = [
     "Preconditioner",
     "Projection",
     "Resolution",
+    "Response",
     "Scheme",
     "SelfFilter",
     "Slot",

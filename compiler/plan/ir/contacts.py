@@ -28,6 +28,15 @@ class ContactGuard:
     touching: Buffer  # i64 [1]: the pair that stopped the step, -1 if none
 
 
+class Response(enum.Enum):
+    """How a pipeline's contacts act: penalty forces (PenalityContactForceField under
+    DefaultAnimationLoop) or rows of the constraint phase (FrictionContactConstraint under
+    FreeMotionAnimationLoop: runtime lagrangian_contact.h)."""
+
+    PENALTY = "penalty"
+    FRICTION_CONTACT = "friction_contact"
+
+
 class Resolution(enum.IntEnum):
     """How the constraint solver resolves a block of rows (runtime constraints.h Resolution, whose
     values these are: tests/test_layout.py checks them)."""
@@ -276,9 +285,7 @@ class Collision:
     report: Buffer | None = None
     # Why each other pair of models gets no code: ((first origin, second origin), reason).
     left_out: list[tuple[str, str, str]] = field(default_factory=list)
-    # "penalty" (DefaultAnimationLoop) or "friction_contact" (FrictionContactConstraint under
-    # FreeMotionAnimationLoop: its contacts are rows of the constraint phase, lagrangian_contact.h)
-    response: str = "penalty"
+    response: Response = Response.PENALTY
     mu: float = 0.0  # FrictionContact's mu (0: one row per contact)
     # LocalMinDistance: filterIntersection, angleCone, coneFactor, useLMDFilters
     lmd: tuple[bool, float, float, bool] | None = None

@@ -28,6 +28,7 @@ from sofac.plan.ir import (
     MappingOp,
     Op,
     Preconditioner,
+    Response,
     StatePlan,
     bind,
     call,
@@ -421,7 +422,7 @@ def rigid_compliance(
 
 def lagrangian_collision(planner: Planner) -> Collision | None:
     """The scene's FrictionContactConstraint contacts (their rows join the phase), if compiled."""
-    return next((c for c in planner.collisions if c.response == "friction_contact" and c.pairs), None)
+    return next((c for c in planner.collisions if c.response is Response.FRICTION_CONTACT and c.pairs), None)
 
 
 def barycentric_mapping(mapping: MappingOp) -> tuple[Buffer, Buffer, int] | None:

@@ -149,6 +149,7 @@ _PROXIMITY = (
     ),
 )
 
+
 def _alarm_covers_contact(value: Callable[[str], Any]) -> tuple[str, str, str, str] | None:
     """An alarm distance below the contact distance: pairs would be dropped before they come as
     near as the response keeps them (SOFA does not check it; every contact would start violated)."""
@@ -236,6 +237,7 @@ CCD_TIGHT_INCLUSION_INTERSECTION = ComponentSpec(
         FieldSpec("maxIterations", Int(), 1000, valid=MUST_BE_POSITIVE),
     ),
 )
+
 
 def response_params(text: str) -> dict[str, str]:
     """A contact manager's responseParams, 'name=value&name=value' (SOFA's ContactManager)."""
