@@ -125,3 +125,32 @@ def test_the_graph_is_read() -> None:
     graph = _graph()
     assert "plan.ir" in graph["codegen.cpp"] and "front.parse" in graph["check.checker"]
     assert {"front", "check", "plan", "codegen", "build", "simulation"} <= {_top(m) for m in graph}
+
+
+def test_every_name_imported_from_sofac_exists() -> None:
+    """Each ``from sofac... import name`` anywhere in the package (lazy imports inside functions
+    included, which only run on some paths) names something its module defines."""
+    import importlib
+
+    missing = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        package = ".".join(("sofac", *path.relative_to(PACKAGE).parent.parts))
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level:  # relative: from its own package up
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                target = f"{base}.{node.module}" if node.module else base
+            elif node.module is not None and node.module.split(".")[0] == "sofac":
+                target = node.module
+            else:
+                continue
+            module = importlib.import_module(target)
+            for alias in node.names:
+                if alias.name == "*" or hasattr(module, alias.name):
+                    continue
+                try:  # a submodule of a package
+                    importlib.import_module(f"{target}.{alias.name}")
+                except ImportError:
+                    missing.append(f"{path.relative_to(PACKAGE)}:{node.lineno}: {target}.{alias.name}")
+    assert missing == []

@@ -24,6 +24,9 @@ from sofac.front.model import Component, Node, Scene
 from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, ComponentSpec, DataType, FieldSpec, NameStatus, Variant
 from sofac.registry.components.common import MATRIX_TEMPLATE_ALIASES
+from sofac.registry.components.mass import UNIFORM_MASS
+from sofac.registry.components.ode import VARIATIONAL_SYMPLECTIC_SOLVER
+from sofac.registry.components.utility import REQUIRED_PLUGIN
 from sofac.registry.datatypes import DATATYPES, canonical_datatype, split_template
 from sofac.registry.fields import (
     Coords,
@@ -241,11 +244,7 @@ class _Checker:
             state = linked if isinstance(linked, Component) else self._node_state(component.node)
             datatype = self.checked.of(state).datatype if state is not None else checked.datatype
             if datatype is not None and datatype.rigid:
-                if any(
-                    self.checked.of(other).spec is not None
-                    and self.checked.of(other).spec.name == "UniformMass"  # type: ignore[union-attr]
-                    for other in component.node.objects
-                ):
+                if any(self.checked.of(other).spec is UNIFORM_MASS for other in component.node.objects):
                     continue
                 self.diags.add(
                     "E226",
@@ -1147,7 +1146,7 @@ class _Checker:
                     )
             if spec.category is Category.STATE:
                 self._check_state_integrated(checked)
-            if spec.name == "VariationalSymplecticSolver":
+            if spec is VARIATIONAL_SYMPLECTIC_SOLVER:
                 component = checked.component
                 if checked.fields.get("saveEnergyInFile") and not checked.fields.get("file"):
                     self.diags.add(
@@ -1454,7 +1453,7 @@ class _Checker:
     def _check_plugins(self) -> None:
         for checked in self.checked:
             spec = checked.spec
-            if spec is None or spec.name != "RequiredPlugin":
+            if spec is not REQUIRED_PLUGIN:
                 continue
             names = [*checked.fields.get("pluginName", ())]
             if not names and checked.component.name:

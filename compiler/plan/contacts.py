@@ -20,7 +20,7 @@ import numpy as np
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component, Node
 from sofac.registry import Category, Variant
-from sofac.registry.components.collision import response_params
+from sofac.registry.components.collision import RULE_BASED_CONTACT_MANAGER, response_params
 from sofac.registry.spec import Effect
 
 from .collision_models import add_cone, add_edges_around_vertex, collision_model, node_ranks
@@ -201,7 +201,7 @@ def contact_setup_refusal(planner: Planner) -> str:
             if role == Variant.BROAD_PHASE and checked.component.get("box") is not None:
                 return f"{checked.component.type_name}'s box (models outside it left out) is not compiled yet"
         manager = setup.parts["contact_manager"]
-        if manager.spec is not None and manager.spec.name == "RuleBasedContactManager":
+        if manager.spec is RULE_BASED_CONTACT_MANAGER:
             # its rules are triplets "name1 name2 response"; SOFA's parser stops at the first
             # incomplete one, so rules="default" gives no rule: CollisionResponse's behaviour
             words = str(planner.value(manager.component, "rules") or "").split()

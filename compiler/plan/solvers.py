@@ -12,6 +12,12 @@ from sofac.front.model import Component
 from sofac.plan.ir import Group, Preconditioner, Scheme
 from sofac.registry import Category, Variant
 from sofac.registry.components.common import GRAPH_SCATTERED
+from sofac.registry.components.linear import (
+    COMPOSITE_LINEAR_SYSTEM,
+    PRECOMPUTED_MATRIX_SYSTEM,
+    PRECONDITIONED_MATRIX_FREE_SYSTEM,
+)
+from sofac.registry.components.ode import NEWTON_RAPHSON_SOLVER
 
 if TYPE_CHECKING:
     from sofac.plan.planner import Planner
@@ -174,14 +180,14 @@ def _assembling_rate(planner: Planner, pcg: CheckedComponent) -> int:
                 c
                 for c in pcg.component.node.objects
                 if (spec := planner.checked.of(c).spec) is not None
-                and spec.name == "PreconditionedMatrixFreeSystem"
+                and spec is PRECONDITIONED_MATRIX_FREE_SYSTEM
             ),
             None,
         )
     if not isinstance(system, Component):
         return 1
     spec = planner.checked.of(system).spec
-    if spec is None or spec.name != "PreconditionedMatrixFreeSystem":
+    if spec is None or spec is not PRECONDITIONED_MATRIX_FREE_SYSTEM:
         return 1
     return max(int(planner.value(system, "assemblingRate") or 1), 1)
 
@@ -210,7 +216,7 @@ def precomputed_warp_is_inert(planner: Planner, warp: CheckedComponent, group: G
     The configurations where SOFA does something else are refused."""
     system = warp.links.get("linearSystem")
     system_spec = planner.checked.of(system).spec if isinstance(system, Component) else None
-    if system_spec is None or system_spec.name != "PrecomputedMatrixSystem":
+    if system_spec is None or system_spec is not PRECOMPUTED_MATRIX_SYSTEM:
         planner.unsupported(warp, "its linearSystem must link a PrecomputedMatrixSystem")
         return False
     if planner.value(warp.component, "use_rotations") is False:
@@ -369,7 +375,7 @@ def plan_static(planner: Planner, solver: CheckedComponent, group: Group) -> boo
                 c
                 for node in _subtree(component.node)
                 for c in node.objects
-                if (spec := planner.checked.of(c).spec) is not None and spec.name == "NewtonRaphsonSolver"
+                if (spec := planner.checked.of(c).spec) is not None and spec is NEWTON_RAPHSON_SOLVER
             ),
             None,
         )
@@ -494,7 +500,7 @@ def assembles_everything(planner: Planner, linear: CheckedComponent) -> bool:
     if not isinstance(system, Component):
         return True  # the default one SOFA creates: a MatrixLinearSystem
     checked = planner.checked.of(system)
-    if checked.spec is not None and checked.spec.name == "CompositeLinearSystem":
+    if checked.spec is not None and checked.spec is COMPOSITE_LINEAR_SYSTEM:
         chosen = checked.links.get("solverLinearSystem")
         if not isinstance(chosen, Component):
             listed = checked.links.get("linearSystems")

@@ -41,6 +41,7 @@ from sofac.diagnostics import SofacError
 from sofac.front.model import Component, Node
 from sofac.geometry.fem_topology import CELL_KINDS
 from sofac.registry import Category, Variant
+from sofac.registry.components.visual import INTERACTIVE_CAMERA
 
 Vec3 = tuple[float, float, float]
 RGBA = tuple[float, float, float, float]
@@ -317,7 +318,7 @@ def scene_camera(checked: Any) -> Camera | None:
     its Y axis up) with ``distance`` to place the missing one; ``fieldOfView`` as the vertical angle.
     """
     for item in checked:
-        if item.spec is None or item.spec.name != "InteractiveCamera":
+        if item.spec is not INTERACTIVE_CAMERA:
             continue
         if checked.value(item.component, "activated") is False:
             continue
@@ -1066,7 +1067,7 @@ class _SceneBuilder:
         return _Feed("rigid", state, local=np.asarray(local, dtype=float), frame_of=frame_of)
 
     def _barycentric_feed(self, mapping: Any, source: Component, points: np.ndarray, state: str) -> _Feed:
-        from sofac.geometry.barycentric import RegularGrid, map_cells, mapper_for
+        from sofac.geometry.barycentric import RegularGrid, embed_cells, mapper_for
 
         rest = self.checked.positions(source)
         if rest is None or rest.shape[1] != 3:
@@ -1083,8 +1084,8 @@ class _SceneBuilder:
             grid = RegularGrid(
                 tuple(int(c) for c in cells["resolution"][:3]), tuple(bounds[:3]), tuple(bounds[3:6])
             )
-        indices, weights = map_cells(rest, points, cells, mode=mode, grid=grid)
-        return _Feed("linear", state, indices=indices, weights=weights)
+        embedding = embed_cells(rest, points, cells, mode=mode, grid=grid)
+        return _Feed("linear", state, indices=embedding.indices, weights=embedding.weights)
 
     def _input_points(self, feed: _Feed) -> np.ndarray:
         """A visual model without vertices of its own: its input state's initial points (identity)."""
