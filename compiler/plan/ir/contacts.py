@@ -8,6 +8,7 @@ import enum
 from dataclasses import dataclass, field
 
 from sofac.check.checker import CheckedComponent
+from sofac.registry import Variant
 
 from .calls import Buffer, Call, Statement
 from .groups import Group, Op, StatePlan
@@ -78,7 +79,7 @@ class Correction:
     """A constraint correction: how constraint forces on its (independent) state move it."""
 
     origin: str
-    kind: str  # "uncoupled" (a per-DOF compliance) or "linear_solver" (A^-1 of the group's solve)
+    kind: Variant  # UNCOUPLED (a per-DOF compliance) or LINEAR_SOLVER (A^-1 of the group's solve)
     state: StatePlan
     group: Group
     checked: CheckedComponent | None = None
@@ -95,7 +96,7 @@ class ConstraintPhase:
 
     loop: str  # origin of the FreeMotionAnimationLoop
     solver: str  # origin of the constraint solver ("" : none in the scene, SOFA's default BGS)
-    method: str  # "block_gauss_seidel", "unbuilt_gauss_seidel", "nncg", "lcp"
+    method: Variant  # BLOCK_GAUSS_SEIDEL, UNBUILT_GAUSS_SEIDEL, NNCG or LCP
     # maxIterations, tolerance, sor, regularization, scaleTolerance, allVerified (LCP: mu, minW...)
     settings: dict[str, Buffer]
     # f64 CONSTRAINT_REPORT_FIELDS: solves, iterations and residual of the last solve, solves that
@@ -133,7 +134,7 @@ class CollisionModel:
     """A collision model of the pipeline, in SOFA's order (depth first below the pipeline's node)."""
 
     origin: str
-    kind: str  # "triangle", "line", "point" or "sphere" (runtime ContactSide)
+    kind: Variant  # TRIANGLE, LINE, POINT or SPHERE (runtime ContactSide)
     state: StatePlan  # its points (Vec3d), or a sphere model's frames (Rigid3d: ``rigid``)
     elements: int  # triangles, edges, points or spheres
     cells: Buffer | None  # i64 triangles (3 per) or edges (2 per)
@@ -267,7 +268,7 @@ class Collision:
     """Detection and penalty response of a DefaultAnimationLoop scene, run before the groups step."""
 
     origin: str  # the pipeline
-    method: str  # "new_proximity" or "min_proximity"
+    method: Variant  # the intersection: NEW_PROXIMITY, MIN_PROXIMITY or LOCAL_MIN_DISTANCE
     alarm_distance: float
     contact_distance: float
     depth: int  # the bounding trees' depth (BVHNarrowPhase needs deep trees)

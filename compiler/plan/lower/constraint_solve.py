@@ -173,7 +173,7 @@ def solve_constraints(
     else:  # no solver in the scene: FreeMotionAnimationLoop makes a BlockGaussSeidelConstraintSolver
         default = BLOCK_GAUSS_SEIDEL_CONSTRAINT_SOLVER.field
         settings = [float(default(name).default) for name in order]  # type: ignore[union-attr]
-    method = _BUILT[Variant(phase.method)]
+    method = _BUILT[phase.method]
     arguments = (*problem.arguments(), *blocks, *settings, phase.report, Env.TIME)
     if contacts:
         solve = call(kernel("lagrangian_solve", len(phase.blocks)), Env.LAGRANGIAN, method, *arguments)

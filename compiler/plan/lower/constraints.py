@@ -111,7 +111,7 @@ def constraint_lowering(planner: Planner) -> ConstraintLowering | None:
         return None
     solver = _loop_solver(planner, loop)
     settings = {}
-    method = "block_gauss_seidel"
+    method = Variant.BLOCK_GAUSS_SEIDEL  # FreeMotionAnimationLoop's default solver
     if solver is not None and solver.spec is not None:
         method = solver.spec.variant
         names = _LCP_SETTINGS if method == Variant.LCP else _GENERIC_SETTINGS
