@@ -47,7 +47,7 @@ sys.path.insert(0, str(REPO / "tests"))
 import sofac  # noqa: E402
 from lagrangian_scenes import CONTACT, contact_root, particles, static_floor  # noqa: E402
 from machine import describe  # noqa: E402
-from sofac.plan.ir import CONSTRAINT_REPORT_FIELDS  # noqa: E402
+from sofac.plan.ir import CONSTRAINT_REPORT_FIELDS, Response  # noqa: E402
 
 # SOFA's regression scenes under FreeMotionAnimationLoop: (scene, steps timed, steps run before),
 # their regression's step counts from the start; and the falling beam at rest (92 contacts).
@@ -140,7 +140,7 @@ def rows_per_step(sim: sofac.Simulation, steps: int, skip: int = 0) -> float:
     plan = sim.plan
     if plan.constraints is None:
         return 0.0
-    lagrangian = [c for c in plan.collisions if c.response == "friction_contact" and c.pairs]
+    lagrangian = [c for c in plan.collisions if c.response is Response.FRICTION_CONTACT and c.pairs]
     if not lagrangian:
         return float(plan.constraints.capacity)
     sim.reset()
