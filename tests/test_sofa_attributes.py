@@ -132,3 +132,30 @@ def test_rigid_mass_reads_its_first_eleven_numbers(tmp_path: Path) -> None:
     assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [("W225", 3, "vertexMass")]
     mass = next(c for c in checked.scene.root.components() if c.label == "mass")
     assert np.asarray(checked.value(mass, "vertexMass")).tolist() == [1, 1, 0.1, 0, 0, 0, 0.1, 0, 0, 0, 0.1]
+
+
+def test_empty_fixed_size_value_keeps_the_default(tmp_path: Path) -> None:
+    """Data<T>::read("") only resizes the value to 0 elements, which a number or a Vec3 cannot be,
+    and Base::parseField says nothing about an empty text: SOFA keeps the default
+    (examples/Objects/BoxConstantForceField.xml writes showArrowSize=""). A warning,
+    not E204/E205; an empty list stays an empty list."""
+    path = tmp_path / "empty.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerExplicitSolver/>\n'
+        '  <MechanicalObject name="dofs" position="0 0 0  1 0 0"\n      translation=""/>\n'
+        '  <UniformMass totalMass="1"/>\n'
+        '  <ConstantForceField name="push" indices="0" forces="1 2 3" showArrowSize=""/>\n'
+        '  <FixedProjectiveConstraint name="fix" indices=""/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [
+        ("W225", 3, "translation"),
+        ("W225", 5, "showArrowSize"),
+    ]
+    assert "is empty: SOFA keeps its default" in diags.warnings[0].message
+    components = {c.label: c for c in checked.scene.root.components()}
+    assert checked.value(components["push"], "showArrowSize") == 0.0
+    assert checked.positions(components["dofs"]).tolist() == [[0, 0, 0], [1, 0, 0]]
+    assert np.asarray(checked.value(components["fix"], "indices")).size == 0

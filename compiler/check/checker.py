@@ -380,6 +380,16 @@ class _Checker:
             try:
                 value = field_spec.type.parse(attribute.value)
             except FieldValueError as error:
+                if attribute.value == "" and error.code.startswith("E"):
+                    # Data<T>::read("") only resizes to 0: a fixed-size value (a number, a Vec3, a
+                    # flag) cannot be, so SOFA keeps its default without a word (Base::parseField).
+                    self.diags.add(
+                        "W225",
+                        attribute.loc,
+                        f"{owner}: {name} is empty: SOFA keeps its default",
+                        "remove the attribute or write a value",
+                    )
+                    continue
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 if error.code.startswith("W") and error.value is not None:
                     out[field_spec.name] = error.value  # what SOFA reads from the text anyway
