@@ -159,3 +159,12 @@ def test_empty_fixed_size_value_keeps_the_default(tmp_path: Path) -> None:
     assert checked.value(components["push"], "showArrowSize") == 0.0
     assert checked.positions(components["dofs"]).tolist() == [[0, 0, 0], [1, 0, 0]]
     assert np.asarray(checked.value(components["fix"], "indices")).size == 0
+
+
+@pytest.mark.parametrize("src", ["", "loader"])
+def test_src_that_is_not_a_link_is_sofa_s_error(tmp_path: Path, src: str) -> None:
+    """BaseComponent::parse: a src not starting with '@' is an error in SOFA ("'src' attribute value
+    should be a link using '@'"; examples/Objects/DynamicSparseGridTopology.xml writes src="")."""
+    _, diags, _ = check(tmp_path, state=f'src="{src}"')
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.errors] == [("E213", 4, "src")]
+    assert "is not a link: SOFA reports that it should start with '@'" in diags.errors[0].message

@@ -448,7 +448,15 @@ class _Checker:
         elif src_text is not None:
             loc = checked.component.attribute_loc("src")
             source = links.resolve_src(src_text, checked.component)
-            if source is None:
+            if not src_text.startswith("@"):  # BaseComponent::parse's error
+                self.diags.add(
+                    "E213",
+                    loc,
+                    f"{checked.spec.name} {checked.component.label!r}: src={src_text!r} is not a link: "
+                    "SOFA reports that it should start with '@'",
+                    'write src="@name" with the name of a loader of this node, or remove src',
+                )
+            elif source is None:
                 self.diags.add(
                     "E213",
                     loc,
