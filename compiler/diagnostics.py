@@ -88,7 +88,7 @@ CODES: dict[str, CodeInfo] = {
     "W230": _w("anisotropic rigid inertia on a rotating body (SOFA applies it in world axes)"),
     "W231": _w("a loader read only by visual models has a missing file"),
     "W232": _w("assembled solve of contacts with a static model (SOFA adds coupling blocks sofac omits)"),
-    "W233": _w("a Data link to nothing: SOFA leaves the Data at its default"),
+    "W233": _w("a link to nothing SOFA goes on without (a Data at its default, an optional object)"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
     "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),

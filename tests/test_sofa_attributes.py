@@ -168,3 +168,25 @@ def test_src_that_is_not_a_link_is_sofa_s_error(tmp_path: Path, src: str) -> Non
     _, diags, _ = check(tmp_path, state=f'src="{src}"')
     assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.errors] == [("E213", 4, "src")]
     assert "is not a link: SOFA reports that it should start with '@'" in diags.errors[0].message
+
+
+def test_optional_link_to_nothing_is_a_warning(tmp_path: Path) -> None:
+    """RestShapeSpringsForceField::init: an external_rest_shape that finds nothing is SOFA's warning
+    ("external_rest_shape ... not found") and the springs pull to the state's own rest positions
+    (Xitact's XitactGrasping*.scn write external_rest_shape="@toto"); a broken object1 stays E213."""
+    path = tmp_path / "rest.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerImplicitSolver/><CGLinearSolver/>\n'
+        '  <MechanicalObject name="dofs" position="0 0 0  1 0 0"/>\n  <UniformMass totalMass="1"/>\n'
+        '  <RestShapeSpringsForceField name="springs" stiffness="10" external_rest_shape="@toto"/>\n'
+        '  <SpringForceField object1="@nothing" object2="@dofs"/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [
+        ("W233", 4, "external_rest_shape")
+    ]
+    assert "SOFA warns and goes on as if external_rest_shape were not written" in diags.warnings[0].message
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.errors] == [("E213", 5, "object1")]
+    springs = next(c for c in checked.scene.root.components() if c.label == "springs")
+    assert "external_rest_shape" not in checked.of(springs).links
