@@ -89,6 +89,7 @@ CODES: dict[str, CodeInfo] = {
     "W231": _w("a loader read only by visual models has a missing file"),
     "W232": _w("assembled solve of contacts with a static model (SOFA adds coupling blocks sofac omits)"),
     "W233": _w("a link to nothing SOFA goes on without (a Data at its default, an optional object)"),
+    "W234": _w("collision models that could touch without a compiled contact response (the run stops)"),
     "E226": _e("missing required value"),
     "E227": _e("duplicate name"),
     "W245": _w("state without a constraint correction under FreeMotionAnimationLoop (it never moves)"),

@@ -34,7 +34,7 @@ from sofac.cli.main import find_scenes
 from sofac.diagnostics import Diagnostic, Diagnostics, SceneError
 from sofac.front.parse import parse_scene
 from sofac.pipeline import add_compile_refusals, compile_scene
-from sofac.simulation.loader import SimulationDiverged
+from sofac.simulation.loader import ContactNotCompiled, SimulationDiverged
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "docs" / "components.md"  # the page that holds the section
@@ -209,7 +209,8 @@ def render(shared: Path) -> str:
 def run_outcome(path: Path, steps: int, budget: float | None = None) -> tuple[str, int]:
     """Compile a scene that checks clean and run it: "runs" (finite after ``steps`` steps, or
     after as many as ``budget`` seconds of stepping allow), "refused EXXX" (the compile stopped
-    with a diagnostic), "diverged", or "internal: ..."; and the number of steps run."""
+    with a diagnostic), "diverged", "stopped by the contact guard" (ContactNotCompiled, which
+    check announces with W234) or "internal: ..."; and the number of steps run."""
     done = 0
     try:
         sim = compile_scene(path).instantiate()
@@ -222,6 +223,8 @@ def run_outcome(path: Path, steps: int, budget: float | None = None) -> tuple[st
         return "refused " + ",".join(codes or ["?"]), done
     except SimulationDiverged:
         return "diverged", done
+    except ContactNotCompiled:  # what check's W234 announces
+        return "stopped by the contact guard", done
     except Exception as error:  # an internal error is what this report looks for
         return f"internal: {type(error).__name__}: {error}".splitlines()[0][:160], done
     return "runs", done

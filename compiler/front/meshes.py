@@ -1565,12 +1565,7 @@ def _parse_vtk_ascii(text: str) -> Mesh:
         body_end = sections[index + 1].start() if index + 1 < len(sections) else len(text)
         body = text[m.end() : body_end]
         if keyword == "DATASET":
-            dataset = args[0].upper() if args else ""
-            if dataset not in ("UNSTRUCTURED_GRID", "POLYDATA"):
-                raise MeshError(
-                    f"VTK dataset {dataset or '?'} is not supported (only UNSTRUCTURED_GRID and POLYDATA)",
-                    line,
-                )
+            dataset = _vtk_dataset(args, line)
         elif keyword in ("POINT_DATA", "CELL_DATA"):
             mode = keyword
         elif mode != "geometry":
@@ -1646,6 +1641,16 @@ def _vtk_mesh(
     if normals is not None:
         mesh_kw["normals"] = normals
     return Mesh(positions=points, notes=tuple(notes), **mesh_kw)
+
+
+def _vtk_dataset(args: list[str], line: int) -> str:
+    """The kind a ``DATASET`` line names, one of those SOFA's legacy reader takes."""
+    dataset = args[0].upper() if args else ""
+    if dataset not in ("UNSTRUCTURED_GRID", "POLYDATA"):
+        raise MeshError(
+            f"VTK dataset {dataset or '?'} is not supported (only UNSTRUCTURED_GRID and POLYDATA)", line
+        )
+    return dataset
 
 
 def _vtk_count(args: list[str], position: int, keyword: str, line: int) -> int:
@@ -1737,12 +1742,7 @@ def _parse_vtk_binary(data: bytes) -> Mesh:
         words = text.split()
         keyword, args, line = words[0].upper(), words[1:], line_number
         if keyword == "DATASET":
-            dataset = args[0].upper() if args else ""
-            if dataset not in ("UNSTRUCTURED_GRID", "POLYDATA"):
-                raise MeshError(
-                    f"VTK dataset {dataset or '?'} is not supported (only UNSTRUCTURED_GRID and POLYDATA)",
-                    line,
-                )
+            dataset = _vtk_dataset(args, line)
             continue
         if keyword in ("POINT_DATA", "CELL_DATA"):
             break
