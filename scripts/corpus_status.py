@@ -262,7 +262,8 @@ def render_tree(tree: Path, steps: int | None, budget: float | None = None) -> s
             first = next(d for d in errors if d.code != "E222")
             other.append(f"- `{name}`: {first.code} line {first.loc.line}: {first.message}")
     lines = [
-        f"`python scripts/corpus_status.py --all{f' --run {steps}' if steps else ''}` on the "
+        f"`python scripts/corpus_status.py --all{f' --run {steps}' if steps else ''}"
+        f"{f' --seconds {budget:g}' if steps and budget is not None else ''}` on the "
         f"{len(scenes)} scenes of `{tree}` (sofac {sofac.__version__}):",
         "",
         "| `sofac check` result | scenes |",
