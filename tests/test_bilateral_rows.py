@@ -278,3 +278,39 @@ def test_box_roi_points_in_roi_give_a_state_its_positions(tmp_path: Path) -> Non
     assert diagnostics.errors == []
     dofs = next(c for c in checked.scene.root.components() if c.label == "dofs")
     assert checked.positions(dofs).tolist() == [[1, 0, 0], [2, 0.5, 0]]
+
+
+def test_a_fixed_end_leaves_the_rows_as_in_sofa(tmp_path: Path) -> None:
+    """GenericConstraintSolver::buildSystem clears the constraint matrix's columns of the DOFs a
+    projective constraint holds (projectJacobianMatrix): a particle joined to a FixedProjectiveConstraint'd
+    one (at rest: SOFA's fixed DOF keeps its velocity) gets the whole correction (W = C_a alone) and
+    reaches it in one step, which stays put. With the fixed particle's compliance counted, a would
+    only go part of the way and b would move."""
+    fixed = '<UniformMass vertexMass="6"/>\n        <FixedProjectiveConstraint indices="0"/>'
+    text = MERGE.replace('<UniformMass vertexMass="6"/>', fixed).replace(
+        'velocity="-3 0 1"', 'velocity="0 0 0"'
+    )
+    path = tmp_path / "fixed_end.scn"
+    path.write_text(text)
+    sim = sofac.load(path)
+    sim.step(3)
+    np.testing.assert_allclose(sim["A/a"].position, [[0, 0, 0]], atol=1e-12)
+    assert sim["B/b"].position.tolist() == [[0.0, 0.0, 0.0]]
+
+
+def test_rows_on_a_moved_frame_are_refused_at_its_correction(tmp_path: Path) -> None:
+    """LinearMovementProjectiveConstraint clears its DOFs' columns only between its key times: rows
+    reaching them under an UncoupledConstraintCorrection are refused (E222 at the correction), as
+    SOFA's BilateralLagrangianConstraint_Soft_Rigid_Bodies.scn is (sofac's run of it diverged)."""
+    from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
+
+    moved = '<LinearMovementProjectiveConstraint keyTimes="0 1" movements="0 0 0  1 0 0"/>'
+    text = MERGE.replace('<UniformMass vertexMass="6"/>', f'<UniformMass vertexMass="6"/>\n        {moved}')
+    path = tmp_path / "moved.scn"
+    path.write_text(text)
+    checked, diagnostics = check_file(path)
+    add_compile_refusals(checked, diagnostics)
+    line = next(n for n, row in enumerate(text.splitlines(), start=1) if 'defaultCompliance="0.1666' in row)
+    assert [(d.code, d.loc.line) for d in diagnostics.errors] == [("E222", line)]
+    assert "LinearMovementProjectiveConstraint" in diagnostics.errors[0].message
