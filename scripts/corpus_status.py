@@ -2,11 +2,11 @@
 
     python scripts/corpus_status.py                  # print the section (Markdown)
     python scripts/corpus_status.py --update-readme  # rewrite it in docs/components.md, between the markers
-    python scripts/corpus_status.py --all [--run N] [--tree DIR]
+    python scripts/corpus_status.py --all [--run N [--seconds S]] [--tree DIR]
         # every scene of the corpus (or of DIR, e.g. SOFA's whole examples/ tree): how many check
         # clean, fail only on unsupported components (which, by frequency) or with other errors;
-        # with --run, the clean ones are also compiled and run N steps (compiled and finite,
-        # refused at compile time, diverged, internal error)
+        # with --run, the clean ones are also compiled and run N steps, or as many as S seconds
+        # of stepping allow (compiled and finite, refused at compile time, diverged, internal error)
 
 Reads ``shared/corpus/sofa`` (``../shared`` beside the checkout, else ``$SOFAC_SHARED``): the 126
 scenes of its ``manifest.json`` are classified as clean (no errors), failing only with unsupported
@@ -21,6 +21,7 @@ import json
 import os
 import re
 import sys
+import time
 from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ from sofac.cli.main import find_scenes
 from sofac.diagnostics import Diagnostic, Diagnostics, SceneError
 from sofac.front.parse import parse_scene
 from sofac.pipeline import add_compile_refusals, compile_scene
-from sofac.simulation.loader import SimulationDiverged
+from sofac.simulation.loader import ContactNotCompiled, SimulationDiverged
 
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "docs" / "components.md"  # the page that holds the section
@@ -205,23 +206,31 @@ def render(shared: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_outcome(path: Path, steps: int) -> str:
-    """Compile a scene that checks clean and run it: "runs" (finite after ``steps`` steps),
-    "refused EXXX" (the compile stopped with a diagnostic), "diverged", or "internal: ..."."""
+def run_outcome(path: Path, steps: int, budget: float | None = None) -> tuple[str, int]:
+    """Compile a scene that checks clean and run it: "runs" (finite after ``steps`` steps, or
+    after as many as ``budget`` seconds of stepping allow), "refused EXXX" (the compile stopped
+    with a diagnostic), "diverged", "stopped by the contact guard" (ContactNotCompiled, which
+    check announces with W234) or "internal: ..."; and the number of steps run."""
+    done = 0
     try:
         sim = compile_scene(path).instantiate()
-        sim.step(steps)
+        start = time.perf_counter()
+        while done < steps and (budget is None or time.perf_counter() - start < budget):
+            sim.step(1 if budget is not None else steps)
+            done = sim.steps
     except SceneError as error:
         codes = sorted({d.code for d in error.diagnostics if d.severity.name == "ERROR"})
-        return "refused " + ",".join(codes or ["?"])
+        return "refused " + ",".join(codes or ["?"]), done
     except SimulationDiverged:
-        return "diverged"
+        return "diverged", done
+    except ContactNotCompiled:  # what check's W234 announces
+        return "stopped by the contact guard", done
     except Exception as error:  # an internal error is what this report looks for
-        return f"internal: {type(error).__name__}: {error}".splitlines()[0][:160]
-    return "runs"
+        return f"internal: {type(error).__name__}: {error}".splitlines()[0][:160], done
+    return "runs", done
 
 
-def render_tree(tree: Path, steps: int | None) -> str:
+def render_tree(tree: Path, steps: int | None, budget: float | None = None) -> str:
     """The whole-tree report: every scene ``find_scenes`` finds under ``tree``."""
     scenes = sorted(find_scenes([str(tree)]))
     kinds: Counter[str] = Counter()
@@ -253,7 +262,8 @@ def render_tree(tree: Path, steps: int | None) -> str:
             first = next(d for d in errors if d.code != "E222")
             other.append(f"- `{name}`: {first.code} line {first.loc.line}: {first.message}")
     lines = [
-        f"`python scripts/corpus_status.py --all{f' --run {steps}' if steps else ''}` on the "
+        f"`python scripts/corpus_status.py --all{f' --run {steps}' if steps else ''}"
+        f"{f' --seconds {budget:g}' if steps and budget is not None else ''}` on the "
         f"{len(scenes)} scenes of `{tree}` (sofac {sofac.__version__}):",
         "",
         "| `sofac check` result | scenes |",
@@ -267,17 +277,28 @@ def render_tree(tree: Path, steps: int | None) -> str:
     if steps:
         outcomes: Counter[str] = Counter()
         not_running: list[str] = []
+        cut_short: list[str] = []
         for path in clean:
-            outcome = run_outcome(path, steps)
-            print(f"{outcome}\t{path.relative_to(tree).as_posix()}", file=sys.stderr, flush=True)  # progress
+            start = time.perf_counter()
+            outcome, done = run_outcome(path, steps, budget)
+            name = path.relative_to(tree).as_posix()
+            seconds = time.perf_counter() - start
+            print(
+                f"{outcome}\t{done} steps\t{seconds:.0f} s\t{name}", file=sys.stderr, flush=True
+            )  # progress
             outcomes[outcome.split(":")[0] if outcome.startswith("internal") else outcome] += 1
             if outcome != "runs":
-                not_running.append(f"- `{path.relative_to(tree).as_posix()}`: {outcome}")
-        lines += ["", f"Of the {len(clean)} clean scenes, run {steps} steps each:", ""]
+                not_running.append(f"- `{name}`: {outcome}" + (f" (step {done + 1})" if done else ""))
+            elif done < steps:
+                cut_short.append(f"`{name}` ({done})")
+        limit = f" (or as many as {budget:g} s of stepping allow)" if budget is not None else ""
+        lines += ["", f"Of the {len(clean)} clean scenes, run {steps} steps each{limit}:", ""]
         lines += ["| outcome | scenes |", "| --- | ---: |"]
         lines += [f"| {outcome} | {count} |" for outcome, count in sorted(outcomes.items())]
         if not_running:
             lines += ["", "Clean scenes that do not run:", "", *not_running]
+        if cut_short:
+            lines += ["", f"Runs cut short by the time limit (steps run): {', '.join(cut_short)}."]
     lines += [
         "",
         "Unsupported components (E222), by the number of scenes they block: "
@@ -314,6 +335,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--run", type=int, metavar="N", help="with --all: compile the clean scenes and run N steps"
     )
+    parser.add_argument(
+        "--seconds",
+        type=float,
+        metavar="S",
+        help="with --run: stop a scene's run after S seconds of stepping",
+    )
     args = parser.parse_args(argv)
     shared = find_shared()
     if args.all:
@@ -321,7 +348,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if tree is None or not tree.is_dir():
             print("corpus_status: no folder to report on (set SOFAC_SHARED or pass --tree)", file=sys.stderr)
             return 2
-        sys.stdout.write(render_tree(tree, args.run))
+        sys.stdout.write(render_tree(tree, args.run, args.seconds))
         return 0
     if shared is None:
         print("corpus_status: shared/corpus/sofa not found (set SOFAC_SHARED)", file=sys.stderr)

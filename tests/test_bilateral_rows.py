@@ -230,3 +230,87 @@ def test_a_rigid_pendulum_held_by_a_bilateral_constraint_keeps_its_length(tmp_pa
         assert abs(np.linalg.norm(centre) - 1.0) < 1e-4
         lowest = min(lowest, centre[1])
     assert lowest < -0.95  # it swung down (a free fall of 1 s would take it 4.9 down, off the circle)
+
+
+def test_points_of_a_state_whose_positions_are_unknown_are_refused_at_the_attribute(tmp_path: Path) -> None:
+    """A state whose positions come from an engine output sofac does not evaluate (BoxROI's
+    pointsOutROI) has no known size: rows on its points are refused (E222 at second_point, what
+    `sofac check` reports too), not planned on a state of 0 points (an IndexError while carrying
+    them through a RigidMapping: SOFA's BilateralLagrangianConstraint_Soft_Rigid_Bodies.scn, before
+    BoxROI's pointsInROI was evaluated)."""
+    from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
+
+    text = HANGING.format(
+        solver="BlockGaussSeidelConstraintSolver", iterations=100, tolerance=1e-6, mass=1.0, compliance=1.0
+    )
+    text = text.replace(
+        '<MechanicalObject name="dofs" position="0 1 0  1 1 0"/>',
+        '<BoxROI name="roi" box="-1 -1 -1 0.5 2 1" position="0 1 0  1 1 0"/>\n'
+        '        <MechanicalObject name="dofs" position="@roi.pointsOutROI"/>',
+    )
+    path = tmp_path / "unknown.scn"
+    path.write_text(text)
+    checked, diagnostics = check_file(path)
+    add_compile_refusals(checked, diagnostics)
+    line = next(
+        n for n, row in enumerate(text.splitlines(), start=1) if "<BilateralLagrangianConstraint" in row
+    )
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diagnostics.errors] == [
+        ("E222", line, "second_point")
+    ]
+    assert "whose positions sofac does not know at compile time" in diagnostics.errors[0].message
+
+
+def test_box_roi_points_in_roi_give_a_state_its_positions(tmp_path: Path) -> None:
+    """BoxROI::doUpdate's pointsInROI, the input points inside in index order, evaluated at compile
+    time: a MechanicalObject reading them has those positions."""
+    from sofac.check.checker import check_file
+
+    path = tmp_path / "roi.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/>\n'
+        '  <BoxROI name="roi" box="0.5 -1 -1 3 1 1" position="0 0 0  1 0 0  5 0 0  2 0.5 0"/>\n'
+        '  <MechanicalObject name="dofs" position="@roi.pointsInROI"/>\n'
+        "</Node>\n"
+    )
+    checked, diagnostics = check_file(path)
+    assert diagnostics.errors == []
+    dofs = next(c for c in checked.scene.root.components() if c.label == "dofs")
+    assert checked.positions(dofs).tolist() == [[1, 0, 0], [2, 0.5, 0]]
+
+
+def test_a_fixed_end_leaves_the_rows_as_in_sofa(tmp_path: Path) -> None:
+    """GenericConstraintSolver::buildSystem clears the constraint matrix's columns of the DOFs a
+    projective constraint holds (projectJacobianMatrix): a particle joined to a FixedProjectiveConstraint'd
+    one (at rest: SOFA's fixed DOF keeps its velocity) gets the whole correction (W = C_a alone) and
+    reaches it in one step, which stays put. With the fixed particle's compliance counted, a would
+    only go part of the way and b would move."""
+    fixed = '<UniformMass vertexMass="6"/>\n        <FixedProjectiveConstraint indices="0"/>'
+    text = MERGE.replace('<UniformMass vertexMass="6"/>', fixed).replace(
+        'velocity="-3 0 1"', 'velocity="0 0 0"'
+    )
+    path = tmp_path / "fixed_end.scn"
+    path.write_text(text)
+    sim = sofac.load(path)
+    sim.step(3)
+    np.testing.assert_allclose(sim["A/a"].position, [[0, 0, 0]], atol=1e-12)
+    assert sim["B/b"].position.tolist() == [[0.0, 0.0, 0.0]]
+
+
+def test_rows_on_a_moved_frame_are_refused_at_its_correction(tmp_path: Path) -> None:
+    """LinearMovementProjectiveConstraint clears its DOFs' columns only between its key times: rows
+    reaching them under an UncoupledConstraintCorrection are refused (E222 at the correction), as
+    SOFA's BilateralLagrangianConstraint_Soft_Rigid_Bodies.scn is (sofac's run of it diverged)."""
+    from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
+
+    moved = '<LinearMovementProjectiveConstraint keyTimes="0 1" movements="0 0 0  1 0 0"/>'
+    text = MERGE.replace('<UniformMass vertexMass="6"/>', f'<UniformMass vertexMass="6"/>\n        {moved}')
+    path = tmp_path / "moved.scn"
+    path.write_text(text)
+    checked, diagnostics = check_file(path)
+    add_compile_refusals(checked, diagnostics)
+    line = next(n for n, row in enumerate(text.splitlines(), start=1) if 'defaultCompliance="0.1666' in row)
+    assert [(d.code, d.loc.line) for d in diagnostics.errors] == [("E222", line)]
+    assert "LinearMovementProjectiveConstraint" in diagnostics.errors[0].message

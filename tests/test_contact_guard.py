@@ -113,3 +113,21 @@ def test_self_collision_is_still_refused(tmp_path: Path) -> None:
     # refused, saying why (DiscreteIntersection and StickContactForceField are not compiled)
     assert "unsupported component SphereCollisionModel at line 6: self-collision: " in first.message
     assert "penalty contact is compiled for" in first.message
+
+
+def test_check_says_that_a_run_may_stop(tmp_path: Path) -> None:
+    """What a run stops on, `sofac check` says (check and compile agree): W234 at the contact
+    manager, naming why the contacts are not compiled (SOFA's Component/Collision/Geometry/
+    SphereModel.scn stops at step 69 when its spheres reach the floor)."""
+    from sofac.check.checker import check_file
+    from sofac.pipeline import add_compile_refusals
+
+    checked, diagnostics = check_file(write(tmp_path, "balls.scn"))
+    add_compile_refusals(checked, diagnostics)
+    assert diagnostics.errors == []
+    assert [(d.code, d.loc.line) for d in diagnostics.warnings] == [("W234", 3)]
+    message = diagnostics.warnings[0].message
+    assert message.startswith("2 collision models of this scene could touch")
+    # the planner's reason: the first part of the setup it does not compile (DiscreteIntersection)
+    assert "(penalty contact is compiled for a CollisionPipeline with its intersection" in message
+    assert "a run stops with ContactNotCompiled" in message

@@ -6,6 +6,7 @@ import contextlib
 import itertools
 import math
 import os
+import re
 import time
 import warnings
 from pathlib import Path
@@ -478,14 +479,13 @@ def test_obj_crlf_tabs_indent_and_comments(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "line", "match"),
     [
-        ("v 0 0 0\nv 1 0\nf 1 2 1\n", 2, "expected 3 numbers"),
         ("v 0 0 0\nv 1 x 0\n", 2, "expected a number"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", 4, "vertex 4"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 0\n", 4, "index 0"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\n# c\nf 1 2 x\n", 5, "expected an integer"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf -4 1 2\n", 5, "before this line"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1/1 2 3\n", 4, "malformed face corner"),
-        ("v 0 0 0\nv 1 0 0\nvn 0 0\n", 3, "normal"),
+        ("v 0 0 0\nv 1 0\nvn 0 x 0\n", 3, "normal"),
         ("v 0 0 0\nv nan 0 0\n", 2, "non-finite"),
         ("v 0 0 0\nv 1\x000 0\nv 2 0 0\n", 2, "binary data"),
         ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 3.", 5, None),  # truncated last line
@@ -496,8 +496,18 @@ def test_obj_errors_have_lines(tmp_path: Path, text: str, line: int, match: str 
         read_mesh(write(tmp_path, "bad.obj", text))
 
 
+def test_obj_short_lines_keep_the_previous_numbers(tmp_path: Path) -> None:
+    """SOFA reads every v/vn/vt line into one Vec3 with `>>`: a number past the end of a short line
+    stays what the previous v, vn or vt line left (0 at first). share/mesh/raptorTemperature.obj
+    ("v 0" a line) is a scalar field TetrahedronDiffusionFEMForceField.scn loads this way."""
+    text = "v 5\nv 1 2 3\nvt 7\nv 4\nvn 0 0 1\nv 6\nvt 8 9\nf 1 2 3\n"
+    mesh = read_mesh(write(tmp_path, "short.obj", text))
+    np.testing.assert_array_equal(mesh.positions, [[5, 0, 0], [1, 2, 3], [4, 2, 3], [6, 0, 1]])
+    assert count_points(tmp_path / "short.obj") == 4
+
+
 def test_obj_error_message_names_file_and_line(tmp_path: Path) -> None:
-    path = write(tmp_path, "bad.obj", "v 0 0 0\nv 1 0\n")
+    path = write(tmp_path, "bad.obj", "v 0 0 0\nv 1 x\n")
     with pytest.raises(MeshError) as info:
         read_mesh(path)
     assert str(info.value).startswith(f"{path.resolve()}:2: ")
@@ -822,6 +832,95 @@ def test_vtk_errors_have_lines(tmp_path: Path, old: str, new: str, line: int, ma
         read_mesh(write(tmp_path, "bad.vtk", VTK_LEGACY.replace(old, new)))
 
 
+def test_vtk_xml_file_named_vtk(tmp_path: Path) -> None:
+    """MeshVTKLoader picks its reader from the first lines, not the extension: share/mesh/Bunny.vtk
+    (Component/Engine/Generate/VolumeFromVolumetricElements.scn) is XML, starting at <VTKFile."""
+    expected = read_mesh(write(tmp_path, "a.vtu", VTU))
+    for name, text in (("b.vtk", VTU), ("c.vtk", VTU.split("\n", 1)[1])):
+        mesh = read_mesh(write(tmp_path, name, text))
+        np.testing.assert_array_equal(mesh.positions, expected.positions)
+        np.testing.assert_array_equal(mesh.tetrahedra, expected.tetrahedra)
+        assert count_points(tmp_path / name) == 5
+
+
+def test_vtk_xml_polydata(tmp_path: Path) -> None:
+    """XMLVTKReader::loadPolydata (share/mesh/skull.vtp in Component/IO/Mesh/MeshVTKLoader.scn):
+    Points, Polys by their offsets (2 points: an edge, 3: a triangle, 4: a quad, more: a polyline
+    SOFA keeps apart) and PointData normals; Lines are not read."""
+    text = """<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">
+  <PolyData>
+    <Piece NumberOfPoints="5" NumberOfLines="1" NumberOfPolys="4">
+      <PointData Normals="Normals">
+        <DataArray type="Float32" Name="Normals" NumberOfComponents="3" format="ascii">
+          0 0 1  0 0 1  0 0 1  0 0 1  0 0 1
+        </DataArray>
+      </PointData>
+      <Points>
+        <DataArray type="Float32" NumberOfComponents="3" format="ascii">
+          0 0 0  1 0 0  1 1 0  0 1 0  0.1 0.2 0.3
+        </DataArray>
+      </Points>
+      <Lines>
+        <DataArray type="Int32" Name="connectivity" format="ascii">0 4</DataArray>
+        <DataArray type="Int32" Name="offsets" format="ascii">2</DataArray>
+      </Lines>
+      <Polys>
+        <DataArray type="Int32" Name="connectivity" format="ascii">0 1 2 3  0 1 4  2 3  0 1 2 3 4</DataArray>
+        <DataArray type="Int32" Name="offsets" format="ascii">4 7 9 14</DataArray>
+      </Polys>
+    </Piece>
+  </PolyData>
+</VTKFile>
+"""
+    mesh = read_mesh(write(tmp_path, "p.vtp", text))
+    np.testing.assert_array_equal(mesh.quads, [[0, 1, 2, 3]])
+    np.testing.assert_array_equal(mesh.triangles, [[0, 1, 4]])
+    np.testing.assert_array_equal(mesh.edges, [[2, 3]])
+    assert mesh.positions[4].tolist() == [0.1, 0.2, 0.3]  # SOFA reads the points as Float64
+    assert mesh.normals is not None and (mesh.normals[:, 2] == 1).all()
+    assert count_points(tmp_path / "p.vtp") == 5
+
+
+def _legacy_binary(text: str, order: str) -> bytes:
+    """The BINARY form of a legacy ASCII file (its sections up to POINT_DATA), numbers in ``order``."""
+    lines = text.split("\n")
+    out = [lines[0], lines[1], "BINARY", lines[3]]
+    blob = b""
+    sections = "\n".join(lines[4:]).split("POINT_DATA")[0]
+    for block in re.split(r"\n(?=[A-Z_]+ )", sections.strip()):
+        head, _, body = block.partition("\n")
+        dtype = {"float": "f4", "double": "f8"}.get(head.split()[-1], "i4")
+        numbers = np.array(body.split(), dtype=float).astype(order + dtype)
+        blob += (head + "\n").encode() + numbers.tobytes() + b"\n"
+    return ("\n".join(out) + "\n").encode() + blob
+
+
+@pytest.mark.parametrize("order", [">", "<"])
+def test_vtk_legacy_binary_reads_as_ascii(tmp_path: Path, order: str) -> None:
+    """share/mesh/liver.vtk (Component/IO/Mesh/MeshVTKLoader.scn) is BINARY POLYDATA: the raw
+    numbers after each section line, big-endian as VTK writes them; SOFA also reads a file written
+    in the machine's order (it swaps when the first cell count reads larger swapped back)."""
+    polydata = (
+        "# vtk DataFile Version 3.0\npoly\nASCII\nDATASET POLYDATA\nPOINTS 5 float\n"
+        "0 0 0 1 0 0 1 1 0 0 1 0 0.1 0.2 0.3\nPOLYGONS 2 9\n4 0 1 2 3\n3 0 1 4\n"
+    )
+    for name, text in (("grid", VTK_LEGACY), ("poly", polydata)):
+        ascii_mesh = read_mesh(write(tmp_path, f"{name}.vtk", text))
+        path = tmp_path / f"{name}-binary.vtk"
+        path.write_bytes(_legacy_binary(text, order))
+        mesh = read_mesh(path)
+        assert count_points(path) == ascii_mesh.n_points
+        np.testing.assert_array_equal(mesh.positions, ascii_mesh.positions)
+        for kind in ("edges", "triangles", "quads", "tetrahedra"):
+            np.testing.assert_array_equal(getattr(mesh, kind), getattr(ascii_mesh, kind))
+    assert mesh.positions[4, 0] == np.float32(0.1)
+    truncated = path.read_bytes()[:-10]
+    path.write_bytes(truncated)
+    with raises_at(6, "the file ends before"):
+        read_mesh(path)
+
+
 # --------------------------------------------------------------------------------------------
 # Spheres and rigid files
 # --------------------------------------------------------------------------------------------
@@ -885,7 +984,7 @@ def test_rigid_errors(tmp_path: Path, text: str, line: int, match: str) -> None:
 
 def test_unknown_extension_names_supported(tmp_path: Path) -> None:
     path = write(tmp_path, "a.ply", "ply\n")
-    with pytest.raises(MeshError, match=r"\.ply.*supported: \.obj, \.msh, \.vtu, \.vtk, \.sph, \.stl"):
+    with pytest.raises(MeshError, match=r"\.ply.*supported: \.obj, \.msh, \.vtu, \.vtp, \.vtk, \.sph, \.stl"):
         read_mesh(path)
     with pytest.raises(MeshError, match="supported"):
         count_points(path)

@@ -18,6 +18,7 @@ import pytest
 from sofac import registry
 from sofac.check.checker import CheckedScene, check_file
 from sofac.diagnostics import Diagnostics
+from sofac.front.datafiles import default_data_roots
 from sofac.registry import Category, NameStatus
 from sofac.registry.fields import FieldValueError, Link, LinkList, SofaData, parse_ints, parse_reals
 
@@ -402,8 +403,9 @@ def test_examples_tree_searches_share_beside_it(tmp_path: Path) -> None:
 
 def test_unreadable_mesh_is_a_diagnostic_not_an_exit(tmp_path: Path) -> None:
     """meshio ends the process on a POLYDATA .vtk (sys.exit): the checker reports it instead,
-    and goes on with the next file."""
-    polydata = "# vtk DataFile Version 3.0\nsurface\nBINARY\nDATASET POLYDATA\nPOINTS 1 float\n"
+    and goes on with the next file. (Only version 5 files go to meshio: older ones, binary too,
+    are read by sofac as SOFA does.)"""
+    polydata = "# vtk DataFile Version 5.1\nsurface\nBINARY\nDATASET POLYDATA\nPOINTS 1 float\n"
     scene = (
         '<Node name="root">\n    <MeshVTKLoader name="l" filename="s.vtk"/>\n'
         '    <MechanicalObject src="@l"/>\n</Node>\n'
@@ -558,3 +560,24 @@ def test_a_repeated_template_of_a_registered_type_is_unsupported_not_unknown(tmp
     )
     assert [(d.code, d.loc.line) for d in diagnostics.errors] == [("E222", 3), ("E222", 4)]
     assert "DiagonalMass CudaVec3f,CudaVec3f is supported by SOFA" in diagnostics.errors[1].message
+
+
+def test_scene_beside_its_own_mesh_folder_finds_share(tmp_path: Path) -> None:
+    """examples/Component/SceneUtility/Gravity.scn has a mesh/ folder beside it and reads
+    mesh/torus2_scale3.obj from SOFA's share/mesh: SOFA's DataRepository keeps share/ and examples/
+    whatever folder the scene is in."""
+    (tmp_path / "share" / "mesh").mkdir(parents=True)
+    (tmp_path / "share" / "mesh" / "square.obj").write_text(SQUARE_OBJ)
+    folder = tmp_path / "examples" / "Component" / "SceneUtility"
+    (folder / "mesh").mkdir(parents=True)
+    (folder / "scene.scn").write_text(
+        '<Node name="root">\n    <MeshOBJLoader name="l" filename="mesh/square.obj"/>\n'
+        '    <MechanicalObject src="@l"/>\n</Node>\n'
+    )
+    _, diagnostics = check_file(folder / "scene.scn")
+    assert codes(diagnostics) == []
+    assert default_data_roots(folder) == [
+        folder.resolve(),
+        (tmp_path / "share").resolve(),
+        (tmp_path / "examples").resolve(),
+    ]

@@ -132,3 +132,61 @@ def test_rigid_mass_reads_its_first_eleven_numbers(tmp_path: Path) -> None:
     assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [("W225", 3, "vertexMass")]
     mass = next(c for c in checked.scene.root.components() if c.label == "mass")
     assert np.asarray(checked.value(mass, "vertexMass")).tolist() == [1, 1, 0.1, 0, 0, 0, 0.1, 0, 0, 0, 0.1]
+
+
+def test_empty_fixed_size_value_keeps_the_default(tmp_path: Path) -> None:
+    """Data<T>::read("") only resizes the value to 0 elements, which a number or a Vec3 cannot be,
+    and Base::parseField says nothing about an empty text: SOFA keeps the default
+    (examples/Objects/BoxConstantForceField.xml writes showArrowSize=""). A warning,
+    not E204/E205; an empty list stays an empty list."""
+    path = tmp_path / "empty.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerExplicitSolver/>\n'
+        '  <MechanicalObject name="dofs" position="0 0 0  1 0 0"\n      translation=""/>\n'
+        '  <UniformMass totalMass="1"/>\n'
+        '  <ConstantForceField name="push" indices="0" forces="1 2 3" showArrowSize=""/>\n'
+        '  <FixedProjectiveConstraint name="fix" indices=""/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert diags.errors == []
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [
+        ("W225", 3, "translation"),
+        ("W225", 5, "showArrowSize"),
+    ]
+    assert "is empty: SOFA keeps its default" in diags.warnings[0].message
+    components = {c.label: c for c in checked.scene.root.components()}
+    assert checked.value(components["push"], "showArrowSize") == 0.0
+    assert checked.positions(components["dofs"]).tolist() == [[0, 0, 0], [1, 0, 0]]
+    assert np.asarray(checked.value(components["fix"], "indices")).size == 0
+
+
+@pytest.mark.parametrize("src", ["", "loader"])
+def test_src_that_is_not_a_link_is_sofa_s_error(tmp_path: Path, src: str) -> None:
+    """BaseComponent::parse: a src not starting with '@' is an error in SOFA ("'src' attribute value
+    should be a link using '@'"; examples/Objects/DynamicSparseGridTopology.xml writes src="")."""
+    _, diags, _ = check(tmp_path, state=f'src="{src}"')
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.errors] == [("E213", 4, "src")]
+    assert "is not a link: SOFA reports that it should start with '@'" in diags.errors[0].message
+
+
+def test_optional_link_to_nothing_is_a_warning(tmp_path: Path) -> None:
+    """RestShapeSpringsForceField::init: an external_rest_shape that finds nothing is SOFA's warning
+    ("external_rest_shape ... not found") and the springs pull to the state's own rest positions
+    (Xitact's XitactGrasping*.scn write external_rest_shape="@toto"); a broken object1 stays E213."""
+    path = tmp_path / "rest.scn"
+    path.write_text(
+        '<Node name="root"><DefaultAnimationLoop/><EulerImplicitSolver/><CGLinearSolver/>\n'
+        '  <MechanicalObject name="dofs" position="0 0 0  1 0 0"/>\n  <UniformMass totalMass="1"/>\n'
+        '  <RestShapeSpringsForceField name="springs" stiffness="10" external_rest_shape="@toto"/>\n'
+        '  <SpringForceField object1="@nothing" object2="@dofs"/>\n'
+        "</Node>\n"
+    )
+    checked, diags = check_file(path)
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.warnings] == [
+        ("W233", 4, "external_rest_shape")
+    ]
+    assert "SOFA warns and goes on as if external_rest_shape were not written" in diags.warnings[0].message
+    assert [(d.code, d.loc.line, d.loc.attribute) for d in diags.errors] == [("E213", 5, "object1")]
+    springs = next(c for c in checked.scene.root.components() if c.label == "springs")
+    assert "external_rest_shape" not in checked.of(springs).links

@@ -380,6 +380,16 @@ class _Checker:
             try:
                 value = field_spec.type.parse(attribute.value)
             except FieldValueError as error:
+                if attribute.value == "" and error.code.startswith("E"):
+                    # Data<T>::read("") only resizes to 0: a fixed-size value (a number, a Vec3, a
+                    # flag) cannot be, so SOFA keeps its default without a word (Base::parseField).
+                    self.diags.add(
+                        "W225",
+                        attribute.loc,
+                        f"{owner}: {name} is empty: SOFA keeps its default",
+                        "remove the attribute or write a value",
+                    )
+                    continue
                 self.diags.add(error.code, attribute.loc, f"{owner}: {name}: {error}", error.hint)
                 if error.code.startswith("W") and error.value is not None:
                     out[field_spec.name] = error.value  # what SOFA reads from the text anyway
@@ -438,7 +448,15 @@ class _Checker:
         elif src_text is not None:
             loc = checked.component.attribute_loc("src")
             source = links.resolve_src(src_text, checked.component)
-            if source is None:
+            if not src_text.startswith("@"):  # BaseComponent::parse's error
+                self.diags.add(
+                    "E213",
+                    loc,
+                    f"{checked.spec.name} {checked.component.label!r}: src={src_text!r} is not a link: "
+                    "SOFA reports that it should start with '@'",
+                    'write src="@name" with the name of a loader of this node, or remove src',
+                )
+            elif source is None:
                 self.diags.add(
                     "E213",
                     loc,
@@ -496,29 +514,34 @@ class _Checker:
             path = links.parse_link(text)
             assert path is not None
             target = links.resolve(path, component)
-            if target is None:
-                if attribute is not None:
-                    self.diags.add(
-                        "E213",
-                        loc,
-                        f"{checked.spec.name} {component.label!r}: {field_spec.name}={attribute.value!r} "
-                        "points to nothing",
-                        "paths are relative to the component's node: '@../name' is in the parent node",
-                    )
-                continue
             wanted = field_spec.type.target
+            problem = "points to nothing" if target is None else ""
             if isinstance(target, Node) and wanted in ("state", "topology"):
                 target = self._singleton(target, wanted)
                 if target is None:
-                    if attribute is not None:
-                        self.diags.add(
-                            "E213",
-                            loc,
-                            f"{checked.spec.name} {component.label!r}: {field_spec.name}={attribute.value!r} "
-                            f"names a node with no {'mechanical state' if wanted == 'state' else 'topology'}",
-                        )
-                    continue
+                    problem = (
+                        f"names a node with no {'mechanical state' if wanted == 'state' else 'topology'}"
+                    )
+            if target is None:
+                if attribute is not None:
+                    self._broken_link(
+                        checked, field_spec, f"{field_spec.name}={attribute.value!r}", problem, loc
+                    )
+                continue
             checked.links[field_spec.name] = target
+
+    def _broken_link(
+        self, checked: CheckedComponent, field_spec: FieldSpec, written: str, problem: str, loc: SourceLoc
+    ) -> None:
+        """E213, or W233 for a link SOFA's component goes on without (``Link.optional``)."""
+        assert checked.spec is not None and isinstance(field_spec.type, Link)
+        message = f"{checked.spec.name} {checked.component.label!r}: {written} {problem}"
+        hint = "paths are relative to the component's node: '@../name' is in the parent node"
+        if field_spec.type.optional:
+            message += f": SOFA warns and goes on as if {field_spec.name} were not written"
+            self.diags.add("W233", loc, message, hint)
+        else:
+            self.diags.add("E213", loc, message, hint if problem == "points to nothing" else "")
 
     def _singleton(self, node: Node, role: str) -> Component | None:
         """SOFA's fallback when a link names a node: its (or its ancestors') state / topology."""

@@ -546,7 +546,8 @@ def sparse_grid_ramification(ctx: Context) -> Outputs:
 
 
 def box_roi(ctx: Context) -> Outputs:
-    """Indices of the input points inside any of the boxes (xmin ymin zmin xmax ymax zmax)."""
+    """Indices (and positions) of the input points inside any of the boxes (xmin ymin zmin xmax ymax
+    zmax), and of the elements inside."""
     value = ctx.value("box")
     if value is None or np.size(value) == 0 or np.size(value) % 6:
         # No usable box (missing, or invalid and reported as such): the selection is not known.
@@ -562,7 +563,12 @@ def box_roi(ctx: Context) -> Outputs:
         padded = np.zeros((len(points), 3))
         padded[:, : min(dim, 3)] = points[:, :3]
         inside |= ((padded >= low) & (padded <= high)).all(axis=1)
-    outputs = {"indices": np.flatnonzero(inside).astype(np.int64)}
+    # BoxROI::doUpdate: pointsInROI lists the input points inside, in index order.
+    outputs = {
+        "indices": np.flatnonzero(inside).astype(np.int64),
+        "pointsInROI": np.asarray(points, dtype=float)[inside].ravel(),
+        "nbIndices": int(inside.sum()),
+    }
     for elements, corners, output in _ROI_ELEMENTS:
         given = ctx.value(elements)
         if given is None or not np.size(given) or not ctx.value(f"compute{elements.capitalize()}"):

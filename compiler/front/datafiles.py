@@ -78,10 +78,11 @@ def default_data_roots(scene_dir: Path, data_roots: Sequence[Path] = ()) -> list
         candidates.append(auto)
         if auto.name == "examples" and (auto.parent / "share" / "mesh").is_dir():
             candidates.append(auto.parent / "share")
-    else:  # a plugin's scene inside a SOFA tree (applications/plugins/X/examples): SOFA's share/, examples/
-        tree = _sofa_tree(real_path(Path(scene_dir)))
-        if tree is not None:
-            candidates.extend((tree / "share", tree / "examples"))
+    # Inside a SOFA tree (a plugin's applications/plugins/X/examples, or a folder of examples/ with
+    # its own mesh/ such as Component/SceneUtility): SOFA's DataRepository still has share/ and examples/.
+    tree = _sofa_tree(real_path(Path(scene_dir)))
+    if tree is not None:
+        candidates.extend((tree / "share", tree / "examples"))
     roots: list[Path] = []
     for candidate in candidates:
         try:

@@ -8,9 +8,9 @@ extension     format                                                         rea
 ``.obj``      Wavefront OBJ (``v``, ``vn``, ``vt``, ``f``, ``l``)            own, vectorised
 ``.msh``      Gmsh format 1 (``$NOD``/``$ELM``) and format 2 ASCII           own
 ``.msh``      Gmsh format 2 binary, format 4 (ASCII or binary)               meshio (lazy import)
-``.vtu``      VTK XML UnstructuredGrid, ASCII data arrays                    own, hardened lxml
-``.vtk``      legacy VTK ASCII (UNSTRUCTURED_GRID, POLYDATA), version < 5    own
-``.vtk``      legacy VTK binary or version 5.x                               meshio (lazy import)
+``.vtu/.vtp`` VTK XML UnstructuredGrid or PolyData, ASCII data arrays       own, hardened lxml
+``.vtk``      legacy VTK ASCII or binary (UNSTRUCTURED_GRID, POLYDATA), < 5   own
+``.vtk``      legacy VTK version 5.x                                         meshio (lazy import)
 ``.sph``      SOFA sphere list (``sphe id x y z r``)                         own
 ``.stl``      STL, ASCII (``solid``) or binary                               own (MeshSTLLoader)
 ``.rigid``    Xsp 3.0 rigid-body file (mass, volume, inertia, center)        own (read_rigid)
@@ -76,7 +76,7 @@ __all__ = [
 ]
 
 #: Extensions :func:`read_mesh` and :func:`count_points` understand.
-SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".msh", ".vtu", ".vtk", ".sph", ".stl")
+SUPPORTED_EXTENSIONS: tuple[str, ...] = (".obj", ".msh", ".vtu", ".vtp", ".vtk", ".sph", ".stl")
 
 #: Files larger than this are refused (a guard against reading a wrong path into memory).
 MAX_FILE_BYTES = 1 << 30
@@ -323,10 +323,8 @@ def _read_mesh_cached(path: str, mtime_ns: int, size: int, handle_seams: bool = 
             return _parse_obj(_read_text(path), handle_seams)
         if suffix == ".msh":
             return _read_gmsh(path)
-        if suffix == ".vtu":
-            return _parse_vtu(_read_bytes(path))
-        if suffix == ".vtk":
-            return _read_vtk(path)
+        if suffix in (".vtu", ".vtp", ".vtk"):  # which reader: the first lines say, as in SOFA
+            return _parse_vtu(_read_bytes(path)) if _is_vtk_xml(path) else _read_vtk(path)
         if suffix == ".stl":
             return _parse_stl(_read_bytes(path))
         spheres = _parse_sph(_read_text(path))
@@ -345,10 +343,8 @@ def _count_points_cached(path: str, mtime_ns: int, size: int) -> int:
             return len(_OBJ_VERTEX_RE.findall(_read_text(path)))
         if suffix == ".msh":
             return _count_gmsh(path)
-        if suffix == ".vtu":
-            return _count_vtu(_read_text(path))
-        if suffix == ".vtk":
-            return _count_vtk(path)
+        if suffix in (".vtu", ".vtp", ".vtk"):  # which reader: the first lines say, as in SOFA
+            return _count_vtu(_read_text(path)) if _is_vtk_xml(path) else _count_vtk(path)
         if suffix == ".stl":
             return _parse_stl(_read_bytes(path)).n_points
         text = _read_text(path)
@@ -443,7 +439,8 @@ def _parse_obj(text: str, handle_seams: bool = False) -> Mesh:
     """Wavefront OBJ, as SOFA's MeshOBJLoader reads it.
 
     - ``v x y z [...]`` positions (extra values such as ``w`` or vertex colours are ignored);
-      ``vn`` normals; ``vt u [v [w]]`` texture coordinates.
+      ``vn`` normals; ``vt u v [w]`` texture coordinates. A line with fewer numbers takes the
+      missing ones from the previous v/vn/vt line, as SOFA's stream does (:func:`_obj_stream_vectors`).
     - ``f`` and ``l`` corners ``v``, ``v/t``, ``v//n``, ``v/t/n``; indices are 1-based, negative
       ones count back from the last element of that kind defined so far.
     - A 2-corner ``f`` or ``l`` is an edge stored as (min, max); a 3-corner ``f`` a triangle; a
@@ -458,7 +455,7 @@ def _parse_obj(text: str, handle_seams: bool = False) -> Mesh:
       the ``v`` (0-based) each point comes from (SOFA's ``vertPosIdx``).
     - ``mtllib``, ``usemtl``, ``g``, ``o``, ``s``, comments and unknown keywords are ignored.
     - A ``vt``/``vn`` index outside the defined ones is ignored with a note (as in SOFA).
-    Errors (with line): too few or non-numeric values, index 0, a vertex index outside the
+    Errors (with line): non-numeric values, index 0, a vertex index outside the
     defined vertices (SOFA would build invalid topology).
     """
     _reject_binary(text)
@@ -504,9 +501,12 @@ def _parse_obj(text: str, handle_seams: bool = False) -> Mesh:
         wanted = ("f", "l") if kind == "face" else (kind,)
         return [number for name, number in kinds() if name in wanted][k]
 
-    positions = _obj_vectors(v_bodies, 3, 3, "vertex", lambda k: line_of("v", k))
-    normals_list = _obj_vectors(vn_bodies, 3, 3, "normal", lambda k: line_of("vn", k))
-    texcoords_list = _obj_vectors(vt_bodies, 2, 1, "texture coordinate", lambda k: line_of("vt", k))
+    try:
+        positions = _obj_vectors(v_bodies, 3, 3, "vertex", lambda k: line_of("v", k))
+        normals_list = _obj_vectors(vn_bodies, 3, 3, "normal", lambda k: line_of("vn", k))
+        texcoords_list = _obj_vectors(vt_bodies, 2, 2, "texture coordinate", lambda k: line_of("vt", k))
+    except _ShortObjLine:
+        positions, normals_list, texcoords_list = _obj_stream_vectors(lines)
     n_v = positions.shape[0]
     notes: list[str] = [] if n_v else ["no vertices"]
     if not f_bodies:
@@ -628,6 +628,41 @@ def _obj_counts_before_faces(lines: list[str]) -> np.ndarray:
     return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
+class _ShortObjLine(MeshError):
+    """A v, vn or vt line with fewer numbers than its kind has (read by :func:`_obj_stream_vectors`)."""
+
+
+def _obj_stream_vectors(lines: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, normals and texture coordinates as SOFA's MeshOBJLoader reads a file whose v, vn
+    or vt lines are short (share/mesh/raptorTemperature.obj stores one number a vertex): every such
+    line is ``values >> result[0] >> result[1] >> result[2]`` (two for vt) into one Vec3 declared
+    before the loop, and an extraction past the end of the line leaves its number as it was. So a
+    missing number is the one the previous v/vn/vt line left there (0 before the first)."""
+    result = [0.0, 0.0, 0.0]
+    read: dict[str, list[list[float]]] = {"v": [], "vn": [], "vt": []}
+    names = {"v": "vertex", "vn": "normal", "vt": "texture coordinate"}
+    for number, line in enumerate(lines, start=1):
+        kind, space, body = line.partition(" ")
+        if kind not in read or not space:  # a bare "v" is no vertex here either (_parse_obj)
+            continue
+        width = 2 if kind == "vt" else 3
+        for j, token in enumerate(body.split("#", 1)[0].split()[:width]):
+            try:
+                result[j] = float(token)
+            except ValueError:
+                raise MeshError(f"{names[kind]}: expected a number, found {token!r}", number) from None
+        read[kind].append(result[:width])
+    positions, normals, texcoords = (
+        np.array(read[k], dtype=np.float64).reshape(-1, w) for k, w in (("v", 3), ("vn", 3), ("vt", 2))
+    )
+    for kind, values in (("v", positions), ("vn", normals), ("vt", texcoords)):
+        if not np.isfinite(values).all():
+            row = int(np.nonzero(~np.isfinite(values).all(axis=1))[0][0])
+            number = [n for n, line in enumerate(lines, start=1) if line.partition(" ")[0] == kind][row]
+            raise MeshError(f"{names[kind]}: non-finite number", number)
+    return positions, normals, texcoords
+
+
 def _obj_vectors(bodies: list[str], width: int, minimum: int, what: str, line_of: Any) -> np.ndarray:
     if not bodies:
         return np.zeros((0, width))
@@ -647,7 +682,7 @@ def _obj_vectors(bodies: list[str], width: int, minimum: int, what: str, line_of
         for k, body in enumerate(bodies):
             tokens = body.split("#", 1)[0].split()
             if len(tokens) < minimum:
-                raise MeshError(f"{what}: expected {minimum} numbers, found {len(tokens)}", line_of(k))
+                raise _ShortObjLine(f"{what}: expected {minimum} numbers, found {len(tokens)}", line_of(k))
             for j, token in enumerate(tokens[:width]):
                 try:
                     values[k, j] = float(token)
@@ -1289,7 +1324,12 @@ def _vtu_parser() -> Any:
 
 
 def _parse_vtu(data: bytes) -> Mesh:
-    """VTK XML UnstructuredGrid with ASCII data arrays (``format="ascii"``).
+    """VTK XML UnstructuredGrid or PolyData with ASCII data arrays (``format="ascii"``).
+
+    PolyData as SOFA's XMLVTKReader::loadPolydata: only ``Points``, ``Polys`` and ``PointData``
+    (Verts, Lines and Strips are not read); a polygon of 2, 3, 4 points is an edge, a triangle, a
+    quad, a larger one a polyline (which sofac does not keep). SOFA splits the connectivity by
+    text lines when ``offsets`` comes before it; sofac always follows the offsets.
 
     Binary or appended data is refused ("binary VTU not supported"). Several ``Piece`` elements
     are concatenated (SOFA keeps only the last one). A point-data array named ``Normals`` with 3
@@ -1310,18 +1350,20 @@ def _parse_vtu(data: bytes) -> Mesh:
     if root.tag != "VTKFile":
         raise MeshError(f"not a VTK XML file (root element <{root.tag}>)", root.sourceline)
     file_type = root.get("type")
-    if file_type != "UnstructuredGrid":
+    if file_type not in ("UnstructuredGrid", "PolyData"):
         raise MeshError(
-            f"VTK XML type {file_type!r} is not supported (only UnstructuredGrid)", root.sourceline
+            f"VTK XML type {file_type!r} is not supported (only UnstructuredGrid and PolyData)",
+            root.sourceline,
         )
+    poly = file_type == "PolyData"
     if root.find("AppendedData") is not None:
         raise MeshError(
             "binary VTU not supported (AppendedData); save the file with ASCII data arrays",
             root.find("AppendedData").sourceline,
         )
-    grid = root.find("UnstructuredGrid")
+    grid = root.find(file_type)
     if grid is None:
-        raise MeshError("no <UnstructuredGrid> element", root.sourceline)
+        raise MeshError(f"no <{file_type}> element", root.sourceline)
     pieces = grid.findall("Piece")
     if not pieces:
         raise MeshError("no <Piece> element", grid.sourceline)
@@ -1332,7 +1374,7 @@ def _parse_vtu(data: bytes) -> Mesh:
     offset = 0
     for piece in pieces:
         n_points = _vtu_int_attr(piece, "NumberOfPoints")
-        n_cells = _vtu_int_attr(piece, "NumberOfCells")
+        n_cells = _vtu_int_attr(piece, "NumberOfPolys" if poly else "NumberOfCells")
         points_el = piece.find("Points/DataArray")
         if points_el is None:
             if n_points:
@@ -1345,19 +1387,23 @@ def _parse_vtu(data: bytes) -> Mesh:
             points = _vtu_array(points_el, np.float64, 3 * n_points).reshape(n_points, 3)
             if not np.isfinite(points).all():
                 raise MeshError("non-finite point coordinate", points_el.sourceline)
-        arrays = {el.get("Name"): el for el in piece.findall("Cells/DataArray")}
+        section = "Polys" if poly else "Cells"
+        arrays = {el.get("Name"): el for el in piece.findall(f"{section}/DataArray")}
         if n_cells:
-            for needed in ("connectivity", "offsets", "types"):
+            for needed in ("connectivity", "offsets") if poly else ("connectivity", "offsets", "types"):
                 if needed not in arrays:
-                    raise MeshError(f'no <Cells><DataArray Name="{needed}">', piece.sourceline)
+                    raise MeshError(f'no <{section}><DataArray Name="{needed}">', piece.sourceline)
             conn = _vtu_array(arrays["connectivity"], np.int64, None)
             ends = _vtu_array(arrays["offsets"], np.int64, n_cells)
-            types = _vtu_array(arrays["types"], np.int64, n_cells)
             offsets = np.concatenate([[0], ends])
             if (np.diff(offsets) < 0).any() or offsets[-1] != conn.size:
                 raise MeshError(
                     "cell offsets do not match the connectivity array", arrays["offsets"].sourceline
                 )
+            if poly:  # XMLVTKReader::parsePolysIndices: the type from the size, polylines past 4
+                types = np.select([np.diff(offsets) == k for k in (2, 3, 4)], [3, 5, 9], default=4)
+            else:
+                types = _vtu_array(arrays["types"], np.int64, n_cells)
             cells, cell_notes = _vtk_cells(types, offsets, conn, n_points, arrays["connectivity"].sourceline)
             notes.extend(cell_notes)
             for name, block in cells.items():
@@ -1441,6 +1487,15 @@ def _count_vtu(text: str) -> int:
 _VTK_KEYWORD_RE = re.compile(r"^[ \t]*([A-Za-z_][A-Za-z_0-9]*)([^\n]*)$", re.M)
 
 
+def _is_vtk_xml(path: str) -> bool:
+    """MeshVTKLoader::detectFileType: an XML file when the first line holds ``<?xml`` or
+    ``<VTKFile``, whatever the extension (share/mesh/Bunny.vtk is XML). (SOFA also wants
+    ``<VTKFile`` on the second line after ``<?xml``, else reads nothing; the XML reader says why.)"""
+    with open(path, "rb") as handle:
+        first = handle.readline()
+    return b"<?xml" in first or b"<VTKFile" in first
+
+
 def _vtk_header(path: str) -> tuple[str, str]:
     """(version string, 'ASCII'|'BINARY') from the first three lines."""
     with open(path, "rb") as handle:
@@ -1460,8 +1515,10 @@ def _vtk_header(path: str) -> tuple[str, str]:
 def _read_vtk(path: str) -> Mesh:
     version, encoding = _vtk_header(path)
     major = version.split(".")[0]
-    if encoding == "BINARY" or (major.isdigit() and int(major) >= 5):
+    if major.isdigit() and int(major) >= 5:
         return _read_with_meshio(path, "vtk")
+    if encoding == "BINARY":
+        return _parse_vtk_binary(_read_bytes(path))
     return _parse_vtk_ascii(_read_text(path))
 
 
@@ -1508,12 +1565,7 @@ def _parse_vtk_ascii(text: str) -> Mesh:
         body_end = sections[index + 1].start() if index + 1 < len(sections) else len(text)
         body = text[m.end() : body_end]
         if keyword == "DATASET":
-            dataset = args[0].upper() if args else ""
-            if dataset not in ("UNSTRUCTURED_GRID", "POLYDATA"):
-                raise MeshError(
-                    f"VTK dataset {dataset or '?'} is not supported (only UNSTRUCTURED_GRID and POLYDATA)",
-                    line,
-                )
+            dataset = _vtk_dataset(args, line)
         elif keyword in ("POINT_DATA", "CELL_DATA"):
             mode = keyword
         elif mode != "geometry":
@@ -1533,6 +1585,18 @@ def _parse_vtk_ascii(text: str) -> Mesh:
         elif keyword == "CELL_TYPES":
             n = _vtk_count(args, 0, keyword, line)
             cell_types = _vtk_body(body, n, np.int64, keyword, line)
+    return _vtk_mesh(dataset, points, lists, cell_types, normals)
+
+
+def _vtk_mesh(
+    dataset: str | None,
+    points: np.ndarray | None,
+    lists: dict[str, tuple[np.ndarray, int, int]],
+    cell_types: np.ndarray | None,
+    normals: np.ndarray | None,
+) -> Mesh:
+    """The mesh of a legacy file's sections, ASCII or binary: ``lists`` maps CELLS, VERTICES,
+    LINES, POLYGONS, TRIANGLE_STRIPS to (count-prefixed values, cell count, line)."""
     if dataset is None:
         raise MeshError("no DATASET line", None)
     if points is None:
@@ -1577,6 +1641,16 @@ def _parse_vtk_ascii(text: str) -> Mesh:
     if normals is not None:
         mesh_kw["normals"] = normals
     return Mesh(positions=points, notes=tuple(notes), **mesh_kw)
+
+
+def _vtk_dataset(args: list[str], line: int) -> str:
+    """The kind a ``DATASET`` line names, one of those SOFA's legacy reader takes."""
+    dataset = args[0].upper() if args else ""
+    if dataset not in ("UNSTRUCTURED_GRID", "POLYDATA"):
+        raise MeshError(
+            f"VTK dataset {dataset or '?'} is not supported (only UNSTRUCTURED_GRID and POLYDATA)", line
+        )
+    return dataset
 
 
 def _vtk_count(args: list[str], position: int, keyword: str, line: int) -> int:
@@ -1630,6 +1704,91 @@ def _vtk_unprefix(flat: np.ndarray, n: int, keyword: str, line: int) -> tuple[np
     sizes = np.diff(starts) - 1
     offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     return flat[keep], offsets
+
+
+_VTK_BINARY_TYPES = {
+    "float": "f4", "double": "f8", "int": "i4", "unsigned_int": "u4", "long": "i8",
+    "unsigned_long": "u8", "short": "i2", "unsigned_short": "u2", "char": "i1", "unsigned_char": "u1",
+}  # fmt: skip
+
+
+def _parse_vtk_binary(data: bytes) -> Mesh:
+    """Legacy VTK BINARY (versions up to 4.2), as SOFA's LegacyVTKReader reads it: after each
+    ``POINTS n type``, ``CELLS``/``POLYGONS``/``LINES``/... ``n size`` or ``CELL_TYPES n`` line come
+    the raw numbers (``int`` for the cell lists). SOFA reads them in the machine's byte order and
+    swaps them all when the first cell count (or cell type) reads larger than its swap: so
+    big-endian, VTK's order, for any real file. It stops at the first POINT_DATA or CELL_DATA
+    (sofac: no normals from a binary file) and, as SOFA, once points and polygons are read."""
+    position = 0
+    line_number = 0
+
+    def next_line() -> str:
+        nonlocal position, line_number
+        end = data.find(b"\n", position)
+        end = len(data) if end < 0 else end
+        text = data[position:end].decode("latin-1").rstrip("\r")
+        position = end + 1
+        line_number += 1
+        return text
+
+    for _ in range(3):  # version, title, BINARY
+        next_line()
+    dataset: str | None = None
+    raw: dict[str, tuple[bytes, str, int, int]] = {}  # keyword -> (bytes, dtype, cell count, line)
+    while position < len(data):
+        text = next_line()
+        if not text.strip():
+            continue
+        words = text.split()
+        keyword, args, line = words[0].upper(), words[1:], line_number
+        if keyword == "DATASET":
+            dataset = _vtk_dataset(args, line)
+            continue
+        if keyword in ("POINT_DATA", "CELL_DATA"):
+            break
+        if keyword == "POINTS":
+            count = 3 * _vtk_count(args, 0, keyword, line)
+            name = args[1].lower() if len(args) > 1 else ""
+            if name not in _VTK_BINARY_TYPES:
+                raise MeshError(f"POINTS: unknown number type {name or '?'}", line)
+            dtype, cells = _VTK_BINARY_TYPES[name], 0
+        elif keyword in ("CELLS", "VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS"):
+            cells, count, dtype = _vtk_count(args, 0, keyword, line), _vtk_count(args, 1, keyword, line), "i4"
+        elif keyword == "CELL_TYPES":
+            count, dtype, cells = _vtk_count(args, 0, keyword, line), "i4", 0
+        else:
+            raise MeshError(f"unexpected {keyword!r} in a binary VTK file", line)
+        size = count * int(dtype[1])
+        if position + size > len(data):
+            raise MeshError(f"{keyword}: {count} values announced, the file ends before (truncated?)", line)
+        raw[keyword] = (data[position : position + size], dtype, cells, line)
+        position += size
+        if data[position : position + 1] == b"\n":  # the end of the data's line (not a line of its own)
+            position += 1
+        if "POINTS" in raw and "POLYGONS" in raw:
+            break
+    # SOFA's test (on a little-endian machine): swap when the first int reads larger swapped back.
+    first = raw.get("POLYGONS") or (raw.get("CELL_TYPES") if "CELLS" in raw else None)
+    head = first[0][:4] if first is not None else b""
+    swapped = len(head) == 4 and int.from_bytes(head, "little") > int.from_bytes(head, "big")
+    order = ">" if swapped else "<"
+
+    def values(keyword: str) -> np.ndarray:
+        block, dtype, _, _ = raw[keyword]
+        return np.frombuffer(block, dtype=order + dtype if dtype[1] != "1" else dtype)
+
+    points = None
+    if "POINTS" in raw:
+        points = values("POINTS").astype(np.float64).reshape(-1, 3)
+        if not np.isfinite(points).all():
+            raise MeshError("non-finite point coordinate", raw["POINTS"][3])
+    lists = {
+        keyword: (values(keyword).astype(np.int64), raw[keyword][2], raw[keyword][3])
+        for keyword in ("CELLS", "VERTICES", "LINES", "POLYGONS", "TRIANGLE_STRIPS")
+        if keyword in raw
+    }
+    cell_types = values("CELL_TYPES").astype(np.int64) if "CELL_TYPES" in raw else None
+    return _vtk_mesh(dataset, points, lists, cell_types, None)
 
 
 # --------------------------------------------------------------------------------------------

@@ -91,6 +91,7 @@ class Planner:
         self.guarded: list[CheckedComponent] = []  # collision models that could touch (ContactGuard)
         self.guard: ContactGuard | None = None
         self.colliding = False  # contacts compiled (plan/contacts.py) rather than guarded
+        self.contact_refusal = ""  # why the scene's contacts are not compiled (then guarded)
         self.collisions: list[Collision] = []
         self.pruned: dict[str, str] = {}  # parameter key -> why the code using it was left out
         self.refused: set[int] = set()  # components whose one refusal says all (no follow-up E222)
@@ -206,8 +207,8 @@ class Planner:
         # Models of different nodes could touch: guarded (the step stops before a contact), unless
         # a model may touch itself, which a box cannot rule out.
         guard = contacts and not any(self.value(c.component, "selfCollision") for c in models)
-        refusal = contact_setup_refusal(self) if contacts else ""
-        self.colliding = contacts and not refusal
+        self.contact_refusal = contact_setup_refusal(self) if contacts else ""
+        self.colliding = contacts and not self.contact_refusal
         if contacts:
             for checked, why in contact_response_refusals(self):
                 self.unsupported(checked, why, attribute="contactResponse")
@@ -225,7 +226,7 @@ class Planner:
                     self.ignored.append((checked.component, "inactive collision model"))
             elif checked.category is Category.COLLISION_MODEL and contacts:
                 # a model may touch itself (no box can rule it out), and this setup is not compiled
-                self.unsupported(checked, f"self-collision: {refusal}")
+                self.unsupported(checked, f"self-collision: {self.contact_refusal}")
             elif checked.category is Category.TOPOLOGICAL_MAPPING and self._feeds_a_state(checked):
                 self.unsupported(checked, "its output topology sizes a MechanicalObject; not evaluated yet")
             elif checked.category is Category.COLLISION_MODEL:
@@ -239,6 +240,23 @@ class Planner:
                 self.unsupported(checked, f"sofac cannot compile {spec.name} yet")
             elif checked.category not in _STEP_CATEGORIES:
                 self.ignored.append((checked.component, f"{checked.category.value}: no part in the step"))
+
+    def _warn_contact_guard(self) -> None:
+        """What a run may stop on (ContactNotCompiled), said by ``sofac check`` too: at the contact
+        manager (else the pipeline, else the first guarded model), with why contacts are not compiled."""
+        assert self.guard is not None
+        roles = [c for c in self.checked if c.category is Category.COLLISION_PIPELINE]
+        manager = next((c for c in roles if c.spec and c.spec.variant is Variant.CONTACT_MANAGER), None)
+        where = (manager or (roles[0] if roles else self.guarded[0])).component
+        models = len(self.guard.models)
+        self.diags.add(
+            "W234",
+            where.loc,
+            f"{models} collision models of this scene could touch and their contact response is not "
+            f"compiled ({self.contact_refusal}): a run stops with ContactNotCompiled before the first "
+            "step in which two of them come within reach; a run that ends without it had no contact",
+            "`sofac inspect --effects` lists the guarded models",
+        )
 
     def _feeds_a_state(self, checked: CheckedComponent) -> bool:
         """Its output topology is what sizes a MechanicalObject (whose points are then unknown)."""
@@ -395,6 +413,8 @@ class Planner:
             if group.routed:
                 route_through_mappings(self, group)
         self.guard = contact_guard(self)
+        if self.guard is not None:
+            self._warn_contact_guard()
         if self.prune:
             leave_unread_out(self, list(groups.values()))
         if self.interactive:

@@ -635,10 +635,13 @@ class MassValue(FieldType):
 
 @dataclass(frozen=True)
 class Link(FieldType):
-    """A link to another object (``@../dofs``): ``target`` names the category expected."""
+    """A link to another object (``@../dofs``): ``target`` names the category expected.
+    ``optional``: the component works without it, and SOFA only warns when the path finds nothing
+    (a warning here too, W233), else a broken link stops the component in SOFA (E213)."""
 
     kind = "link"
     target: str = "object"
+    optional: bool = False
 
     def parse(self, text: str) -> str:
         return text.strip()

@@ -98,6 +98,19 @@ def lower_bilateral(planner: Planner, checked: CheckedComponent, owner: dict[int
     if pairs == 0:
         planner.ignored.append((component, "no pair of points: no constraint row"))
         return
+    for name, points, state in (
+        ("first_point", first_points, states[0]),
+        ("second_point", second_points, states[1]),
+    ):
+        # (indices past a state of known size are the checker's E218: here its positions are unknown)
+        if int(np.max(points[:pairs])) >= state.size:
+            planner.unsupported(
+                checked,
+                f"{name} names point {int(np.max(points[:pairs]))} of {state.component.label!r}, whose "
+                "positions sofac does not know at compile time (an engine output it does not evaluate)",
+                attribute=name,
+            )
+            return
     first_row = phase.capacity
     phase.capacity += 3 * pairs
     if phase.kept is None:

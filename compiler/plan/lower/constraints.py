@@ -33,7 +33,12 @@ from sofac.plan.ir import (
     origin_of,
 )
 from sofac.plan.lower.constraint_context import ConstraintLowering, ConstraintProblem
-from sofac.plan.lower.constraint_solve import solve_constraints, solver_refusal, uncoupled_correction
+from sofac.plan.lower.constraint_solve import (
+    solve_constraints,
+    solver_refusal,
+    uncoupled_correction,
+    values_of,
+)
 from sofac.plan.lower.corrections import (
     carry_through_linear_mappings,
     carry_through_rigid_mappings,
@@ -275,10 +280,14 @@ def _phase_with_rows(planner: Planner, lowering: ConstraintLowering) -> None:
             entries = []
         if entries is None or not _correction_compiled(planner, correction, lagrangian is not None):
             continue
-        J = _jacobian_rows(planner, lowering, correction.state, entries)
-        if correction.kind == Variant.LINEAR_SOLVER:
+        if correction.kind == Variant.LINEAR_SOLVER:  # its A is projected: held DOFs get no response
+            J = _jacobian_rows(planner, lowering, correction.state, entries)
             linear_solver_correction(planner, lowering, correction, body, J, lagrangian is not None, problem)
             continue
+        kept = _without_held_dofs(planner, lowering, correction, entries)
+        if kept is None:
+            continue
+        J = _jacobian_rows(planner, lowering, correction.state, kept)
         item = uncoupled_correction(planner, lowering, correction, body, J, problem, lagrangian is not None)
         if item is not None:
             uncoupled.append(item)
@@ -377,6 +386,51 @@ def _violations(lowering: ConstraintLowering, dfree: Buffer, free_x: dict[str, B
     for stopper in lowering.stoppers:
         violation = call("stopper_violation", dfree, stopper.row, stopper.state.x, stopper.index)
         phase.violation.append(Op(stopper.origin, [violation]))
+
+
+def _without_held_dofs(
+    planner: Planner,
+    lowering: ConstraintLowering,
+    correction: Correction,
+    entries: list[tuple[int, int, tuple[float, ...]]],
+) -> list[tuple[int, int, tuple[float, ...]]] | None:
+    """GenericConstraintSolver::buildSystem clears the constraint matrix's columns of the DOFs a
+    projective constraint holds (projectJacobianMatrix) before W is built, so an uncoupled
+    correction neither counts their compliance nor moves them: a FixedProjectiveConstraint's DOFs
+    leave the rows here. Rows on the DOFs of another projective constraint (LinearMovement's only
+    while between its key times, partial ones per axis), or computed on held frames (RigidMapping's
+    rows), are refused (None)."""
+    state = correction.state
+    computed = lowering.computed_rows.get(state.ident)
+    frames: set[int] = set()
+    if computed is not None:  # RigidMapping's rows: (count, rows, starts, dofs, values)
+        dof_buffer = computed.fields[3]
+        assert isinstance(dof_buffer, Buffer)
+        frames = set(np.asarray(dof_buffer.initial, dtype=np.int64).tolist())
+    dofs = {dof for _, dof, _ in entries} | frames
+    for checked in planner.checked:
+        if checked.category is not Category.PROJECTIVE_CONSTRAINT or planner.state_of(checked) is not state:
+            continue
+        assert checked.spec is not None
+        component = checked.component
+        fix_all = checked.spec.field("fixAll") is not None and bool(planner.value(component, "fixAll"))
+        held = (
+            set(range(state.size))
+            if fix_all
+            else set(values_of(planner, component, "indices", np.int64).tolist())
+        )
+        if checked.spec.name == "FixedProjectiveConstraint" and not frames & held:
+            entries = [entry for entry in entries if entry[1] not in held]
+        elif dofs & held or checked.spec.field("indices") is None:
+            assert correction.checked is not None
+            planner.unsupported(
+                correction.checked,
+                f"constraint rows on DOFs {checked.spec.name} {component.label!r} holds: SOFA removes "
+                "them from the constraint matrix while it projects them; not compiled yet for "
+                "UncoupledConstraintCorrection",
+            )
+            return None
+    return entries
 
 
 def _correction_compiled(planner: Planner, correction: Correction, contacts: bool) -> bool:

@@ -230,7 +230,10 @@ REST_SHAPE_SPRINGS_FORCE_FIELD = ComponentSpec(
             valid=MUST_BE_NONNEGATIVE,
         ),
         FieldSpec("pivot_points", Reals(multiple=3), doc="pivot points used instead of the rigid centres"),
-        FieldSpec("external_rest_shape", Link("state"), doc="state whose positions are the anchors"),
+        # RestShapeSpringsForceField::init: a path to nothing is a warning, the own rest state is used
+        FieldSpec(
+            "external_rest_shape", Link("state", optional=True), doc="state whose positions are the anchors"
+        ),
         FieldSpec("external_points", Ints(), doc="anchor indices in external_rest_shape"),
         FieldSpec("recompute_indices", Bool(), True, "recompute the indices at init"),
         FieldSpec("activeDirections", Bools(), doc="per-coordinate mask of active directions (default: all)"),

@@ -99,7 +99,9 @@ MESH_OBJ_LOADER = _mesh_loader(
     former=("MeshObjLoader",),
 )
 MESH_GMSH_LOADER = _mesh_loader("MeshGmshLoader", "Gmsh .msh (format 1, 2 ASCII, 4).")
-MESH_VTK_LOADER = _mesh_loader("MeshVTKLoader", "Legacy VTK (.vtk) and XML UnstructuredGrid (.vtu).")
+MESH_VTK_LOADER = _mesh_loader(
+    "MeshVTKLoader", "Legacy VTK (.vtk) and XML UnstructuredGrid or PolyData (.vtu, .vtp)."
+)
 MESH_STL_LOADER = _mesh_loader(
     "MeshSTLLoader",
     "STL triangles, ASCII or binary (vertices merged by exact equality, in order of first appearance).",
