@@ -17,8 +17,7 @@ def _outputs(tmp_path: Path, attributes: str) -> dict[str, np.ndarray]:
     assert diags.errors == []
     grid = next(iter(checked.scene.root.components()))
     return {
-        kind: np.asarray(checked.value(grid, kind))
-        for kind in ("position", "edges", "triangles", "quads")
+        kind: np.asarray(checked.value(grid, kind)) for kind in ("position", "edges", "triangles", "quads")
     }
 
 

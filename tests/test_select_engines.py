@@ -71,8 +71,12 @@ def test_subset_topology_local_indices(tmp_path: Path) -> None:
     local = {1: 0, 5: 1, 0: 2, 4: 3, 2: 2, 3: 3, 6: 4, 7: 5}
     assert _value(checked, subset, "nbrborder") == [[2]]
     assert _value(checked, subset, "indices") == [[1], [5], [0], [4]]
-    assert _value(checked, subset, "trianglesInROI", 3) == [[local[i] for i in t] for t in STRIP_TRIANGLES[:2]]
-    assert _value(checked, subset, "trianglesOutROI", 3) == [[local[i] for i in t] for t in STRIP_TRIANGLES[2:]]
+    assert _value(checked, subset, "trianglesInROI", 3) == [
+        [local[i] for i in t] for t in STRIP_TRIANGLES[:2]
+    ]
+    assert _value(checked, subset, "trianglesOutROI", 3) == [
+        [local[i] for i in t] for t in STRIP_TRIANGLES[2:]
+    ]
     points = np.array(STRIP.split(), dtype=float).reshape(-1, 3)
     assert _value(checked, subset, "pointsInROI", 3) == points[[1, 5, 0, 4]].tolist()
     assert _value(checked, subset, "pointsOutROI", 3) == points[[1, 5, 2, 3, 6, 7]].tolist()

@@ -102,7 +102,10 @@ def test_gmsh_loader_creates_subelements_unless_told_not_to(tmp_path: Path) -> N
         "$NOD\n4\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 1 1 0\n$ENDNOD\n"
         "$ELM\n3\n1 1 0 0 2 2 4\n2 2 0 0 3 1 2 3\n3 2 0 0 3 3 2 4\n$ENDELM\n"
     )
-    for flag, expected in (("", [[1, 3], [1, 2], [2, 0], [0, 1], [3, 2]]), ('createSubelements="0"', [[1, 3]])):
+    for flag, expected in (
+        ("", [[1, 3], [1, 2], [2, 0], [0, 1], [3, 2]]),
+        ('createSubelements="0"', [[1, 3]]),
+    ):
         path = tmp_path / "load.scn"
         path.write_text(f'<Node name="root"><MeshGmshLoader name="l" filename="two.msh" {flag}/></Node>')
         checked, diags = check_file(path)
@@ -121,7 +124,9 @@ def test_the_tree_scene_gives_the_square_border(tmp_path: Path) -> None:
     container = next(c for c in checked.scene.root.components() if c.type_name == "EdgeSetTopologyContainer")
     edges = np.asarray(checked.value(container, "edges")).reshape(-1, 2)
     assert len(edges) == 96 and edges[0].tolist() == [0, 4] and edges[-1].tolist() == [95, 0]
-    triangles = next(c for c in checked.scene.root.components() if c.type_name == "TriangleSetTopologyContainer")
+    triangles = next(
+        c for c in checked.scene.root.components() if c.type_name == "TriangleSetTopologyContainer"
+    )
     cells = np.asarray(checked.value(triangles, "triangles")).reshape(-1, 3)
     counts: dict[tuple[int, int], int] = {}
     for t in cells.tolist():
