@@ -82,13 +82,26 @@ def test_subset_topology_local_indices(tmp_path: Path) -> None:
     assert _value(checked, subset, "pointsOutROI", 3) == points[[1, 5, 2, 3, 6, 7]].tolist()
 
 
-def test_subset_topology_refuses_edges_its_topology_would_compute(tmp_path: Path) -> None:
-    path = tmp_path / "engine.scn"
+def test_subset_topology_reads_the_edges_a_triangle_container_computes(tmp_path: Path) -> None:
+    """A TriangleSetTopologyContainer given triangles only computes its edges when it initialises
+    (createEdgesInTriangleArray: (t[j+1], t[j+2]) first met): those are the engine's."""
     triangles = " ".join(str(i) for t in STRIP_TRIANGLES for i in t)
+    body = (
+        f'<MechanicalObject name="dofs" position="{STRIP}"/>\n'
+        f'<TriangleSetTopologyContainer name="mesh" triangles="{triangles}"/>\n'
+        '<SubsetTopology name="subset" box="-0.5 -0.5 -1  1.5 1.5 1"/>'
+    )
+    checked, subset = _engine(tmp_path, body, "SubsetTopology")
+    # edges of 0 1 5, then 0 5 4: (1 5) (5 0) (0 1) (5 4) (4 0); the rest have a corner outside
+    assert _value(checked, subset, "edgesInROI", 2) == [[1, 5], [5, 0], [0, 1], [5, 4], [4, 0]]
+
+
+def test_subset_topology_refuses_edges_a_volume_container_would_compute(tmp_path: Path) -> None:
+    path = tmp_path / "engine.scn"
     path.write_text(
         '<Node name="root"><DefaultAnimationLoop/>\n'
         f'<MechanicalObject name="dofs" position="{STRIP}"/>\n'
-        f'<TriangleSetTopologyContainer name="mesh" triangles="{triangles}"/>\n'
+        '<TetrahedronSetTopologyContainer name="mesh" tetrahedra="0 1 4 5"/>\n'
         '<SubsetTopology name="subset"/>\n</Node>'
     )
     _, diags = checker.check_file(path)

@@ -694,7 +694,8 @@ _HIGHER_CELLS = {
 def _engine_cells(ctx: Context, name: str, corners: int, *, from_topology: bool) -> np.ndarray:
     """An engine's element input: its own (given, linked, or by src=), else (``from_topology``)
     the field of the topology in its node or above, as SOFA's init links them. A topology that is
-    not given them computes them when it initialises (from its larger elements): refused."""
+    not given them computes them when it initialises (from its larger elements): a
+    TriangleSetTopologyContainer's edges are computed here as it does, the others refused."""
     value = ctx.value(name)
     if value is not None or ctx.is_set(name) or not from_topology:
         return np.asarray(value if value is not None else [], dtype=np.int64).reshape(-1, corners)
@@ -704,6 +705,10 @@ def _engine_cells(ctx: Context, name: str, corners: int, *, from_topology: bool)
     topology, cells = found
     if cells is not None and np.size(cells):
         return np.asarray(cells, dtype=np.int64).reshape(-1, corners)
+    if topology == "TriangleSetTopologyContainer" and name == "edges":  # createEdgesInTriangleArray's
+        triangles = ctx.context_topology("triangles")
+        if triangles is not None and triangles[1] is not None and np.size(triangles[1]):
+            return triangle_edges(np.asarray(triangles[1], dtype=np.int64).reshape(-1, 3))
     for larger in _HIGHER_CELLS[name]:
         other = ctx.context_topology(larger)
         if other is not None and other[1] is not None and np.size(other[1]):
