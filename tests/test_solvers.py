@@ -172,6 +172,42 @@ API void newton(double k, double c, double load, double x, Index iterations, Ind
     out[1] = double(p.solves);
 }
 
+// BDFOdeSolver on the spring (exact linear solves, one Newton iteration, no Rayleigh damping):
+// from out = {x, v} at time 0, `steps` steps; out[2 j], out[2 j + 1] = x, v after step j.
+API void bdf(double m, double k, double h, Index order, Index steps, double* out) {
+    struct Operations : PointOperations {
+        void project_position_velocity() const {}
+    };
+    Point p{m, k, 0.0, out[0], out[1]};
+    double x_previous = 0, v_previous = 0, r1 = 0, r2 = 0;
+    std::vector<double> times(order + 2, 0.0), a(order + 1), b(order + 1);
+    Index count = 1, solves = 0;
+    const sofac::BdfVectors<Line> own{{&x_previous}, {&v_previous}, {&r1}, {&r2}};
+    const sofac::NewtonControls newton{1, 1, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0};
+    double time = 0.0;
+    for (Index j = 1; j <= steps; ++j) {
+        const sofac::BdfControls controls{h, time, order, 0.0, 0.0, newton};
+        sofac::bdf_step(line, p.vectors(), own, controls, {times.data(), count, solves, a.data(), b.data()},
+                        Operations{{p}});
+        time += h;
+        out[2 * j] = p.x;
+        out[2 * j + 1] = p.v;
+    }
+}
+
+// BDFOdeSolver::computeLinearMultiStepCoefficients on times t[0..k]: a[0..k], b[0..k]
+API void bdf_coefficients(const double* t, Index k, double* a, double* b) {
+    sofac::bdf_coefficients(t, k, a, b);
+}
+
+// CentralDifferenceSolver's update on the spring (a = -k x / m, rayleighMass r): out = {x, v}, in place
+API void central_difference(double m, double k, double r, double h, Index steps, double* out) {
+    for (Index j = 0; j < steps; ++j) {
+        const double a = -k * out[0] / m;
+        sofac::central_difference<sofac::Vec1d>(&out[0], &out[1], &a, h, r, 1);
+    }
+}
+
 // Newton on f(x) = -atan(x) (the line search's textbook case): out = {x, solves}
 API void newton_atan(double x, Index iterations, Index line_searches, double coefficient, double* out) {
     struct Atan {
@@ -207,6 +243,9 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     lib.variational.argtypes = [ctypes.c_double] * 4 + [ctypes.c_int64, ctypes.c_double, ctypes.c_int64, D, D]
     lib.newton.argtypes = [*[ctypes.c_double] * 4, ctypes.c_int64, ctypes.c_int64, *[ctypes.c_double] * 3, D]
     lib.newton_atan.argtypes = [ctypes.c_double, ctypes.c_int64, ctypes.c_int64, ctypes.c_double, D]
+    lib.bdf.argtypes = [*[ctypes.c_double] * 3, ctypes.c_int64, ctypes.c_int64, D]
+    lib.bdf_coefficients.argtypes = [D, ctypes.c_int64, D, D]
+    lib.central_difference.argtypes = [*[ctypes.c_double] * 4, ctypes.c_int64, D]
     return lib
 
 
@@ -557,6 +596,7 @@ GROUPS = {
     "newmark_step": "<NewmarkImplicitSolver/><SparseLDLSolver/>",
     "newton_raphson": "<StaticSolver/><SparseLDLSolver/>",
     "variational_symplectic_step": '<VariationalSymplecticSolver steps="2"/><SparseLDLSolver/>',
+    "bdf_step": '<BDFOdeSolver order="2"/><NewtonRaphsonSolver/><SparseLDLSolver/>',
 }
 
 
@@ -575,5 +615,142 @@ def test_generated_steps_call_the_runtime_solvers(tmp_path: Path, capsys: pytest
     for algorithm in GROUPS:
         assert f"sofac::{algorithm}(" in source, algorithm
     assert source.count("sofac::implicit_euler_step(") == 3
-    for internal in ("cg_update", "rho_previous", "tnorm2", "line_search", "momentum_dot", "beta1"):
+    internals = (
+        "cg_update",
+        "rho_previous",
+        "tnorm2",
+        "line_search",
+        "momentum_dot",
+        "beta1",
+        "bdf_coefficients",
+    )
+    for internal in internals:
         assert internal not in source, internal
+
+
+def bdf_coefficients(lib: ctypes.CDLL, times: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    k = len(times) - 1
+    a, b = np.zeros(k + 1), np.zeros(k + 1)
+    lib.bdf_coefficients(_d(np.array(times)), k, _d(a), _d(b))
+    return a, b
+
+
+@pytest.mark.parametrize("start", [0.0, 12.0, 900.0])
+def test_bdf_coefficients_are_sofas(lib: ctypes.CDLL, start: float) -> None:
+    """SOFA's BDFOdeSolver_test values on evenly spaced times (1, 2, 3 steps back), and on uneven
+    ones the derivative at t_k of the Lagrange interpolant through (t_j, y_j), times t_k - t_k-1,
+    normalised by a_k: exact on quadratics."""
+    for times, a_ref, b_ref in (
+        ([start, start + 1], [-1, 1], [0, 1]),
+        ([start, start + 1, start + 2], [1 / 3, -4 / 3, 1], [0, 0, 2 / 3]),
+        ([start, start + 1, start + 2, start + 3], [-2 / 11, 9 / 11, -18 / 11, 1], [0, 0, 0, 6 / 11]),
+    ):
+        a, b = bdf_coefficients(lib, times)
+        assert a == pytest.approx(a_ref, abs=1e-12) and b == pytest.approx(b_ref, abs=1e-12)
+    times = [start, start + 0.1, start + 0.35]
+    a, b = bdf_coefficients(lib, times)
+    y = [(t - start) ** 2 + 3 * (t - start) for t in times]  # y' at t_2 = 2 (0.35) + 3
+    derivative = sum(a[j] * y[j] for j in range(3)) / (b[2] * (times[2] - times[1]))
+    assert derivative == pytest.approx(2 * 0.35 + 3, rel=1e-12)
+
+
+def bdf_run(lib: ctypes.CDLL, h: float, order: int, steps: int, x0: float = 1.0) -> np.ndarray:
+    out = np.zeros(2 * steps + 2)
+    out[0] = x0
+    lib.bdf(M, K, h, order, steps, _d(out))
+    return out.reshape(-1, 2)
+
+
+def bdf_reference(h: float, order: int, steps: int, x0: float = 1.0) -> np.ndarray:
+    """SOFA's BDF step solved in closed form: r1 = sum_j a_j x_j - h b_k v_k = 0 and
+    r2 = m sum_j a_j v_j - h b_k f(x_k) = 0 with, as SOFA's vector ids make them, x_j = x_n and
+    v_j = v_n for every j < k (the step's start), k = min(order, step + 1)."""
+    x, v, times, rows = x0, 0.0, [0.0], [(x0, 0.0)]
+    for step in range(steps):
+        k = min(order, step + 1)
+        times = ([*times, step * h + h])[-(k + 1) :]
+        a = np.zeros(k + 1)
+        for j in range(k + 1):
+            for i in range(k + 1):
+                if i != j:
+                    product = 1.0
+                    for m in range(k + 1):
+                        if m not in (i, j):
+                            product *= (times[k] - times[m]) / (times[j] - times[m])
+                    a[j] += product / (times[j] - times[i])
+        a *= times[k] - times[k - 1]
+        hb, before = h / a[k], a[:k].sum() / a[k]  # a_k x_k + (sum a_j) x_n = h b_k a_k v_k, ...
+        # x_k = -before x + hb v_k; m (v_k + before v) = hb (-K x_k)
+        v_next = (-M * before * v + hb * K * before * x) / (M + hb * hb * K)
+        x, v = -before * x + hb * v_next, v_next
+        rows.append((x, v))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_bdf_steps_of_a_spring_are_sofas(lib: ctypes.CDLL, order: int) -> None:
+    """One Newton iteration solves the linear spring's step exactly: the trajectory is the closed
+    form of SOFA's residual, start-up steps (order 1, then 2, ...) included."""
+    h, steps = 0.01, 40
+    assert bdf_run(lib, h, order, steps) == pytest.approx(bdf_reference(h, order, steps), rel=1e-9, abs=1e-12)
+
+
+def test_bdf_accuracy_on_the_harmonic_oscillator(lib: ctypes.CDLL) -> None:
+    """x(t) = cos(w t) from x = 1, v = 0. Order 1 is backward Euler: first order in h. At higher
+    orders SOFA's solver reuses the state's x and v for every earlier slot, so after the start-up a
+    step is backward Euler with the step b_k h (b_2 = 2/3, b_3 = 6/11): first order again, towards
+    cos(w b_k t) instead of cos(w t)."""
+    w, t = np.sqrt(K / M), 1.0
+    for order, speed in ((1, 1.0), (2, 2 / 3), (3, 6 / 11)):
+        errors, wrong = [], []
+        for steps in (400, 800, 1600):
+            h = t / steps
+            x = bdf_run(lib, h, order, steps)[-1, 0]
+            # the start-up steps: a first step of h, then order-2 steps (b = 2/3) up to order k
+            elapsed = h + sum({2: 2 / 3, 3: 6 / 11}.get(min(order, j + 1), 1.0) * h for j in range(1, steps))
+            errors.append(abs(x - np.cos(w * elapsed)))
+            wrong.append(abs(x - np.cos(w * t)))
+        rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+        assert np.all(np.abs(rates - 1.0) < 0.1), (order, rates)  # first order
+        assert elapsed == pytest.approx(speed * t, abs=2 * h)
+        if order > 1:
+            assert min(wrong) > 0.1  # not converging to cos(w t)
+
+
+def test_central_difference_steps(lib: ctypes.CDLL) -> None:
+    """rayleighMass 0: v += h a, then x += h v (symplectic Euler). r > 0: v += c1 v, v += c2 a with
+    c1 = (1/h - r/2) / (1/h + r/2) - 1, c2 = 1 / (1/h + r/2), then x += h v."""
+    h, r = 0.01, 0.7
+    for damping in (0.0, r):
+        state = np.array([0.2, -0.3])
+        lib.central_difference(M, K, damping, h, 1, _d(state))
+        a = -K * 0.2 / M
+        if damping == 0.0:
+            v = -0.3 + h * a
+        else:
+            v = -0.3 + (-1.0 + (1 / h - r / 2) / (1 / h + r / 2)) * -0.3
+            v = v + 1 / (1 / h + r / 2) * a
+        assert state.tolist() == [0.2 + h * v, v]
+
+
+@pytest.mark.parametrize("damping", [0.0, 0.8])
+def test_central_difference_accuracy_on_the_oscillator(lib: ctypes.CDLL, damping: float) -> None:
+    """m x'' + r m x' + k x = 0 from x = 1: the velocity SOFA's solver updates is the one of the
+    half step before (leapfrog). Started with v(-h/2) the error in x at t = 1 is second order in h;
+    started with v(0), as a scene gives it, the first step is off by O(h^2) and x only first order."""
+    w0 = np.sqrt(K / M)
+    wd = np.sqrt(w0**2 - damping**2 / 4)
+
+    def exact(t: float) -> tuple[float, float]:  # x(0) = 1, x'(0) = 0
+        decay, c, s = np.exp(-damping * t / 2), np.cos(wd * t), np.sin(wd * t)
+        return decay * (c + damping / (2 * wd) * s), -decay * s * w0**2 / wd
+
+    for start, order in (("half step", 2.0), ("step", 1.0)):
+        errors = []
+        for steps in (400, 800, 1600):
+            h = 1.0 / steps
+            state = np.array([1.0, exact(-h / 2)[1] if start == "half step" else 0.0])
+            lib.central_difference(M, K, damping, h, steps, _d(state))
+            errors.append(abs(state[0] - exact(1.0)[0]))
+        rates = np.log2(np.array(errors[:-1]) / np.array(errors[1:]))
+        assert np.all(np.abs(rates - order) < 0.1), (start, rates)

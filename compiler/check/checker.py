@@ -146,6 +146,7 @@ class _Checker:
         self.checked = CheckedScene(scene)
         self.checked.resolver = self
         self._readers: dict[int, list[CheckedComponent]] | None = None  # who links to each component
+        self._links_resolved = False  # set once every component's links are resolved
 
     # ------------------------------------------------------------------------------------------
     def run(self) -> CheckedScene:
@@ -161,6 +162,7 @@ class _Checker:
             if checked.spec is not None:
                 self._resolve_links(checked)
                 self._drop_broken_data_links(checked)
+        self._links_resolved = True
         for node in self.scene.root.walk():
             self._check_states_of(node)
         for checked in self.checked:
@@ -750,6 +752,13 @@ class _Checker:
         field_spec = checked.spec.field(name)
         if field_spec is not None and isinstance(field_spec.type, SofaData):
             return None  # a Data known only from SOFA's source: sofac cannot say what it holds
+        if checked.category is Category.TOPOLOGY and name in CELL_KINDS:
+            # A topological mapping's init clears its output container and writes its elements
+            # (those it does not write, the container computes when it initialises): what the
+            # scene gives the container, by src= or attribute, does not last.
+            writer = self._topology_writer(checked)
+            if writer is not None:
+                return self.value(writer, name, depth + 1)
         if name in checked.fields and (raw or name not in checked.spec.rewrites):
             return checked.fields[name]
         if checked.category is Category.STATE and name in ("rest_position", "reset_position"):
@@ -772,19 +781,34 @@ class _Checker:
             source = self.checked.components.get(id(checked.src))
             if source is not None and source.spec is not None and source.spec.field(name) is not None:
                 return self.value(source, name, depth + 1)
-        if checked.category is Category.TOPOLOGY and name in (*CELL_KINDS, "position"):
-            # A topological mapping writes its output container's cells (Hexa2Tetra, Tetra2Triangle...)
-            # or points (Mesh2Point).
-            for writer in self.checked:
-                if (
-                    writer.category is Category.TOPOLOGICAL_MAPPING
-                    and writer.links.get("output") is checked.component
-                ):
-                    written = self.value(writer, name, depth + 1)
-                    if written is not None and np.size(written):
-                        return written
+        if checked.category is Category.TOPOLOGY and name == "position":
+            # Mesh2PointTopologicalMapping writes its output container's points.
+            writer = self._topology_writer(checked)
+            if writer is not None:
+                written = self.value(writer, name, depth + 1)
+                if written is not None and np.size(written):
+                    return written
         field_spec = checked.spec.field(name)
         return field_spec.default if field_spec else None
+
+    def _topology_writer(self, container: CheckedComponent) -> CheckedComponent | None:
+        """The topological mapping sofac evaluates whose output is this container, if any."""
+        if "writer" not in container.cache:
+            found = next(
+                (
+                    writer
+                    for writer in self.checked
+                    if writer.category is Category.TOPOLOGICAL_MAPPING
+                    and writer.spec is not None
+                    and writer.spec.compute
+                    and writer.links.get("output") is container.component
+                ),
+                None,
+            )
+            if not self._links_resolved:  # links still being resolved: not final yet
+                return found
+            container.cache["writer"] = found
+        return container.cache["writer"]
 
     def _outputs(self, checked: CheckedComponent) -> dict[str, np.ndarray] | None:
         if checked.outputs is not None:
@@ -1520,20 +1544,40 @@ class _EvalContext:
         linked = self.checker.checked.of(target)
         return None if linked.spec is None else self.checker.value(linked, name)  # unknown type: no value
 
-    def input_positions(self) -> np.ndarray | None:
+    def context_topology(self, name: str) -> tuple[str, Any] | None:
+        """The component name and field ``name`` of the topology SOFA's getContext()->get finds
+        (in the component's node, else the nearest ancestor's), if any."""
+        found, _ = links.pick_in_node(
+            self.checked.component.node, lambda c: self.checker._is(c, Category.TOPOLOGY), climb=True
+        )
+        if found is None:
+            return None
+        topology = self.checker.checked.of(found)
+        if topology.spec is None:
+            return None
+        return topology.spec.name, self.checker.value(topology, name)
+
+    def linked_type(self, link: str) -> str | None:
+        target = self.checked.links.get(link)
+        if not isinstance(target, Component):
+            return None
+        spec = self.checker.checked.of(target).spec
+        return None if spec is None else spec.name
+
+    def input_positions(self, name: str = "position") -> np.ndarray | None:
         source = self.checked.src
         from_src = source is not None and self.checker.checked.of(source).spec is not None
         if from_src:  # src="@loader" links the engine's position to the loader's
-            from_src = self.checker.checked.of(source).spec.field("position") is not None  # type: ignore[union-attr]
-        if self.is_set("position") or from_src:
-            value = self.value("position")
+            from_src = self.checker.checked.of(source).spec.field(name) is not None  # type: ignore[union-attr]
+        if self.is_set(name) or from_src:
+            value = self.value(name)
             if value is None:
                 # Linked to a Data sofac does not compute (an unsupported loader or mesh creator,
                 # reported there): not known here, and no second error.
                 raise evaluate.UnknownInput("the input positions are only known at run time")
             datatype = self.checked.datatype or DATATYPES["Vec3d"]
             if np.size(value) % datatype.coord_size:  # not points: the count check reports it (E205)
-                raise evaluate.UnknownInput(f"position is not a list of {datatype.name} points")
+                raise evaluate.UnknownInput(f"{name} is not a list of {datatype.name} points")
             return np.asarray(value, dtype=float).reshape(-1, datatype.coord_size)
         state = self.checked.state or self.checker._node_state(self.checked.component.node)
         if state is None:

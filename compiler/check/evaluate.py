@@ -45,10 +45,21 @@ class Context(Protocol):
 
     def file(self, name: str) -> Path | None: ...
 
-    def input_positions(self) -> np.ndarray | None: ...
+    def input_positions(self, name: str = "position") -> np.ndarray | None:
+        """The points an engine reads: its field ``name`` when set (or linked by src=), else its
+        state's initial positions."""
+        ...
+
+    def context_topology(self, name: str) -> tuple[str, Any] | None:
+        """The topology found in the component's node or above: its component name and field ``name``."""
+        ...
 
     def linked(self, link: str, name: str) -> Any:
         """The value of field ``name`` of the component the link field ``link`` points to."""
+        ...
+
+    def linked_type(self, link: str) -> str | None:
+        """The component name (its spec's) the link field ``link`` points to, if any."""
         ...
 
 
@@ -81,14 +92,56 @@ def mesh_loader(ctx: Context) -> Outputs:
         mesh = meshes.read_mesh(_file(ctx))
     except meshes.MeshError as error:
         raise EvaluationError(str(error), "filename") from None
+    cells = {kind: getattr(mesh, kind) for kind in ("edges", "triangles", "quads", "tetrahedra", "hexahedra")}
+    cells = update_elements(cells, bool(ctx.value("createSubelements")))
     return {
         "position": _transform(ctx, mesh.positions).ravel(),
-        "edges": mesh.edges.ravel(),
-        "triangles": mesh.triangles.ravel(),
-        "quads": mesh.quads.ravel(),
-        "tetrahedra": mesh.tetrahedra.ravel(),
-        "hexahedra": mesh.hexahedra.ravel(),
+        **{kind: value.ravel() for kind, value in cells.items()},
     }
+
+
+# MeshLoader::updateElements: the boundary elements of each kind, in its order.
+_HEXAHEDRON_QUADS = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
+_TETRAHEDRON_TRIANGLES = ((0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3))
+
+
+def _append_missing(cells: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``cells`` followed by the faces (rows, in order) no cell nor earlier face has, compared as
+    sets of corners (MeshLoader's uniqueOrder keys)."""
+    seen = {tuple(sorted(cell)) for cell in cells.tolist()}
+    added = []
+    for face in faces.tolist():
+        key = tuple(sorted(face))
+        if key not in seen:
+            seen.add(key)
+            added.append(face)
+    if not added:
+        return cells
+    return np.concatenate([cells, np.asarray(added, dtype=np.int64)]).astype(np.int64)
+
+
+def update_elements(cells: dict[str, np.ndarray], create_subelements: bool) -> dict[str, np.ndarray]:
+    """SOFA's MeshLoader::updateElements with createSubelements: the quads of the hexahedra
+    missing from the quads, the triangles of the tetrahedra missing from the triangles, then the
+    edges (t[j+1], t[j+2]) of the quads and then of the triangles missing from the edges, each kind
+    appended in element order. (MeshGmshLoader turns it on unless the scene sets it.)"""
+    if not create_subelements:
+        return cells
+    out = {kind: np.asarray(value, dtype=np.int64) for kind, value in cells.items()}
+    for volume, surface, faces in (
+        ("hexahedra", "quads", _HEXAHEDRON_QUADS),
+        ("tetrahedra", "triangles", _TETRAHEDRON_TRIANGLES),
+    ):
+        if len(out[volume]):
+            found = out[volume][:, np.asarray(faces)].reshape(-1, len(faces[0]))
+            out[surface] = _append_missing(out[surface], found)
+    for surface in ("quads", "triangles"):
+        elements = out[surface]
+        if len(elements):
+            corners = elements.shape[1]
+            order = [[(j + 1) % corners, (j + 2) % corners] for j in range(corners)]
+            out["edges"] = _append_missing(out["edges"], elements[:, order].reshape(-1, 2))
+    return out
 
 
 def string_mesh(ctx: Context) -> Outputs:
@@ -110,6 +163,55 @@ def string_mesh(ctx: Context) -> Outputs:
         "quads": empty,
         "tetrahedra": empty,
         "hexahedra": empty,
+    }
+
+
+def grid_mesh(ctx: Context) -> Outputs:
+    """GridMeshCreator::doLoad: points x / (nx - 1), y / (ny - 1), 0, x fastest; per cell (x, y),
+    y outer, the quad or the two triangles of the pattern; the edges of those elements as its
+    std::set keeps them: (a, b) unless (b, a) is there already, sorted."""
+    nx, ny = (int(v) for v in _numbers(ctx, "resolution", 2, integer=True))
+    if nx < 2 or ny < 2:
+        raise EvaluationError("resolution must be >= 2 along x and y", "resolution", code="E207")
+    refused = limits.too_many_points([nx, ny])
+    if refused:
+        raise EvaluationError(f"resolution: {refused}", "resolution", code="E207")
+    points = np.array(
+        [[(x * 1.0) / (nx - 1), (y * 1.0) / (ny - 1), 0.0] for y in range(ny) for x in range(nx)]
+    )
+
+    def vert(x: int, y: int) -> int:
+        return x + y * nx
+
+    pattern = int(ctx.value("trianglePattern"))
+    quads: list[tuple[int, ...]] = []
+    triangles: list[tuple[int, ...]] = []
+    for y in range(ny - 1):
+        for x in range(nx - 1):
+            a, b, c, d = vert(x, y), vert(x + 1, y), vert(x + 1, y + 1), vert(x, y + 1)
+            if pattern == 0:
+                quads.append((a, b, c, d))
+            elif pattern == 2 or (pattern == 1 and (x + y) % 2 == 0):  # upward
+                triangles += [(a, b, c), (a, c, d)]
+            elif pattern in (1, 3):  # downward
+                triangles += [(a, b, d), (b, c, d)]
+    unique: set[tuple[int, int]] = set()
+    for element in [*triangles, *quads]:  # one pattern at a time: never both
+        for k in range(len(element)):
+            a, b = element[k], element[(k + 1) % len(element)]
+            if (b, a) not in unique:
+                unique.add((a, b))
+    cells = {
+        "edges": np.asarray(sorted(unique), dtype=np.int64).reshape(-1, 2),
+        "triangles": np.asarray(triangles, dtype=np.int64).reshape(-1, 3),
+        "quads": np.asarray(quads, dtype=np.int64).reshape(-1, 4),
+        "tetrahedra": np.zeros((0, 4), dtype=np.int64),
+        "hexahedra": np.zeros((0, 8), dtype=np.int64),
+    }
+    cells = update_elements(cells, bool(ctx.value("createSubelements")))
+    return {
+        "position": _transform(ctx, points).ravel(),
+        **{kind: value.ravel() for kind, value in cells.items()},
     }
 
 
@@ -588,6 +690,128 @@ def box_roi(ctx: Context) -> Outputs:
     return outputs
 
 
+_HIGHER_CELLS = {
+    "edges": ("triangles", "quads", "tetrahedra", "hexahedra"),
+    "triangles": ("tetrahedra",),
+    "tetrahedra": (),
+}
+
+
+def _engine_cells(ctx: Context, name: str, corners: int, *, from_topology: bool) -> np.ndarray:
+    """An engine's element input: its own (given, linked, or by src=), else (``from_topology``)
+    the field of the topology in its node or above, as SOFA's init links them. A topology that is
+    not given them computes them when it initialises (from its larger elements): a
+    TriangleSetTopologyContainer's edges are computed here as it does, the others refused."""
+    value = ctx.value(name)
+    if value is not None or ctx.is_set(name) or not from_topology:
+        return np.asarray(value if value is not None else [], dtype=np.int64).reshape(-1, corners)
+    found = ctx.context_topology(name)
+    if found is None:
+        return np.zeros((0, corners), dtype=np.int64)
+    topology, cells = found
+    if cells is not None and np.size(cells):
+        return np.asarray(cells, dtype=np.int64).reshape(-1, corners)
+    if topology == "TriangleSetTopologyContainer" and name == "edges":  # createEdgesInTriangleArray's
+        triangles = ctx.context_topology("triangles")
+        if triangles is not None and triangles[1] is not None and np.size(triangles[1]):
+            return triangle_edges(np.asarray(triangles[1], dtype=np.int64).reshape(-1, 3))
+    for larger in _HIGHER_CELLS[name]:
+        other = ctx.context_topology(larger)
+        if other is not None and other[1] is not None and np.size(other[1]):
+            raise EvaluationError(
+                f"it reads the {name} {topology} computes from its {larger} when it initialises; "
+                f"sofac does not evaluate it on them: give {name}= (e.g. from the loader)",
+                None,
+                code="E222",
+            )
+    return np.zeros((0, corners), dtype=np.int64)
+
+
+def _engine_points(ctx: Context, name: str) -> np.ndarray:
+    """An engine's input points: its field ``name`` (given, linked, by src=), else its state's."""
+    points = ctx.input_positions(name)
+    if points is None:
+        raise UnknownInput(f"the {name} points are not known at compile time")
+    return np.asarray(points, dtype=float)
+
+
+def subset_topology(ctx: Context) -> Outputs:
+    """SubsetTopology (see geometry.selection.subset_topology): boxes, or spheres when centers is
+    set; edges, triangles and tetrahedra default to the context topology's, quads and hexahedra
+    are only read when given."""
+    from sofac.geometry import selection
+
+    if ctx.is_set("tetrahedraInput"):
+        raise EvaluationError("tetrahedraInput is not evaluated yet", "tetrahedraInput", code="E222")
+    coords = _engine_points(ctx, "rest_position")
+    if ctx.is_set("centers"):
+        centers = np.asarray(ctx.value("centers"), dtype=float).reshape(-1, 3)
+        radii = np.asarray(ctx.value("radii") if ctx.value("radii") is not None else [], dtype=float).ravel()
+        if not len(centers) or len(centers) != len(radii):
+            raise EvaluationError(
+                f"{len(centers)} centers and {len(radii)} radii: SOFA then selects nothing (it keeps "
+                "its defaults); give one radius per centre",
+                "radii",
+                code="E205",
+            )
+        inside = selection.in_spheres(coords, centers, radii)
+    else:
+        boxes = np.asarray(ctx.value("box"), dtype=float).reshape(-1, 6)
+        low, high = np.minimum(boxes[:, :3], boxes[:, 3:]), np.maximum(boxes[:, :3], boxes[:, 3:])
+        inside = selection.in_boxes(coords, np.concatenate([low, high], axis=1))
+    cells = {}
+    for kind, corners, *_ in selection.ELEMENT_OUTPUTS:
+        cells[kind] = _engine_cells(ctx, kind, corners, from_topology=kind in _HIGHER_CELLS)
+        if len(cells[kind]) and cells[kind].max() >= len(coords):
+            raise EvaluationError(f"{kind} use points past the {len(coords)} points", kind, code="E218")
+    return selection.subset_topology(coords, inside, cells, bool(ctx.value("localIndices")))
+
+
+def plane_roi(ctx: Context) -> Outputs:
+    """PlaneROI (see geometry.selection.in_planes): the points inside one of the slabs, and the
+    edges, triangles, tetrahedra (each when its compute flag is on) whose corners all are in one."""
+    from sofac.geometry import selection
+
+    value = ctx.value("plane")
+    planes = np.asarray(value if value is not None else [], dtype=float).reshape(-1, 10)
+    if not len(planes):  # SOFA's doUpdate returns at once: the outputs keep their defaults
+        return {"indices": np.zeros(1, dtype=np.int64)}
+    coords = _engine_points(ctx, "position")
+    inside = selection.in_planes(coords, planes)
+    chosen = inside.any(axis=1)
+    outputs = {
+        "indices": np.flatnonzero(chosen).astype(np.int64),
+        "pointsInROI": coords[chosen].ravel(),
+    }
+    # SOFA's init links the missing inputs to the topology's only when edges or triangles are missing
+    linking = not (ctx.is_set("edges") and ctx.is_set("triangles"))
+    for kind, corners, index_name, in_name, _ in selection.ELEMENT_OUTPUTS:
+        if kind not in _HIGHER_CELLS:
+            continue
+        flag = f"compute{kind.capitalize()}"
+        if not ctx.value(flag):
+            continue
+        cells = _engine_cells(ctx, kind, corners, from_topology=linking)
+        if len(cells) and cells.max() >= len(coords):
+            raise EvaluationError(f"{kind} use points past the {len(coords)} points", kind, code="E218")
+        selected = inside[cells].all(axis=1).any(axis=1) if len(cells) else np.zeros(0, dtype=bool)
+        outputs[index_name] = np.flatnonzero(selected).astype(np.int64)
+        outputs[in_name] = cells[selected].ravel()
+    return outputs
+
+
+def pair_box_roi(ctx: Context) -> Outputs:
+    """PairBoxROI (see geometry.selection.pair_box)."""
+    from sofac.geometry import selection
+
+    coords = _engine_points(ctx, "position")
+    inclusive, included = (
+        np.asarray(ctx.value(name), dtype=float) for name in ("inclusiveBox", "includedBox")
+    )
+    indices = selection.pair_box(coords, inclusive, included)
+    return {"indices": indices, "pointsInROI": coords[indices].ravel()}
+
+
 # BoxROI's element inputs, their corner counts and the output listing those inside.
 _ROI_ELEMENTS = (
     ("edges", 2, "edgeIndices"),
@@ -660,6 +884,55 @@ def tetra_to_triangle(ctx: Context) -> Outputs:
     given = ctx.linked("input", "triangles")
     surface = tetrahedron_surface_triangles(tetrahedra, given, bool(ctx.value("flipNormals")))
     return {"triangles": surface.reshape(-1)}
+
+
+def _container_edges(triangles: np.ndarray, given: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A TriangleSetTopologyContainer's edges (those it is given, else createEdgeSetArray's) and
+    each edge's number of triangles (trianglesAroundEdge). A triangle's edge (t[j+1], t[j+2]) is the
+    first given edge joining the same two points (createEdgesInTriangleArray's search); a triangle
+    edge missing from the given ones leaves SOFA's container invalid: refused."""
+    if given is None or not np.size(given):
+        edges = triangle_edges(triangles)
+    else:
+        edges = np.asarray(given, dtype=np.int64).reshape(-1, 2)
+    first: dict[tuple[int, int], int] = {}
+    for index, (a, b) in enumerate(edges.tolist()):
+        first.setdefault((min(a, b), max(a, b)), index)
+    counts = np.zeros(len(edges), dtype=np.int64)
+    for number, triangle in enumerate(triangles.tolist()):
+        for j in range(3):
+            a, b = triangle[(j + 1) % 3], triangle[(j + 2) % 3]
+            index = first.get((min(a, b), max(a, b)))
+            if index is None:
+                raise EvaluationError(
+                    f"the input container's edges have no edge [{a}, {b}] of triangle {number} "
+                    f"{triangle} (SOFA leaves the container invalid); give it the triangles only, "
+                    "its edges are then computed",
+                    "input",
+                    code="E207",
+                )
+            counts[index] += 1
+    return edges, counts
+
+
+def triangle_to_edge(ctx: Context) -> Outputs:
+    """Triangle2EdgeTopologicalMapping: the input container's edges that bound one triangle only,
+    in the container's edge order, as written (SOFA's init)."""
+    for link, expected in (("input", "TriangleSetTopologyContainer"), ("output", "EdgeSetTopologyContainer")):
+        found = ctx.linked_type(link)
+        if found is not None and found != expected:
+            raise EvaluationError(
+                f"{link} is a {found}: sofac evaluates this mapping from a TriangleSetTopologyContainer "
+                "to an EdgeSetTopologyContainer only",
+                link,
+                code="E222",
+            )
+    triangles = ctx.linked("input", "triangles")
+    if triangles is None or not np.size(triangles):
+        raise UnknownInput("the input topology's triangles are not known at compile time")
+    cells = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    edges, counts = _container_edges(cells, ctx.linked("input", "edges"))
+    return {"edges": edges[counts == 1].reshape(-1)}
 
 
 def quad_to_triangle(ctx: Context) -> Outputs:
@@ -826,9 +1099,11 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "transform_engine": transform_engine,
     "hexa_to_tetra": hexa_to_tetra,
     "tetra_to_triangle": tetra_to_triangle,
+    "triangle_to_edge": triangle_to_edge,
     "hexa_to_quad": hexa_to_quad,
     "mesh_loader": mesh_loader,
     "string_mesh": string_mesh,
+    "grid_mesh": grid_mesh,
     "sphere_loader": sphere_loader,
     "grid": grid,
     "grid_topology": grid_topology,
@@ -838,4 +1113,7 @@ EVALUATORS: dict[str, Callable[[Context], Outputs]] = {
     "sparse_grid": sparse_grid,
     "sparse_grid_ramification": sparse_grid_ramification,
     "box_roi": box_roi,
+    "subset_topology": subset_topology,
+    "plane_roi": plane_roi,
+    "pair_box_roi": pair_box_roi,
 }

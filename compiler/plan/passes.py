@@ -69,6 +69,10 @@ def effects(planner: Planner, groups: list[Group]) -> list[tuple[str, str, str]]
             if group.newmark
             else "variational symplectic"
             if group.variational
+            else "BDF"
+            if group.bdf
+            else "central difference"
+            if group.central_difference is not None
             else group.scheme
         )
         effects.append(("integration", origin_of(group.solver), f"{scheme} scheme over {states}"))

@@ -50,7 +50,7 @@ from sofac.plan.passes import (
     leave_unread_out,
     route_through_mappings,
 )
-from sofac.plan.solvers import new_group, screen_btd, screen_variational
+from sofac.plan.solvers import new_group, screen_bdf, screen_btd, screen_variational
 from sofac.registry import Category, Variant
 from sofac.registry.datatypes import DATATYPES
 
@@ -389,9 +389,11 @@ class Planner:
                 names += ("a",)  # the previous step's acceleration
             if group.variational:  # x_k, the previous Newton iterate, the momenta p_k and p_k+1
                 names += ("x0", "xi", "momentum", "new_momentum")
+            if group.bdf:  # x and v of the step's start, the residuals r1 and r2
+                names += ("x_previous", "v_previous", "residual_x", "residual_v")
             for state in group.states:
                 for name in names:
-                    like = state.x if name in ("x0", "xi") else state.v
+                    like = state.x if name in ("x0", "xi", "x_previous") else state.v
                     columns = like.columns
                     state.stages[name] = self.buffer(
                         state.component, name, np.zeros_like(like.initial), columns=columns, role="scratch"
@@ -408,6 +410,8 @@ class Planner:
         for group in groups.values():
             if group.variational:
                 screen_variational(self, group, owner)
+            if group.bdf:
+                screen_bdf(self, group)
             if group.btd:
                 screen_btd(self, group)
             if group.routed:

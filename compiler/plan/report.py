@@ -24,7 +24,11 @@ def format_schedule(plan: Plan) -> str:
     ]
     for group in plan.groups:
         scheme = {
-            Scheme.EULER: "symplectic Euler" if group.symplectic else "explicit Euler",
+            Scheme.EULER: "central difference"
+            if group.central_difference is not None
+            else "symplectic Euler"
+            if group.symplectic
+            else "explicit Euler",
             Scheme.RK2: "RK2 (midpoint)",
             Scheme.RK4: "RK4",
             Scheme.IMPLICIT: "static equilibrium (Newton-Raphson)"
@@ -33,6 +37,8 @@ def format_schedule(plan: Plan) -> str:
             if group.newmark
             else "variational symplectic (implicit midpoint)"
             if group.variational
+            else f"BDF of order {int(group.bdf['order'].initial[0])} (Newton-Raphson)"
+            if group.bdf
             else "implicit Euler",
         }[group.scheme]
         lines.append(f"solver {origin_of(group.solver)}: {scheme}")

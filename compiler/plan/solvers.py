@@ -6,10 +6,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from sofac import registry
 from sofac.check.checker import CheckedComponent
 from sofac.front.model import Component
-from sofac.plan.ir import Group, Preconditioner, Scheme
+from sofac.plan.ir import Buffer, Group, Preconditioner, Scheme
 from sofac.registry import Category, Variant
 from sofac.registry.components.common import GRAPH_SCATTERED
 from sofac.registry.components.linear import (
@@ -70,17 +71,27 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
     lowering = solver.spec.lowering if solver.spec else ""
     scheme = {
         "euler_explicit": Scheme.EULER,
+        "central_difference": Scheme.EULER,
         "runge_kutta2": Scheme.RK2,
         "runge_kutta4": Scheme.RK4,
         "euler_implicit": Scheme.IMPLICIT,
         "static": Scheme.IMPLICIT,
         "newmark": Scheme.IMPLICIT,
         "variational": Scheme.IMPLICIT,
+        "bdf": Scheme.IMPLICIT,
     }.get(lowering)
     if scheme is None:
         return None  # reported by _screen
-    symplectic = bool(planner.value(solver.component, "symplectic")) if scheme is Scheme.EULER else False
+    central = lowering == "central_difference"  # v first, then x with the new v: symplectic
+    symplectic = central or (scheme is Scheme.EULER and bool(planner.value(solver.component, "symplectic")))
     group = Group(solver=solver.component, ident=f"g{index}", scheme=scheme, symplectic=symplectic)
+    if central:
+        # CentralDifferenceSolver: its rayleighMass; a = M^-1 f from the masses (accFromF) always
+        value = planner.value(solver.component, "rayleighMass")
+        group.central_difference = planner.buffer(
+            solver.component, "rayleighMass", [float(value or 0.0)], role="param"
+        )
+        return group
     if lowering == "static" and not plan_static(planner, solver, group):
         return None
     if lowering == "euler_implicit" and not plan_implicit(planner, solver, group):
@@ -88,6 +99,8 @@ def new_group(planner: Planner, solver: CheckedComponent, index: int) -> Group |
     if lowering == "newmark" and not plan_newmark(planner, solver, group):
         return None
     if lowering == "variational" and not plan_variational(planner, solver, group):
+        return None
+    if lowering == "bdf" and not plan_bdf(planner, solver, group):
         return None
     if scheme is Scheme.EULER:  # its linear solver serves only a non-diagonal mass: M a = f
         linear = solver.links.get("linearSolver")
@@ -363,38 +376,98 @@ def screen_variational(planner: Planner, group: Group, owner: dict[int, Group]) 
             )
 
 
+def _newton_solver(planner: Planner, solver: CheckedComponent) -> Component | None:
+    """An ODE solver's NewtonRaphsonSolver: its `newtonSolver` link, else the first one in its node
+    or below."""
+    newton = solver.links.get("newtonSolver")
+    if isinstance(newton, Component):
+        return newton
+    return next(
+        (
+            c
+            for node in _subtree(solver.component.node)
+            for c in node.objects
+            if (spec := planner.checked.of(c).spec) is not None and spec is NEWTON_RAPHSON_SOLVER
+        ),
+        None,
+    )
+
+
+def _newton_buffers(
+    planner: Planner, owner: Component, newton: Component | None, values: dict[str, float]
+) -> dict[str, Buffer]:
+    """The Newton parameters as buffers (those of `newton` where it has them, else `values`)."""
+    for name, default in list(values.items()):
+        value = planner.value(newton, name) if newton is not None else None
+        values[name] = float(default if value is None else value)
+    buffers = {}
+    for name, value in values.items():
+        if name.startswith("maxNb"):
+            buffers[name] = planner.buffer(owner, name, [max(int(value), 0)], "i64")
+        else:
+            buffers[name] = planner.buffer(owner, name, [value], role="param")
+    return buffers
+
+
 def plan_static(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
     """StaticSolver: Newton-Raphson on f(x) = 0 with the parameters of its NewtonRaphsonSolver
     (its `newtonSolver` link, else the first one in its node or below, else SOFA's defaults with
     the StaticSolver's deprecated attributes, as SOFA's init forwards them), then the linear solver."""
     component = solver.component
-    newton = solver.links.get("newtonSolver")
-    if not isinstance(newton, Component):
-        newton = next(
-            (
-                c
-                for node in _subtree(component.node)
-                for c in node.objects
-                if (spec := planner.checked.of(c).spec) is not None and spec is NEWTON_RAPHSON_SOLVER
-            ),
-            None,
-        )
-    values: dict[str, float] = {}
-    for name, default in _newton_defaults().items():
-        value = planner.value(newton, name) if newton is not None else None
-        values[name] = float(default if value is None else value)
+    newton = _newton_solver(planner, solver)
+    values = _newton_defaults()
     if newton is None:
         for legacy, name in _STATIC_LEGACY_FORWARDS:
             value = planner.value(component, legacy)
             if value is not None:
                 values[name] = float(value)
-    owner = newton if newton is not None else component
-    for name, value in values.items():
-        if name.startswith("maxNb"):
-            group.static[name] = planner.buffer(owner, name, [max(int(value), 0)], "i64")
-        else:
-            group.static[name] = planner.buffer(owner, name, [value], role="param")
+    group.static = _newton_buffers(planner, newton if newton is not None else component, newton, values)
     return plan_linear_solver(planner, solver, group)
+
+
+def plan_bdf(planner: Planner, solver: CheckedComponent, group: Group) -> bool:
+    """BDFOdeSolver: its order, Rayleigh damping, what it keeps between steps (the time list, the
+    number of solves), the parameters of its NewtonRaphsonSolver (SOFA creates none: without one
+    the solver is invalid and nothing moves, refused here), then the linear solver."""
+    component = solver.component
+    newton = _newton_solver(planner, solver)
+    if newton is None:
+        planner.unsupported(
+            solver,
+            "it needs a NewtonRaphsonSolver in its node or below (SOFA's is then invalid: nothing moves)",
+        )
+        return False
+    order = max(int(planner.value(component, "order") or 0), 1)  # SOFA's callback makes 0 a 1
+    for name in ("rayleighStiffness", "rayleighMass"):
+        group.implicit[name] = planner.buffer(
+            component, name, [float(planner.value(component, name) or 0.0)], role="param"
+        )
+    group.bdf = {
+        "order": planner.buffer(component, "order", [order], "i64"),
+        # the time list starts with the time at init (0); room for order + 2 (pushed, then trimmed)
+        "times": planner.buffer(component, "times", np.zeros(order + 2), role="state"),
+        "history": planner.buffer(component, "history", [1, 0], "i64", role="state"),  # times kept, solves
+        "a": planner.buffer(component, "a", np.zeros(order + 1), role="scratch"),
+        "b": planner.buffer(component, "b", np.zeros(order + 1), role="scratch"),
+        **_newton_buffers(planner, newton, newton, _newton_defaults()),
+    }
+    return plan_refactoring_solver(planner, solver, group)
+
+
+def screen_bdf(planner: Planner, group: Group) -> None:
+    """What sofac's BDFOdeSolver cannot take: rigid frames (SOFA adds coordinates and derivatives
+    as vectors) and mapped states (SOFA's residual r1 is never mapped: the force fields on mapped
+    states see r1 = 0 in its K r1 product, and their masses see no velocity)."""
+    solver = planner.checked.of(group.solver)
+    for state in group.states:
+        if state.datatype.rigid:
+            planner.unsupported(solver, f"BDFOdeSolver on {state.datatype.name} is not compiled yet")
+            return
+    if group.mapped:
+        planner.unsupported(
+            solver,
+            f"BDFOdeSolver with mapped mechanical states ({group.mapped[0].path}) is not compiled yet",
+        )
 
 
 def plan_linear_solver(planner: Planner, solver: CheckedComponent, group: Group) -> bool:

@@ -57,6 +57,25 @@ inline void advance(double* out, const double* x, const double* v, double h, Ind
     }
 }
 
+// CentralDifferenceSolver's update, a the acceleration M^-1 f: with rayleighMass r = 0 symplectic
+// Euler (SOFA's fused v += a h, x += v h); else v += c1 v, v += c2 a, x += h v with
+// c1 = (1/h - r/2) / (1/h + r/2) - 1 and c2 = 1 / (1/h + r/2), in SOFA's order.
+template <class DT>
+inline void central_difference(double* x, double* v, const double* a, double h, double r, Index n) {
+    const Index size = DT::deriv * n;
+    if (r == 0) {
+        if constexpr (!DT::rigid) {
+            symplectic_points(x, v, a, h, size);
+            return;
+        }
+        add_scaled(v, v, a, h, size);
+    } else {
+        add_scaled(v, v, v, -1.0 + (1 / h - r / 2) / (1 / h + r / 2), size);
+        add_scaled(v, v, a, 1 / (1 / h + r / 2), size);
+    }
+    advance<DT>(x, x, v, h, n);
+}
+
 // ---- masses ------------------------------------------------------------------------------------
 
 // Rigid masses are (m, inertia[9]) with the inertia already multiplied by m, applied in world

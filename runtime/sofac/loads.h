@@ -13,6 +13,7 @@
 // ellipsoids: per ellipsoid, centre (3) and 1/r^2 (3).
 #pragma once
 
+#include <cfloat>
 #include <cmath>
 
 #include "kernels.h"
@@ -181,6 +182,40 @@ inline void triangle_pressure(double* f, const Index* corners, const double* are
         for (int k = 0; k < S; ++k) share[k] = pressure[k] * area[t] / 3.0;
         for (int c = 0; c < 3; ++c)
             for (int k = 0; k < S; ++k) f[DT::deriv * corners[3 * t + c] + k] += share[k];
+    }
+}
+
+// ---- EdgePressureForceField ---------------------------------------------------------------------
+
+// Each selected edge (ends edges[2i], edges[2i+1]) adds its stored force / 2 to both ends (Vec3d).
+inline void edge_pressure_forces(double* f, const Index* edges, Index count, const double* forces) {
+    for (Index i = 0; i < count; ++i) {
+        const double half[3] = {forces[3 * i] / 2, forces[3 * i + 1] / 2, forces[3 * i + 2] / 2};
+        for (int end = 0; end < 2; ++end)
+            for (int k = 0; k < 3; ++k) f[3 * edges[2 * i + end] + k] += half[k];
+    }
+}
+
+// SOFA's initEdgeInformation with a binormal, run at init and at the end of every addForce: the
+// stored force of selected edge i becomes (n intensity[i]) length[i], n = normalize(binormal x
+// normalize(x[e1] - x[e0])), each normalize Vec::normalize's (divided by the norm when it exceeds
+// the machine epsilon).
+inline void edge_pressure_update(double* forces, const double* x, const Index* edges, Index count,
+                                 const double* binormal, const double* intensity, const double* length) {
+    const auto normalize = [](double* v) {
+        const double norm = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        if (norm > DBL_EPSILON)
+            for (int k = 0; k < 3; ++k) v[k] /= norm;
+    };
+    const double* b = binormal;
+    for (Index i = 0; i < count; ++i) {
+        const double* p0 = x + 3 * edges[2 * i];
+        const double* p1 = x + 3 * edges[2 * i + 1];
+        double t[3] = {p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]};
+        normalize(t);
+        double n[3] = {b[1] * t[2] - b[2] * t[1], b[2] * t[0] - b[0] * t[2], b[0] * t[1] - b[1] * t[0]};
+        normalize(n);
+        for (int k = 0; k < 3; ++k) forces[3 * i + k] = n[k] * intensity[i] * length[i];
     }
 }
 

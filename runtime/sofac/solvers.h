@@ -408,35 +408,30 @@ struct NewtonControls {
     double relative_estimate;                // relativeEstimateDifferenceThreshold
 };
 
-// SOFA's StaticSolver with its NewtonRaphsonSolver: x such that f(x) = 0 (projected). Each Newton
-// iteration solves -K dx = f (mass and damping factors 0), then x += alpha dx, alpha multiplied by
-// lineSearchCoefficient while |f| does not decrease, up to maxNbIterationsLineSearch tries; SOFA's
-// stopping rules, in its order. Velocities are left as they are. The residual is f after
-// ops.propagate(), ops.forces() and ops.project_forces().
-template <class Space, class Operations>
-void newton_raphson(const Space& space, const SchemeVectors<Space>& s, const NewtonControls& c,
-                    const Operations& ops) {
-    const auto residual = [&] {  // |f(x)|^2, f projected
-        ops.propagate();
-        ops.forces();
-        ops.project_forces();
-        return space.dot(s.f, s.f);
-    };
-    double r2 = residual();
+// SOFA's NewtonRaphsonSolver::solve on a non-linear function `fn`, its stopping rules in SOFA's
+// order (each measured when its threshold is > 0). `fn` provides (BaseNonLinearFunction's):
+//   fn.evaluate()           r(x) at the current guess; returns |r|^2
+//   fn.solve_linearised()   J_r(x) dx = -r(x) (computeGradientFromCurrentGuess, solveLinearEquation)
+//   fn.update(alpha)        x += alpha dx (updateGuessFromLinearSolution)
+//   fn.squared_guess()      |x|^2 (squaredLastEvaluation, for the relative estimate test)
+//   fn.squared_correction() |dx|^2 (squaredNormDx)
+// The line search multiplies alpha by lineSearchCoefficient while |r| does not decrease, up to
+// maxNbIterationsLineSearch tries; with no decrease (and more than one try) the full step is taken.
+template <class Function>
+void newton_solve(const NewtonControls& c, Function& fn) {
+    double r2 = fn.evaluate();
     if (c.absolute_residual > 0.0 && r2 <= c.absolute_residual * c.absolute_residual) return;
     const double first_r2 = r2;
     const std::int64_t line_searches = std::max<std::int64_t>(c.line_searches, 1);
     for (std::int64_t newton = 0; newton < c.max_iterations; ++newton) {
         const double previous_r2 = r2;
-        const double previous_x2 = c.relative_estimate > 0.0 ? space.dot_coordinates(s.x, s.x) : 0.0;
-        space.copy(s.r, s.f);
-        ops.solve(0.0, -1.0, 0.0);
-        // x += alpha dx, with the line search
+        const double previous_x2 = c.relative_estimate > 0.0 ? fn.squared_guess() : 0.0;
+        fn.solve_linearised();
         double alpha = 1.0, previous_alpha = 0.0;
         bool decreased = false;
         for (std::int64_t search = 0; search < line_searches; ++search) {
-            space.advance(s.x, s.x, s.acc, alpha - previous_alpha);
-            r2 = residual();
+            fn.update(alpha - previous_alpha);
+            r2 = fn.evaluate();
             if (r2 < previous_r2) {
                 decreased = true;
                 break;
@@ -445,20 +440,188 @@ void newton_raphson(const Space& space, const SchemeVectors<Space>& s, const New
             alpha *= c.line_search_coefficient;
         }
         if (!decreased && line_searches > 1) {  // no decrease: the full step after all
-            space.advance(s.x, s.x, s.acc, 1.0 - previous_alpha);
-            r2 = residual();
+            fn.update(1.0 - previous_alpha);
+            r2 = fn.evaluate();
         }
         if (c.relative_successive > 0.0 && r2 < c.relative_successive * c.relative_successive * previous_r2) break;
         if (c.relative_initial > 0.0 && r2 < c.relative_initial * c.relative_initial * first_r2) break;
         if (c.absolute_residual > 0.0 && r2 < c.absolute_residual * c.absolute_residual) break;
         if (c.absolute_estimate > 0.0 || c.relative_estimate > 0.0) {
-            const double dx2 = space.dot(s.acc, s.acc);
+            const double dx2 = fn.squared_correction();
             if (c.relative_estimate > 0.0 && previous_x2 > 0.0 &&
-                dx2 < previous_x2 * c.relative_estimate * c.relative_estimate)
+                dx2 < previous_x2 * (c.relative_estimate * c.relative_estimate))
                 break;
             if (c.absolute_estimate > 0.0 && dx2 < c.absolute_estimate * c.absolute_estimate) break;
         }
     }
+}
+
+// SOFA's StaticSolver with its NewtonRaphsonSolver: x such that f(x) = 0 (projected). The residual
+// is f after ops.propagate(), ops.forces() and ops.project_forces(); each Newton iteration solves
+// -K dx = f (mass and damping factors 0); x moves by alpha dx. Velocities are left as they are.
+template <class Space, class Operations>
+void newton_raphson(const Space& space, const SchemeVectors<Space>& s, const NewtonControls& c,
+                    const Operations& ops) {
+    struct Equilibrium {
+        const Space& space;
+        const SchemeVectors<Space>& s;
+        const Operations& ops;
+        double evaluate() const {
+            ops.propagate();
+            ops.forces();
+            ops.project_forces();
+            return space.dot(s.f, s.f);
+        }
+        void solve_linearised() const {
+            space.copy(s.r, s.f);
+            ops.solve(0.0, -1.0, 0.0);
+        }
+        void update(double alpha) const { space.advance(s.x, s.x, s.acc, alpha); }
+        double squared_guess() const { return space.dot_coordinates(s.x, s.x); }
+        double squared_correction() const { return space.dot(s.acc, s.acc); }
+    } equilibrium{space, s, ops};
+    newton_solve(c, equilibrium);
+}
+
+// BDFOdeSolver's parameters for one step (and its NewtonRaphsonSolver's).
+struct BdfControls {
+    double h;
+    double time;  // the scene's time at the start of the step
+    std::int64_t order;  // d_order (at least 1)
+    double rayleigh_stiffness, rayleigh_mass;
+    NewtonControls newton;
+};
+
+// The solver's vectors: x and v of the step's start, the residuals r1 (positions) and r2
+// (momenta). Point states only: SOFA adds coordinates and derivatives as vectors.
+template <class Space>
+struct BdfVectors {
+    typename Space::Vector x_previous, v_previous, r1, r2;
+};
+
+// What BDFOdeSolver keeps between steps (reset restores it): its time list (capacity order + 2),
+// the list's length and the number of solves done; and room for the coefficients a, b (order + 1
+// each).
+struct BdfHistory {
+    double* times;
+    Index& count;
+    Index& solves;
+    double* a;
+    double* b;
+};
+
+// BDFOdeSolver::computeLinearMultiStepCoefficients on the times t_0..t_k: a_j the derivative at t_k
+// of the j-th Lagrange polynomial, times t_k - t_k-1, divided by a_k (then 1); b_k = 1 / a_k, the
+// other b_j 0. In SOFA's order of operations.
+inline void bdf_coefficients(const double* t, Index k, double* a, double* b) {
+    for (Index j = 0; j <= k; ++j) {
+        a[j] = 0.0;
+        for (Index i = 0; i <= k; ++i) {
+            if (i == j) continue;
+            double product = 1.0;
+            for (Index m = 0; m <= k; ++m)
+                if (m != i && m != j) product *= (t[k] - t[m]) / (t[j] - t[m]);
+            a[j] += product / (t[j] - t[i]);
+        }
+    }
+    const double dt = t[k] - t[k - 1];
+    for (Index j = 0; j <= k; ++j) a[j] *= dt;
+    for (Index j = 0; j < k; ++j) a[j] /= a[k];
+    b[k] = 1 / a[k];
+    a[k] = 1;
+    for (Index j = 0; j < k; ++j) b[j] = 0;
+}
+
+// SOFA's BDFOdeSolver (BaseLinearMultiStepMethod::solve), order k = min(order, solves + 1): the
+// Newton-Raphson solver on r = (r1, r2),
+//   r1 = sum_j a_j x_j - h sum_j b_j v_j,   r2 = M sum_j a_j v_j - h sum_j b_j f_j,
+// f_j = f(x_j, v_j) - rm M v_j + rk K v_j (projected), the guess (x_k, v_k) starting at
+// (x + h v, v); each iteration solves (a_k + h b_k rm) M - h b_k B - h b_k (rk + h b_k / a_k) K) dv =
+// -r2 - (h b_k / a_k) K r1, then v_k += alpha dv, x_k += (h b_k / a_k) dv - r1 / a_k, projected
+// and mapped. SOFA keeps its vector ids from step to step: the slots below k still name the
+// state's own x, v, f (each was xResult when the order was lower), so every x_j, v_j with j < k is
+// the step's start: x_previous, v_previous here (and f_j is never read: b_j = 0). The guess lives
+// in x, v, f, which SOFA copies them into at the end.
+template <class Space, class Operations>
+void bdf_step(const Space& space, const SchemeVectors<Space>& s, const BdfVectors<Space>& w, const BdfControls& c,
+              BdfHistory history, const Operations& ops) {
+    static_assert(Space::all_points, "rigid frames: x and dx do not share a layout");
+    const double h = c.h, rk = c.rayleigh_stiffness, rm = c.rayleigh_mass;
+    const Index k = std::max<Index>(std::min<Index>(c.order, history.solves + 1), 1);
+    history.times[history.count++] = c.time + h;
+    while (history.count > k + 1) {  // pop_front
+        for (Index j = 1; j < history.count; ++j) history.times[j - 1] = history.times[j];
+        --history.count;
+    }
+    const double* a = history.a;
+    const double* b = history.b;
+    bdf_coefficients(history.times, k, history.a, history.b);
+
+    space.copy_coordinates(w.x_previous, s.x);
+    space.copy(w.v_previous, s.v);
+    space.add_scaled_coordinates(s.x, s.x, s.v, h);  // the prediction x + h v
+    ops.propagate();
+
+    struct Residual {
+        const Space& space;
+        const SchemeVectors<Space>& s;
+        const BdfVectors<Space>& w;
+        const Operations& ops;
+        const double* a;
+        const double* b;
+        Index k;
+        double h, rk, rm;
+        double evaluate() const {
+            ops.forces();
+            space.copy(s.dx, s.v);  // Rayleigh damping: f += -rm M v + rk K v
+            space.copy(s.df, s.f);
+            ops.add_product(-rm, rk, 0.0);
+            space.copy(s.f, s.df);
+            ops.project_forces();
+            space.clear(w.r1);  // r1 = sum a_j x_j - h sum b_j v_j
+            for (Index j = 0; j <= k; ++j)
+                if (a[j] != 0) space.add_scaled_coordinates(w.r1, w.r1, j < k ? w.x_previous : s.x, a[j]);
+            for (Index j = 0; j <= k; ++j)
+                if (b[j] != 0) space.add_scaled(w.r1, w.r1, j < k ? w.v_previous : s.v, -h * b[j]);
+            space.clear(s.dx);  // r2 = M (sum a_j v_j) - h b_k f_k
+            for (Index j = 0; j <= k; ++j)
+                if (a[j] != 0) space.add_scaled(s.dx, s.dx, j < k ? w.v_previous : s.v, a[j]);
+            ops.mass();
+            space.copy(w.r2, s.df);
+            if (b[k] != 0) space.add_scaled(w.r2, w.r2, s.f, -h * b[k]);
+            space.copy(s.r, w.r1);
+            ops.project_rhs();
+            space.copy(w.r1, s.r);
+            space.copy(s.r, w.r2);
+            ops.project_rhs();
+            space.copy(w.r2, s.r);
+            return space.dot(w.r2, w.r2);
+        }
+        void solve_linearised() const {
+            space.copy(s.r, w.r2);  // rhs = -r2 - (h b_k / a_k) K r1
+            space.scale(s.r, -1.0);
+            space.copy(s.dx, w.r1);
+            space.copy(s.df, s.r);
+            ops.add_product(0.0, -h * b[k] / a[k], 0.0);
+            space.copy(s.r, s.df);
+            ops.project_rhs();
+            space.clear(s.acc);
+            ops.solve(a[k] + h * b[k] * rm, -h * b[k] * (rk + h * b[k] / a[k]), -h * b[k]);
+        }
+        void update(double alpha) const {
+            space.add_scaled(s.v, s.v, s.acc, alpha);
+            space.copy(s.dx, s.acc);  // dx = (h b_k / a_k) dv - r1 / a_k
+            space.scale(s.dx, h * b[k] / a[k]);
+            space.add_scaled(s.dx, s.dx, w.r1, -1 / a[k]);
+            space.add_scaled_coordinates(s.x, s.x, s.dx, 1.0);
+            ops.project_position_velocity();
+            ops.propagate();
+        }
+        double squared_guess() const { return space.dot(s.v, s.v); }
+        double squared_correction() const { return space.dot(s.acc, s.acc); }
+    } residual{space, s, w, ops, a, b, k, h, rk, rm};
+    newton_solve(c.newton, residual);
+    ++history.solves;
 }
 
 // VariationalSymplecticSolver's parameters for one step.

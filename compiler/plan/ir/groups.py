@@ -164,6 +164,11 @@ class Group:
     # VariationalSymplecticSolver (also "implicit"): newtonError, steps, the Hamiltonian outputs and
     # a flag set once the momentum is initialised; empty for other solvers.
     variational: dict[str, Buffer] = field(default_factory=dict)
+    # BDFOdeSolver (also "implicit"): its order, the time list and counts it keeps between steps,
+    # room for its coefficients, and its NewtonRaphsonSolver's parameters; empty for other solvers.
+    bdf: dict[str, Buffer] = field(default_factory=dict)
+    # CentralDifferenceSolver (an "euler" group, symplectic): its rayleighMass; None for EulerExplicit.
+    central_difference: Buffer | None = None
     hamiltonian: bool = False  # computeHamiltonian: one more solve per step, with M alone
     incremental_potential: bool = True  # useIncrementalPotentialEnergy
     # saveEnergyInFile: the CSV file the loader writes the energies to ("" = none); SOFA opens (and

@@ -18,6 +18,7 @@ from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bendin
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
     lower_constant_force,
+    lower_edge_pressure,
     lower_interaction_ellipsoid,
     lower_plane_force,
     lower_rest_shape,
@@ -100,6 +101,7 @@ LOWERINGS: dict[str, Lowering] = {
     "direction": lower_direction,
     "plane_force": lower_plane_force,
     "triangle_pressure": lower_triangle_pressure,
+    "edge_pressure": lower_edge_pressure,
     "rigid_mapping": lower_rigid_mapping,
     "identity_mapping": lower_subset_mapping,
     "subset_mapping": lower_subset_mapping,

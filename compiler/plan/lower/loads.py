@@ -375,3 +375,148 @@ def lower_triangle_pressure(planner: Planner, checked: CheckedComponent, owner: 
             ],
         )
     )
+
+
+def _edge_pressure_selection(
+    planner: Planner, checked: CheckedComponent, edges: np.ndarray, rest: np.ndarray
+) -> np.ndarray | None:
+    """The edges EdgePressureForceField::init selects, as indices into the topology's edges: the
+    last selection it makes wins (the edge list, else edgeIndices, else the plane dmin < x.n <
+    dmax on the rest positions). An input edge is the last topology edge with the same two ends in
+    the same order (edge 0 when there is none, as SOFA's search leaves it)."""
+    component = checked.component
+    given = planner.value(component, "edges")
+    if given is not None and np.size(given):
+        chosen = np.zeros(np.size(given) // 2, dtype=np.int64)
+        for i, (a, b) in enumerate(np.asarray(given, dtype=np.int64).reshape(-1, 2).tolist()):
+            for j, (c, d) in enumerate(edges.tolist()):
+                if a == c and b == d:
+                    chosen[i] = j
+        return chosen
+    listed = planner.value(component, "edgeIndices")
+    if listed is not None and np.size(listed):
+        chosen = np.asarray(listed, dtype=np.int64).ravel()
+        bad = chosen[(chosen < 0) | (chosen >= len(edges))]
+        if bad.size:
+            planner.diags.add(
+                "E218",
+                component.attribute_loc("edgeIndices"),
+                f"EdgePressureForceField {component.label!r}: edgeIndices contains {int(bad[0])}, but "
+                f"its topology has {len(edges)} edges",
+            )
+            return None
+        return chosen
+    dmin, dmax = float(planner.value(component, "dmin")), float(planner.value(component, "dmax"))
+    if dmin == dmax:
+        return np.zeros(0, dtype=np.int64)
+    normal = np.asarray(planner.value(component, "normal"), dtype=float)
+    d = rest[:, 0] * normal[0] + rest[:, 1] * normal[1] + rest[:, 2] * normal[2]
+    inside = (d > dmin) & (d < dmax)
+    return np.flatnonzero(inside[edges].all(axis=1)).astype(np.int64)
+
+
+def _edge_lengths(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """sofa::geometry::Edge::length: sqrt of (p1 - p0).(p1 - p0), summed x, y, z."""
+    d = points[edges[:, 1], :3] - points[edges[:, 0], :3]
+    return np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+
+
+def lower_edge_pressure(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """EdgePressureForceField: each selected edge pushes both ends with half its force. With a
+    non-zero `pressure`, the force is pressure x the edge's rest length. Else, with `binormal` and
+    `p_intensity`, it is intensity x the rest length of the topology's edge of the same rank (SOFA
+    reads edge i there, not the selected one) along normalize(binormal x edge direction), and SOFA
+    recomputes it at the end of each addForce from the positions of that moment (of init at
+    first): a step applies the directions of the previous force evaluation."""
+    from sofac.geometry.masses import topology_edges
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    cells = _topology_cells(planner, checked)
+    if cells is None:
+        planner.unsupported(checked, "it needs a topology with edges")
+        return
+    rest = planner.checked.positions(state.component)
+    if rest is None:
+        planner.unsupported(checked, "its state's rest positions are not known at compile time")
+        return
+    if "edges" in cells:
+        edges = cells["edges"].reshape(-1, 2)
+    else:
+        edges = topology_edges(
+            len(rest), **{k: cells.get(k) for k in ("triangles", "quads", "tetrahedra", "hexahedra")}
+        )
+    chosen = _edge_pressure_selection(planner, checked, edges, rest)
+    if chosen is None:
+        return
+    pressure = np.zeros(3)
+    given = planner.value(component, "pressure")
+    if given is not None and np.size(given):
+        pressure[:] = np.asarray(given, dtype=float).ravel()[:3]
+    selected = edges[chosen]
+    stored_forces = planner.buffer(
+        component, "edgeForces", np.zeros((len(chosen), 3)), columns=3, role="state"
+    )
+    edge_buffer = planner.buffer(component, "edges", selected, "i64", columns=2)
+    origin = origin_of(component)
+    apply = _call("edge_pressure_forces", state.f, edge_buffer, len(chosen), stored_forces)
+    if np.sqrt(pressure @ pressure) > 0:  # SOFA's test: d_pressure.norm() > 0
+        lengths = _edge_lengths(rest, selected)
+        stored_forces.initial[:] = (pressure[None, :] * lengths[:, None]).ravel()
+        group.forces.append(Op(origin, [apply]))
+        return
+    intensities = planner.value(component, "p_intensity")
+    intensities = np.asarray(intensities if intensities is not None else [], dtype=float).ravel()
+    if not intensities.size or not _is_set(planner, component, "binormal"):
+        if not intensities.size:
+            why = "without pressure or p_intensity SOFA applies uninitialised forces"
+        else:
+            why = "p_intensity without binormal (normals from a triangle topology) is not compiled yet"
+        planner.unsupported(checked, why, "p_intensity")
+        return
+    if not (group.scheme is Scheme.EULER or (group.scheme is Scheme.IMPLICIT and _euler_implicit(group))):
+        planner.unsupported(
+            checked,
+            "with binormal, SOFA updates the forces from the state's positions inside addForce: "
+            "compiled under EulerImplicitSolver and explicit Euler only",
+            "binormal",
+        )
+        return
+    if len(chosen) > len(edges):
+        planner.unsupported(checked, "more selected edges than the topology has (SOFA reads past its edges)")
+        return
+    binormal = np.asarray(planner.value(component, "binormal"), dtype=float)
+    norm = float(np.sqrt(binormal[0] * binormal[0] + binormal[1] * binormal[1] + binormal[2] * binormal[2]))
+    if norm > np.finfo(float).eps:  # Vec::normalize
+        binormal = binormal / norm
+    rank = np.arange(len(chosen))
+    per_edge = np.where(
+        (intensities.size > 1) & (rank < intensities.size),
+        intensities[np.minimum(rank, intensities.size - 1)],
+        intensities[0],
+    )
+    update = _call(
+        "edge_pressure_update",
+        stored_forces,
+        state.x,
+        edge_buffer,
+        len(chosen),
+        planner.buffer(component, "binormal", binormal, role="param"),
+        planner.buffer(component, "intensities", per_edge, role="param"),
+        planner.buffer(component, "lengths", _edge_lengths(rest, edges[: len(chosen)])),
+    )
+    group.init.append(Op(origin, [update]))
+    group.forces.append(Op(origin, [apply, update]))
+
+
+def _is_set(planner: Planner, component: Component, name: str) -> bool:
+    checked = planner.checked.of(component)
+    return name in checked.fields or name in checked.data_links
+
+
+def _euler_implicit(group: Group) -> bool:
+    """An implicit group integrated by EulerImplicitSolver (not Static, Newmark or variational)."""
+    return not (group.static or group.newmark or group.variational)

@@ -441,6 +441,35 @@ TRIANGLE_PRESSURE_FORCE_FIELD = ComponentSpec(
     ),
 )
 
+EDGE_PRESSURE_FORCE_FIELD = ComponentSpec(
+    name="EdgePressureForceField",
+    lowering="edge_pressure",
+    category=Category.FORCEFIELD,
+    module=_LOAD_MODULE,
+    doc="A force on selected edges of the topology, half on each end: pressure x rest length, or "
+    "p_intensity x rest length along binormal x the edge's direction (updated after each force "
+    "evaluation, SOFA's way).",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=frozenset({Effect.EXTERNAL_FORCE}),
+    fields=(
+        FieldSpec("pressure", Coords(deriv=True), doc="force per unit length (a vector)"),
+        FieldSpec("edgeIndices", Ints(), doc="edges under pressure (indices into the topology's edges)"),
+        FieldSpec("edges", Ints(2), doc="edges under pressure, as point pairs of the topology's edges"),
+        FieldSpec("normal", Reals(3), (0.0, 0.0, 0.0), "normal of the selection planes (with dmin, dmax)"),
+        FieldSpec("dmin", Real(), 0.0, "edges whose ends have dmin < x.normal < dmax (when dmin != dmax)"),
+        FieldSpec("dmax", Real(), 0.0, "see dmin"),
+        FieldSpec("arrowSizeCoef", Real(), 0.0, "display size of the arrows"),
+        FieldSpec("p_intensity", Reals(), doc="intensity of the pressure along the edge normals"),
+        FieldSpec("binormal", Reals(3), (0.0, 0.0, 0.0), "binormal of the plane of the edges"),
+        FieldSpec("showForces", Bool(), False, "draw the forces"),
+        FieldSpec("edgePressureMap", Text(), doc="per-edge pressure data (computed)"),
+        *FORCEFIELD_FIELDS,
+        TOPOLOGY_LINK,
+    ),
+)
+
 UNIFORM_VELOCITY_DAMPING_FORCE_FIELD = ComponentSpec(
     name="UniformVelocityDampingForceField",
     lowering="velocity_damping",
@@ -514,6 +543,7 @@ COMPONENTS = (
     ELLIPSOID_FORCE_FIELD,
     INTERACTION_ELLIPSOID_FORCE_FIELD,
     TRIANGLE_PRESSURE_FORCE_FIELD,
+    EDGE_PRESSURE_FORCE_FIELD,
     UNIFORM_VELOCITY_DAMPING_FORCE_FIELD,
     GRAVITY,
 )

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..fields import AttributeNumber, Bool, Coords, FileName, Int, Ints, Reals, Text
+from ..fields import AttributeNumber, Bool, Coords, FileName, Int, Ints, IntVector, Reals, Text
 from ..spec import Category, ComponentSpec, Effect, FieldSpec
 from .common import MUST_BE_POSITIVE
 
@@ -15,6 +15,17 @@ def _at_least_two(x: float) -> bool:
 
 
 _IDENTITY_4X4 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+
+
+def _subelements(default: bool) -> FieldSpec:
+    return FieldSpec(
+        "createSubelements",
+        Bool(),
+        default,
+        "append the missing boundary elements: quads of hexahedra, triangles of tetrahedra, edges "
+        "of quads and triangles (MeshLoader::updateElements)",
+    )
+
 
 # core::loader::MeshLoader without the file name (BaseLoader's), which generators do not need.
 _MESH_LOADER_DATA = (
@@ -29,7 +40,7 @@ _MESH_LOADER_DATA = (
     ),
     FieldSpec("flipNormals", Bool(), False, "reverse the element orientation"),
     FieldSpec("triangulate", Bool(), False, "split polygons into triangles"),
-    FieldSpec("createSubelements", Bool(), False, "also create the boundary sub-elements of every element"),
+    _subelements(False),
     FieldSpec("onlyAttachedPoints", Bool(), False, "drop points not used by any element"),
     # outputs
     FieldSpec("position", Coords(), doc="vertex positions"),
@@ -65,7 +76,12 @@ _FILE = FieldSpec("filename", FileName(), doc="file to read", required=True)
 _MESH_LOADER_FIELDS = (_FILE, *_MESH_LOADER_DATA)
 
 
-def _mesh_loader(name: str, doc: str, *extra: FieldSpec, former: tuple[str, ...] = ()) -> ComponentSpec:
+def _mesh_loader(
+    name: str, doc: str, *extra: FieldSpec, former: tuple[str, ...] = (), subelements: bool = False
+) -> ComponentSpec:
+    fields = (*extra, *_MESH_LOADER_FIELDS)
+    if subelements:
+        fields = tuple(_subelements(True) if f.name == "createSubelements" else f for f in fields)
     return ComponentSpec(
         name=name,
         category=Category.LOADER,
@@ -75,7 +91,7 @@ def _mesh_loader(name: str, doc: str, *extra: FieldSpec, former: tuple[str, ...]
         supported=True,
         effects=_DATA,
         compute="mesh_loader",
-        fields=(*extra, *_MESH_LOADER_FIELDS),
+        fields=fields,
     )
 
 
@@ -98,7 +114,8 @@ MESH_OBJ_LOADER = _mesh_loader(
     FieldSpec("vertNormIdx", Ints(), doc="output (handleSeams): normal index of each vertex"),
     former=("MeshObjLoader",),
 )
-MESH_GMSH_LOADER = _mesh_loader("MeshGmshLoader", "Gmsh .msh (format 1, 2 ASCII, 4).")
+# MeshGmshLoader::doLoad sets createSubelements to true when the scene does not set it.
+MESH_GMSH_LOADER = _mesh_loader("MeshGmshLoader", "Gmsh .msh (format 1, 2 ASCII, 4).", subelements=True)
 MESH_VTK_LOADER = _mesh_loader(
     "MeshVTKLoader", "Legacy VTK (.vtk) and XML UnstructuredGrid or PolyData (.vtu, .vtp)."
 )
@@ -143,6 +160,35 @@ STRING_MESH_CREATOR = ComponentSpec(
     ),
 )
 
+GRID_MESH_CREATOR = ComponentSpec(
+    name="GridMeshCreator",
+    compute="grid_mesh",
+    category=Category.LOADER,
+    module=_MODULE,
+    doc="Generates a 2-D mesh of resolution[0] x resolution[1] points on the unit square (z = 0): "
+    "quads, or two triangles per cell (alternate, upward or downward), and their edges.",
+    supported=True,
+    effects=_DATA,
+    fields=(
+        FieldSpec(
+            "resolution",
+            IntVector(2),
+            (2, 2),
+            "number of vertices along x and y",
+            valid=(_at_least_two, "must be >= 2"),
+        ),
+        FieldSpec(
+            "trianglePattern",
+            Int(),
+            2,
+            "0: quads, 1: alternate triangles, 2: upward triangles, 3: downward triangles",
+        ),
+        # canLoad() is true: SOFA never reads the file (the Data is read-only)
+        FieldSpec("filename", Text(), doc="unused by this generator"),
+        *_MESH_LOADER_DATA,
+    ),
+)
+
 COMPONENTS = (
     MESH_OBJ_LOADER,
     MESH_GMSH_LOADER,
@@ -150,4 +196,5 @@ COMPONENTS = (
     MESH_STL_LOADER,
     SPHERE_LOADER,
     STRING_MESH_CREATOR,
+    GRID_MESH_CREATOR,
 )

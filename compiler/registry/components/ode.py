@@ -292,7 +292,42 @@ VARIATIONAL_SYMPLECTIC_SOLVER = ComponentSpec(
     ),
 )
 
+CENTRAL_DIFFERENCE_SOLVER = ComponentSpec(
+    name="CentralDifferenceSolver",
+    lowering="central_difference",
+    category=Category.ODE_SOLVER,
+    module=_FORWARD,
+    doc="Explicit central difference (leapfrog): a = M^-1 f, v += h a, x += h v; with rayleighMass r, "
+    "v = ((1/h - r/2) v + a) / (1/h + r/2). Diagonal masses only (SOFA's accFromF).",
+    supported=True,
+    effects=_INTEGRATION,
+    fields=(
+        FieldSpec("rayleighMass", Real(), 0.0, "Rayleigh damping coefficient on the mass"),
+        _THREAD_SAFE,
+    ),
+)
+
+BDF_ODE_SOLVER = ComponentSpec(
+    name="BDFOdeSolver",
+    lowering="bdf",
+    category=Category.ODE_SOLVER,
+    module=_BACKWARD,
+    doc="Backward differentiation formula of order `order` (lower while too few steps are done), "
+    "solved by a NewtonRaphsonSolver in its node or below (SOFA's velocity-based residual).",
+    supported=True,
+    needs_linear_solver=True,
+    effects=_INTEGRATION,
+    fields=(
+        FieldSpec("order", Int(nonnegative=True), 1, "order of the method (0 is taken as 1)"),
+        *_rayleigh("C = rM M + rK K"),
+        FieldSpec("newtonSolver", Link("newton_solver"), doc="Newton-Raphson solver (default: found below)"),
+        _LINEAR_SOLVER,
+    ),
+)
+
 COMPONENTS = (
+    CENTRAL_DIFFERENCE_SOLVER,
+    BDF_ODE_SOLVER,
     EULER_IMPLICIT_SOLVER,
     EULER_EXPLICIT_SOLVER,
     RUNGE_KUTTA2_SOLVER,

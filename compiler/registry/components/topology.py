@@ -392,6 +392,12 @@ TETRA2TRIANGLE = _topological_mapping(
     FieldSpec("modifier", Link("topology_helper"), doc="output modifier"),
     compute="tetra_to_triangle",
 )
+TRIANGLE2EDGE = _topological_mapping(
+    "Triangle2EdgeTopologicalMapping",
+    "Writes the boundary edges of the input triangles (the input container's edges that bound one "
+    "triangle only, in its edge order) to the output edge container.",
+    compute="triangle_to_edge",
+)
 MESH2POINT = _topological_mapping(
     "Mesh2PointTopologicalMapping",
     "Creates output points at given barycentric positions in each input point/edge/triangle/... element.",
@@ -447,6 +453,7 @@ COMPONENTS = (
     HEXA2QUAD,
     QUAD2TRIANGLE,
     TETRA2TRIANGLE,
+    TRIANGLE2EDGE,
     MESH2POINT,
     TOPOLOGICAL_CHANGE_PROCESSOR,
 )
