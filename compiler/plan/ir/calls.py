@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import typing
 from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Union
@@ -256,21 +257,7 @@ def _plain(name: str, arg: Any) -> Arg:
     return arg
 
 
-_ARG_TYPES = (
-    Buffer,
-    Count,
-    Element,
-    Offset,
-    Function,
-    LinearSystem,
-    Aggregate,
-    Slot,
-    Env,
-    BuiltSolver,
-    bool,
-    int,
-    float,
-)
+_ARG_TYPES = typing.get_args(Arg)
 
 
 def bind(statement: Call, values: dict[Slot, Arg]) -> Call:
