@@ -298,8 +298,8 @@ def test_box_roi_takes_positions_through_src(tmp_path: Path) -> None:
 def test_no_e212_when_positions_come_from_an_unsupported_generator(tmp_path: Path) -> None:
     _, diagnostics = check(
         tmp_path,
-        '<Node name="root">\n    <GridMeshCreator name="loader" resolution="5 5"/>\n'
-        '    <MechanicalObject name="m" position="@loader.position"/>\n'
+        '<Node name="root">\n    <GenerateGrid name="loader" resolution="5 5 5"/>\n'
+        '    <MechanicalObject name="m" position="@loader.output_position"/>\n'
         '    <BoxROI box="0 0 0 1 1 1" position="@m.position"/>\n</Node>\n',
     )
     assert codes(diagnostics) == [("E222", 2)]
