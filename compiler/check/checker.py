@@ -747,7 +747,13 @@ class _Checker:
                 return outputs[name]
         if checked.src is not None:
             source = self.checked.components.get(id(checked.src))
-            if source is not None and source.spec is not None and source.spec.field(name) is not None:
+            # SOFA's src= fills the Data the component has from the source's of the same name
+            if (
+                source is not None
+                and source.spec is not None
+                and source.spec.field(name) is not None
+                and checked.spec.field(name) is not None
+            ):
                 return self.value(source, name, depth + 1)
         if checked.category is Category.TOPOLOGY and name in (*CELL_KINDS, "position"):
             # A topological mapping writes its output container's cells (Hexa2Tetra, Tetra2Triangle...)

@@ -14,7 +14,13 @@ from sofac.plan.lower.constraint_models import (
     lower_uniform,
 )
 from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
-from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
+from sofac.plan.lower.fem import (
+    lower_element_fem,
+    lower_fem,
+    lower_quad_bending,
+    lower_triangle_fem,
+    lower_trifem_optim,
+)
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
     lower_constant_force,
@@ -70,6 +76,7 @@ LOWERINGS: dict[str, Lowering] = {
     "hexa_fem": lower_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
+    "triangle_fem": lower_triangle_fem,
     "quad_bending": lower_quad_bending,
     "hyperelastic": lower_hyperelastic,
     "quad_bending_springs": lower_quad_bending_springs,

@@ -20,6 +20,7 @@ from sofac.plan.ir import (
     Group,
     Op,
     Scheme,
+    StatePlan,
     kernel,
     origin_of,
 )
@@ -54,6 +55,8 @@ FEM_KINDS = {
 }
 # runtime quad_bending.h QUAD_BENDING_DATA: doubles per quad (rest offsets 12, material 4)
 QUAD_BENDING_DATA = 16
+# runtime shell.h triangle_fem_data_size: doubles per triangle (rotation 9, rest 4, J 18, K 5)
+TRIANGLE_FEM_DATA = 36
 # The runtime's data sizes of those kinds, which tests/test_layout.py checks against this table.
 DATA_SIZE_FUNCTIONS = {
     "tetra_fem": "tetra_fem_data_size",
@@ -237,6 +240,130 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             state,
             _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
         )
+
+
+def _rayleigh_refused(planner: Planner, checked: CheckedComponent) -> bool:
+    """A component-level rayleighStiffness (SOFA's kFactorIncludingRayleighDamping) is refused."""
+    if float(planner.value(checked.component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(
+            checked, "a component-level rayleighStiffness is not compiled yet", "rayleighStiffness"
+        )
+        return True
+    return False
+
+
+def _initial_points(
+    planner: Planner, checked: CheckedComponent, state: StatePlan, cells: np.ndarray
+) -> Buffer | None:
+    """A FEM's ``initialPoints`` when the scene gives them (SOFA's init keeps a non-empty list), else
+    the state's rest positions; None (refused) when they do not cover the elements' nodes."""
+    given = planner.value(checked.component, "initialPoints")
+    if given is None or not np.size(given):
+        return state.rest
+    points = np.asarray(given, dtype=float).reshape(-1, 3)
+    if cells.size and int(cells.max()) >= len(points):
+        planner.unsupported(
+            checked,
+            f"its initialPoints hold {len(points)} points, its elements use point {int(cells.max())}",
+            "initialPoints",
+        )
+        return None
+    return planner.buffer(checked.component, "initialPoints", points.ravel(), columns=3)
+
+
+def lower_triangle_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TriangleFEMForceField: its topology's triangles, or two per quad (q0 q1 q2)(q0 q2 q3) when it
+    has none, as SOFA's init; method large or small (runtime shell.h triangle_fem_*)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"TriangleFEMForceField on {state.datatype.name} is not compiled yet")
+        return
+    if _rayleigh_refused(planner, checked):
+        return
+    cells = _topology_cells(planner, checked) or {}
+    triangles = cells.get("triangles")
+    if (triangles is None or not triangles.size) and cells.get("quads") is not None:
+        quads = cells["quads"].reshape(-1, 4)
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).ravel()
+    if triangles is None or not triangles.size:
+        planner.ignored.append((component, "its topology has no triangles or quads: SOFA applies no force"))
+        return
+    method = FemMethod.SMALL if planner.value(component, "method") == "small" else FemMethod.LARGE
+    initial = _initial_points(planner, checked, state, triangles)
+    if initial is None:
+        return
+    if method is FemMethod.SMALL:
+        # SOFA's small method builds J from the world x, y of the edges ab, ac and stops (the
+        # component turns invalid) when b_x c_y is below machine epsilon
+        points = initial.initial.reshape(-1, 3)
+        tri = triangles.reshape(-1, 3)
+        ab, ac = points[tri[:, 1]] - points[tri[:, 0]], points[tri[:, 2]] - points[tri[:, 0]]
+        if np.any(np.abs(ab[:, 0] * ac[:, 1]) < np.finfo(float).eps):
+            planner.unsupported(
+                checked,
+                "method small divides by b_x c_y of each triangle's world edges, zero here (SOFA stops "
+                "with 'Null determinant')",
+                "method",
+            )
+            return
+    count = triangles.size // 3
+    elements = planner.buffer(component, "triangles", triangles, "i64", columns=3)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    thickness = float(planner.value(component, "thickness") or _default(checked, "thickness"))
+    plane_strain = bool(planner.value(component, "planeStrain"))
+    data = planner.buffer(component, "elements", np.zeros(count * TRIANGLE_FEM_DATA), role="scratch")
+    origin = origin_of(component)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "triangle_fem_init",
+                    elements,
+                    count,
+                    initial,
+                    *material,
+                    thickness,
+                    plane_strain,
+                    method,
+                    data,
+                )
+            ],
+        )
+    )
+    group.forces.append(
+        Op(origin, [_call("triangle_fem_add_force", elements, count, state.x, state.f, data, method)])
+    )
+    if group.scheme is not Scheme.IMPLICIT:
+        return
+    group.stiffness_dx.append(
+        Op(
+            origin,
+            [_call("triangle_fem_add_dforce", elements, count, state.dx, state.df, Env.KFACT, data, method)],
+        )
+    )
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        _call(
+            kernel("assemble_elements", 3),
+            Env.ASSEMBLER,
+            elements,
+            count,
+            data,
+            method,
+            OFFSET,
+            Env.KFACT,
+            Function("triangle_fem_element_matrix"),
+        ),
+    )
 
 
 def lower_quad_bending(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:

@@ -249,9 +249,12 @@ TRIANGULAR_FEM_FORCE_FIELD_OPTIM = ComponentSpec(
 
 TRIANGLE_FEM_FORCE_FIELD = ComponentSpec(
     name="TriangleFEMForceField",
+    lowering="triangle_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
-    doc="Constant-strain triangles on a static topology, plane stress (or plane strain).",
+    doc="Constant-strain triangles on a static topology (its triangles, or two per quad), plane "
+    "stress (or plane strain), corotational for 'large'; SOFA's 'small' works in the world x, y "
+    "plane. SOFA has no energy for it.",
     templates=("Vec3d",),
     default_template="Vec3d",
     supported=True,
