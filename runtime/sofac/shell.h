@@ -1,4 +1,5 @@
-// Surface force fields on triangles, in SOFA's order of floating-point operations.
+// Surface force fields on triangles (and QuadularBendingSprings on quads), in SOFA's order of
+// floating-point operations.
 //
 // TriangularFEMForceFieldOptim (corotational membrane, "large" only): per triangle (a, b, c) the rest
 // frame gives bx, cx, cy (b and c in the frame of edge ab) and ss_factor = 1/2 / (bx cy); each
@@ -322,6 +323,60 @@ inline void assemble_triangular_bending(Assembler& A, Index offset, const Index*
     }
 }
 
+// QuadularBendingSprings: springs (e0, e1) with ks, kd, L each (params), SOFA's computeSpringForce:
+// u = x_e1 - x_e0, d = |u|; for d > 1e-4, direction u * (1/d), F = ks (d - L) + kd direction.(v_e1 -
+// v_e0), f_e0 += F direction, f_e1 -= it, and the force pass stores df/dx = (u/d)(u/d)^T (ks - F/d)
+// + F/d I (zero for d <= 1e-4; note u/d there, a division, where the force multiplies by 1/d).
+inline void quadular_bending_add_force(const Index* springs, const double* params, Index n, const double* x,
+                                       const double* v, double* f, double* dfdx) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double ks = params[3 * s], kd = params[3 * s + 1], rest = params[3 * s + 2];
+        double* m = dfdx + 9 * s;
+        for (int k = 0; k < 9; ++k) m[k] = 0.0;
+        double u[3];
+        for (int k = 0; k < 3; ++k) u[k] = x[3 * b + k] - x[3 * a + k];
+        const double d = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        if (!(d > 1.0e-4)) continue;
+        const double inverse = 1 / d;
+        double direction[3], rv[3], unit[3];
+        for (int k = 0; k < 3; ++k) {
+            direction[k] = u[k] * inverse;
+            rv[k] = v[3 * b + k] - v[3 * a + k];
+            unit[k] = u[k] / d;
+        }
+        const double elongation = d - rest;
+        const double speed = direction[0] * rv[0] + direction[1] * rv[1] + direction[2] * rv[2];
+        const double intensity = ks * elongation + kd * speed;
+        for (int k = 0; k < 3; ++k) {
+            const double force = direction[k] * intensity;
+            f[3 * a + k] += force;
+            f[3 * b + k] -= force;
+        }
+        const double tgt = intensity * inverse;
+        for (int j = 0; j < 3; ++j) {
+            for (int k = 0; k < 3; ++k) m[3 * j + k] = unit[j] * unit[k] * (ks - tgt);
+            m[3 * j + j] += tgt;
+        }
+    }
+}
+
+// df_e0 += m (kfactor (dx_e1 - dx_e0)), df_e1 -= it (SOFA scales dx before the product).
+inline void quadular_bending_add_dforce(const Index* springs, Index n, const double* dfdx, const double* dx,
+                                        double* df, double kfactor) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double* m = dfdx + 9 * s;
+        double d[3];
+        for (int k = 0; k < 3; ++k) d[k] = (dx[3 * b + k] - dx[3 * a + k]) * kfactor;
+        for (int j = 0; j < 3; ++j) {
+            const double value = m[3 * j] * d[0] + m[3 * j + 1] * d[1] + m[3 * j + 2] * d[2];
+            df[3 * a + j] += value;
+            df[3 * b + j] -= value;
+        }
+    }
+}
+
 // TriangularFEMForceField, method "large" (SOFA's TriangleFEMUtils, non-anisotropic path): per
 // triangle the frame R (x along ab, z the normal) of the current positions, the displacement of b and
 // c in it against the rotated rest shape, J from the current local b and c, stress = K J^T D with
@@ -417,6 +472,35 @@ inline void large_triangle_dforce(const Index* t, const double* dx, double* df, 
         for (int k = 0; k < 3; ++k) df[3 * t[node] + k] += fw[k] * kfactor;
     }
 }
+// SOFA's computeElementStiffnessMatrix (TriangleFEMForceField and TriangularFEMForceField): the
+// positive stiffness (9x9, row-major, node-major) Ke = J K J^T on the in-plane x, y of each node, then
+// RR Ke RR^T with RR the block-diagonal rotation (R^T, local to world); products in SOFA's Mat order.
+inline void corotational_triangle_matrix(const double* rotation, const double* J, const double* k, double* out) {
+    const double K[3][3] = {{k[0], k[1], 0}, {k[2], k[3], 0}, {0, 0, k[4]}};
+    double JK[6][3] = {}, JKJt[6][6] = {};
+    for (int i = 0; i < 6; ++i)
+        for (int m = 0; m < 3; ++m)
+            for (int j = 0; j < 3; ++j) JK[i][j] += J[3 * i + m] * K[m][j];
+    for (int i = 0; i < 6; ++i)
+        for (int m = 0; m < 3; ++m)
+            for (int j = 0; j < 6; ++j) JKJt[i][j] += JK[i][m] * J[3 * j + m];
+    double Ke[9][9] = {}, RR[9][9] = {}, S[9][9] = {};
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+            for (int m = 0; m < 2; ++m)
+                for (int l = 0; l < 2; ++l) Ke[3 * a + m][3 * b + l] = JKJt[2 * a + m][2 * b + l];
+    for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) RR[3 * a + i][3 * a + j] = rotation[3 * i + j];
+    for (int i = 0; i < 9; ++i)
+        for (int m = 0; m < 9; ++m)
+            for (int j = 0; j < 9; ++j) S[i][j] += RR[i][m] * Ke[m][j];
+    for (int i = 0; i < 9; ++i)
+        for (int j = 0; j < 9; ++j) out[9 * i + j] = 0.0;
+    for (int i = 0; i < 9; ++i)
+        for (int m = 0; m < 9; ++m)
+            for (int j = 0; j < 9; ++j) out[9 * i + j] += S[i][m] * RR[j][m];
+}
 }  // namespace shell_detail
 
 constexpr int trifem_data_size(int /*method*/ = 1) { return shell_detail::TRI_FEM_DATA; }
@@ -464,6 +548,12 @@ inline void trifem_add_dforce(const Index* tri, Index n, const double* dx, doubl
         const double* e = data + TRI_FEM_DATA * i;
         large_triangle_dforce(tri + 3 * i, dx, df, kfactor, e, e + 12, e + 30);
     }
+}
+
+// The positive stiffness of triangle e of TriangularFEMForceField, for assembled solvers.
+inline void trifem_element_matrix(const double* data, Index e, int /*method*/, double* out) {
+    const double* d = data + shell_detail::TRI_FEM_DATA * e;
+    shell_detail::corotational_triangle_matrix(d, d + 12, d + 30, out);
 }
 
 // TriangleFEMForceField (SOFA's TriangleFEMForceField.inl with TriangleFEMUtils). Element data, 36
@@ -587,38 +677,11 @@ inline void triangle_fem_add_dforce(const Index* tri, Index n, const double* dx,
     }
 }
 
-// The positive stiffness of triangle e (9x9, row-major, node-major), SOFA's
-// computeElementStiffnessMatrix: Ke = J K J^T (in-plane x, y of each node), then RR Ke RR^T with RR
-// the block-diagonal stored rotation (identity for small); products in SOFA's Mat order.
+// The positive stiffness of triangle e of TriangleFEMForceField (9x9, row-major, node-major).
 inline void triangle_fem_element_matrix(const double* data, Index e, int /*method*/, double* out) {
     using namespace shell_detail;
     const double* d = data + TRIANGLE_FEM_DATA * e;
-    const double* J = d + TF_J;
-    const double* k = d + TF_K;
-    const double K[3][3] = {{k[0], k[1], 0}, {k[2], k[3], 0}, {0, 0, k[4]}};
-    double JK[6][3] = {}, JKJt[6][6] = {};
-    for (int i = 0; i < 6; ++i)
-        for (int m = 0; m < 3; ++m)
-            for (int j = 0; j < 3; ++j) JK[i][j] += J[3 * i + m] * K[m][j];
-    for (int i = 0; i < 6; ++i)
-        for (int m = 0; m < 3; ++m)
-            for (int j = 0; j < 6; ++j) JKJt[i][j] += JK[i][m] * J[3 * j + m];
-    double Ke[9][9] = {}, RR[9][9] = {}, S[9][9] = {};
-    for (int a = 0; a < 3; ++a)
-        for (int b = 0; b < 3; ++b)
-            for (int m = 0; m < 2; ++m)
-                for (int l = 0; l < 2; ++l) Ke[3 * a + m][3 * b + l] = JKJt[2 * a + m][2 * b + l];
-    for (int a = 0; a < 3; ++a)
-        for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) RR[3 * a + i][3 * a + j] = d[TF_ROT + 3 * i + j];
-    for (int i = 0; i < 9; ++i)
-        for (int m = 0; m < 9; ++m)
-            for (int j = 0; j < 9; ++j) S[i][j] += RR[i][m] * Ke[m][j];
-    for (int i = 0; i < 9; ++i)
-        for (int j = 0; j < 9; ++j) out[9 * i + j] = 0.0;
-    for (int i = 0; i < 9; ++i)
-        for (int m = 0; m < 9; ++m)
-            for (int j = 0; j < 9; ++j) out[9 * i + j] += S[i][m] * RR[j][m];
+    corotational_triangle_matrix(d + TF_ROT, d + TF_J, d + TF_K, out);
 }
 
 // trifem_optim_element_matrix as assemble_elements calls it: the materials bound, per element.

@@ -67,6 +67,16 @@ def _target(
     return state, group
 
 
+def _rayleigh_refused(planner: Planner, checked: CheckedComponent) -> bool:
+    """A component-level rayleighStiffness (SOFA's kFactorIncludingRayleighDamping) is refused."""
+    if float(planner.value(checked.component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(
+            checked, "a component-level rayleighStiffness is not compiled yet", "rayleighStiffness"
+        )
+        return True
+    return False
+
+
 def _indices(
     planner: Planner, checked: CheckedComponent, name: str, size: int, all_if_empty: bool = True
 ) -> np.ndarray:

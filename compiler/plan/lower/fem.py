@@ -31,6 +31,7 @@ from sofac.plan.lower.common import (
     _call,
     _default,
     _element_target,
+    _rayleigh_refused,
     _sparse_grid_coefficients,
     _split_argument,
     _split_hexahedra,
@@ -110,10 +111,8 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
         return
     method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), FemMethod.LARGE)
-    if prefix == "trifem" and (method != FemMethod.LARGE or group.assembled):
-        planner.unsupported(
-            checked, "TriangularFEMForceField is compiled for method large with the matrix-free CG only"
-        )
+    if prefix == "trifem" and method != FemMethod.LARGE:
+        planner.unsupported(checked, "TriangularFEMForceField is compiled for method large only", "method")
         return
     if prefix != "tetra_fem" and method == FemMethod.SVD:
         method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
@@ -240,16 +239,6 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             state,
             _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
         )
-
-
-def _rayleigh_refused(planner: Planner, checked: CheckedComponent) -> bool:
-    """A component-level rayleighStiffness (SOFA's kFactorIncludingRayleighDamping) is refused."""
-    if float(planner.value(checked.component, "rayleighStiffness") or 0.0) != 0.0:
-        planner.unsupported(
-            checked, "a component-level rayleighStiffness is not compiled yet", "rayleighStiffness"
-        )
-        return True
-    return False
 
 
 def _initial_points(
