@@ -75,6 +75,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetra_fem": lower_fem,
     "tetracorot_fem": lower_fem,
     "hexa_fem": lower_fem,
+    "hexahedral_fem": lower_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
     "triangle_fem": lower_triangle_fem,

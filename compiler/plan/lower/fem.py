@@ -52,6 +52,7 @@ FEM_KINDS = {
     "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
+    "hexahedral_fem": ("hexahedral_fem", "hexahedra", 8, {1: 609, 2: 609}),
     "trifem": ("trifem", "triangles", 3, {1: 35}),
 }
 # runtime quad_bending.h QUAD_BENDING_DATA: doubles per quad (rest offsets 12, material 4)
@@ -63,6 +64,7 @@ DATA_SIZE_FUNCTIONS = {
     "tetra_fem": "tetra_fem_data_size",
     "tetracorot_fem": "tetracorot_fem_data_size",
     "hexa_fem": "hexa_fem_data_size",
+    "hexahedral_fem": "hexahedral_fem_data_size",
     "trifem": "trifem_data_size",
 }
 
@@ -199,7 +201,7 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         planner, checked, state, group, elements, count, data, method, coefficient_buffer
     ):
         return
-    if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
+    if prefix not in ("tetracorot_fem", "trifem", "hexahedral_fem"):  # SOFA's energy (0 for these)
         group.energy.append(
             Op(
                 origin,

@@ -191,6 +191,29 @@ HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
     ),
 )
 
+HEXAHEDRAL_FEM_FORCE_FIELD = ComponentSpec(
+    name="HexahedralFEMForceField",
+    lowering="hexahedral_fem",
+    category=Category.FORCEFIELD,
+    module=_MODULE,
+    doc="Corotational trilinear hexahedra (large or polar) with SOFA's closed-form element stiffness "
+    "for axis-aligned boxes (runtime/sofac/hexahedral_fem.h); SOFA has no energy for it and "
+    "assembles its stiffness with the rotation transposed (kept).",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=_FEM_EFFECTS,
+    fields=(
+        FieldSpec(
+            "method",
+            Enum(values=("large", "polar"), case_sensitive=True),
+            "large",
+            "corotational frame: mean edges orthonormalised (large) or their polar rotation",
+        ),
+        *ELASTICITY_FIELDS,
+    ),
+)
+
 TRIANGULAR_FEM_FORCE_FIELD = ComponentSpec(
     name="TriangularFEMForceField",
     lowering="trifem",
@@ -508,6 +531,7 @@ COMPONENTS = (
     TETRAHEDRAL_COROTATIONAL_FEM_FORCE_FIELD,
     HEXAHEDRON_FEM_FORCE_FIELD,
     HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS,
+    HEXAHEDRAL_FEM_FORCE_FIELD,
     TRIANGULAR_FEM_FORCE_FIELD,
     TRIANGULAR_FEM_FORCE_FIELD_OPTIM,
     TRIANGLE_FEM_FORCE_FIELD,
