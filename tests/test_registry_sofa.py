@@ -173,9 +173,8 @@ def test_sofa_visual_models_are_drawing_only(tmp_path: Path, capsys: pytest.Capt
 
 def test_required_plugin_of_a_sofa_plugin_is_known(tmp_path: Path) -> None:
     _, diagnostics = check(
-        tmp_path,
-        HEAD + '    <RequiredPlugin pluginName="SofaCarving"/>\n'
-        '    <RequiredPlugin pluginName="NoSuchPlugin"/>\n</Node>\n',
+        tmp_path, HEAD + '    <RequiredPlugin pluginName="SofaCarving"/>\n'
+        '    <RequiredPlugin pluginName="NoSuchPlugin"/>\n</Node>\n'
     )
     assert codes(diagnostics) == [("W224", 7)]
 
