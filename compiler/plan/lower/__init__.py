@@ -16,6 +16,7 @@ from sofac.plan.lower.constraint_models import (
 from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
 from sofac.plan.lower.fem import (
     lower_element_fem,
+    lower_fast_tetra_fem,
     lower_fem,
     lower_quad_bending,
     lower_triangle_fem,
@@ -76,6 +77,7 @@ LOWERINGS: dict[str, Lowering] = {
     "tetracorot_fem": lower_fem,
     "hexa_fem": lower_fem,
     "hexahedral_fem": lower_fem,
+    "fast_tetra_fem": lower_fast_tetra_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
     "triangle_fem": lower_triangle_fem,

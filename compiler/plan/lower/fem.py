@@ -357,6 +357,122 @@ def lower_triangle_fem(planner: Planner, checked: CheckedComponent, owner: dict[
     )
 
 
+# SOFA's FastTetrahedralCorotationalForceField method names, as its RotationDecompositionMethod
+# (runtime fast_tetra_fem.h FastTetraMethod: polar, qr, polar2, linear)
+FAST_TETRA_METHODS = {"polar": 0, "qr": 1, "large": 1, "polar2": 2, "none": 3, "linear": 3, "small": 3}
+# runtime fast_tetra_fem.h fast_tetra_fem_data_size: doubles per tetrahedron
+FAST_TETRA_DATA = 144
+
+
+def lower_fast_tetra_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FastTetrahedralCorotationalForceField: the topology's tetrahedra, K dx on its edges (SOFA's
+    order, or the edges of the tetrahedra as SOFA creates them), runtime fast_tetra_fem.h."""
+    from sofac.geometry import masses
+
+    found = _target(planner, checked, owner)
+    if found is None:
+        return
+    state, group = found
+    component = checked.component
+    if state.datatype.name != "Vec3d":
+        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
+        return
+    if _rayleigh_refused(planner, checked):
+        return
+    cells = _topology_cells(planner, checked) or {}
+    tetrahedra = cells.get("tetrahedra")
+    if tetrahedra is None or not tetrahedra.size:
+        planner.unsupported(checked, "it needs tetrahedra known at compile time")
+        return
+    tets = tetrahedra.reshape(-1, 4)
+    edges = cells.get("edges")
+    edges = (
+        masses.topology_edges(state.size, tetrahedra=tets) if edges is None or not edges.size else edges
+    ).reshape(-1, 2)
+    try:
+        tet_edges = masses.element_edge_indices("tetrahedra", tets, edges, state.size)
+    except ValueError as error:
+        planner.unsupported(checked, str(error))
+        return
+    method = FAST_TETRA_METHODS[str(planner.value(component, "method") or _default(checked, "method"))]
+    count, n_edges = len(tets), len(edges)
+    elements = planner.buffer(component, "tetrahedra", tets, "i64", columns=4)
+    edges_in = planner.buffer(component, "edgesInTetrahedron", tet_edges, "i64", columns=6)
+    edge_list = planner.buffer(component, "edges", edges, "i64", columns=2)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    data = planner.buffer(component, "tetrahedronInfo", np.zeros(count * FAST_TETRA_DATA), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "fast_tetra_fem_init",
+                    elements,
+                    count,
+                    state.rest,
+                    *material,
+                    method,
+                    edges_in,
+                    edge_list,
+                    data,
+                )
+            ],
+        )
+    )
+    force = _call("fast_tetra_fem_add_force", elements, count, state.x, state.f, data, method)
+    if group.scheme is not Scheme.IMPLICIT:
+        group.forces.append(Op(origin, [force]))
+        return
+    edge_matrices = planner.buffer(component, "edgeInfo", np.zeros(9 * n_edges), columns=9, role="scratch")
+    # SOFA rebuilds the edge blocks at the first K dx after a force pass: here right after it
+    group.forces.append(
+        Op(
+            origin,
+            [force, _call("fast_tetra_fem_edge_matrices", edges_in, count, n_edges, data, edge_matrices)],
+        )
+    )
+    group.stiffness_dx.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "fast_tetra_fem_add_dforce",
+                    edge_list,
+                    n_edges,
+                    edge_matrices,
+                    state.dx,
+                    state.df,
+                    Env.KFACT,
+                )
+            ],
+        )
+    )
+    if group.assembled:
+        points = planner.buffer(component, "pointInfo", np.zeros(9 * state.size), columns=9, role="scratch")
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call(
+                "assemble_fast_tetra_fem",
+                Env.ASSEMBLER,
+                OFFSET,
+                elements,
+                count,
+                state.size,
+                edge_list,
+                n_edges,
+                edge_matrices,
+                data,
+                points,
+                Env.KFACT,
+            ),
+        )
+
+
 def lower_quad_bending(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """QuadBendingFEMForceField: SOFA's small method on the topology's quads, its stiffness
     recomputed from the positions at every force and derivative pass (as SOFA)."""
