@@ -20,8 +20,10 @@ from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
 from kernel_shim import indices as _i
 from sofac.check.checker import check_file
+from sofac.diagnostics import SceneError
 from sofac.geometry import masses
 from sofac.geometry.fem_topology import tetrahedra_from_grid
+from sofac.pipeline import compile_scene
 from sofac.plan.lower.fem import FAST_TETRA_DATA, FAST_TETRA_METHODS
 
 SHIM = r"""
@@ -474,6 +476,43 @@ def test_unknown_method_is_refused(tmp_path: Path) -> None:
     )
     _, diagnostics = check_file(path)
     assert [(d.code, d.loc.line, d.loc.attribute) for d in diagnostics] == [("E204", 8, "method")]
+
+
+REFUSED = """\
+<Node name="root" dt="0.01">
+  <DefaultAnimationLoop/>
+  <EulerImplicitSolver/>
+  <CGLinearSolver iterations="25" tolerance="1e-9" threshold="1e-9"/>
+  {topology}
+  <MechanicalObject position="0 0 0  1 0 0  0 1 0  0 0 1"/>
+  <UniformMass totalMass="1"/>
+  <FastTetrahedralCorotationalForceField youngModulus="100" {extra}/>
+</Node>
+"""
+
+
+@pytest.mark.parametrize(
+    "topology,extra,attribute,words",
+    [
+        ('<RegularGridTopology n="2 2 2" min="0 0 0" max="1 1 1"/>', "", None, "no tetrahedra"),
+        ('<MeshTopology tetrahedra="0 1 2 3"/>', 'rayleighStiffness="0.1"', "rayleighStiffness", "rayleigh"),
+        ('<MeshTopology tetrahedra="0 1 2 3" edges="0 1  0 2  0 3  1 2  1 3"/>', "", None, "edge (2, 3)"),
+    ],
+    ids=["grid", "rayleigh", "missing-edge"],
+)
+def test_what_is_refused(
+    tmp_path: Path, topology: str, extra: str, attribute: str | None, words: str
+) -> None:
+    """E222 at the force field's line: a topology without tetrahedra (SOFA: "No tetrahedra found"), a
+    component-level rayleighStiffness, edges not covering the tetrahedra (SOFA would read past its
+    edge array)."""
+    path = tmp_path / "refused.scn"
+    path.write_text(REFUSED.format(topology=topology, extra=extra))
+    with pytest.raises(SceneError) as error:
+        compile_scene(path)
+    (diagnostic,) = error.value.diagnostics
+    assert (diagnostic.code, diagnostic.loc.line, diagnostic.loc.attribute) == ("E222", 8, attribute)
+    assert words in diagnostic.message.lower()
 
 
 def test_sofa_example_scene_runs() -> None:

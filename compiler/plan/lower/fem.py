@@ -38,6 +38,7 @@ from sofac.plan.lower.common import (
     _target,
     _topology_cells,
     _triangle_target,
+    _vec3_target,
     _written_float,
 )
 from sofac.plan.lower.masses import lower_hexa_mass
@@ -265,17 +266,11 @@ def _initial_points(
 def lower_triangle_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
     """TriangleFEMForceField: its topology's triangles, or two per quad (q0 q1 q2)(q0 q2 q3) when it
     has none, as SOFA's init; method large or small (runtime shell.h triangle_fem_*)."""
-    found = _target(planner, checked, owner)
-    if found is None:
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
         return
-    state, group = found
+    state, group, cells = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"TriangleFEMForceField on {state.datatype.name} is not compiled yet")
-        return
-    if _rayleigh_refused(planner, checked):
-        return
-    cells = _topology_cells(planner, checked) or {}
     triangles = cells.get("triangles")
     if (triangles is None or not triangles.size) and cells.get("quads") is not None:
         quads = cells["quads"].reshape(-1, 4)
@@ -369,20 +364,19 @@ def lower_fast_tetra_fem(planner: Planner, checked: CheckedComponent, owner: dic
     order, or the edges of the tetrahedra as SOFA creates them), runtime fast_tetra_fem.h."""
     from sofac.geometry import masses
 
-    found = _target(planner, checked, owner)
-    if found is None:
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
         return
-    state, group = found
+    state, group, cells = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"{component.type_name} on {state.datatype.name} is not compiled yet")
-        return
-    if _rayleigh_refused(planner, checked):
-        return
-    cells = _topology_cells(planner, checked) or {}
     tetrahedra = cells.get("tetrahedra")
     if tetrahedra is None or not tetrahedra.size:
-        planner.unsupported(checked, "it needs tetrahedra known at compile time")
+        # SOFA: "No tetrahedra found in linked Topology" (a grid's hexahedra are not split for it)
+        planner.unsupported(
+            checked,
+            "its topology has no tetrahedra known at compile time "
+            "(a grid's hexahedra: split them with Hexa2TetraTopologicalMapping)",
+        )
         return
     tets = tetrahedra.reshape(-1, 4)
     edges = cells.get("edges")

@@ -29,6 +29,7 @@ from sofac.plan.lower.common import (
     _topology_cells,
     _topology_of,
     _triangle_target,
+    _vec3_target,
 )
 
 if TYPE_CHECKING:
@@ -199,17 +200,11 @@ def lower_quadular_bending_springs(
     uniform stiffness and damping, rest lengths from the rest positions (runtime shell.h)."""
     from sofac.geometry import masses
 
-    found = _target(planner, checked, owner)
-    if found is None:
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
         return
-    state, group = found
+    state, group, cells = found
     component = checked.component
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(checked, f"QuadularBendingSprings on {state.datatype.name} is not compiled yet")
-        return
-    if _rayleigh_refused(planner, checked):
-        return
-    cells = _topology_cells(planner, checked) or {}
     quads = cells.get("quads")
     rest = planner.checked.positions(state.component)
     if quads is None or not quads.size or rest is None:
