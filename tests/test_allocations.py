@@ -124,6 +124,25 @@ def test_variational_symplectic_solver_does_not_allocate_in_a_step(shim: Path, t
     assert counts == {str(path): [0, 0] for path in paths}
 
 
+def test_fast_tetrahedral_corotational_does_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
+    # SOFA's example (four methods, EigenSimplicialLDLT: assembled) and a matrix-free CG (K dx on edges)
+    example = Path(
+        "/work/sofa-tree/examples/Component/SolidMechanics/FEM/FastTetrahedralCorotationalForceField.scn"
+    )
+    if not example.is_file():
+        pytest.skip("SOFA's examples tree is not extracted at /work/sofa-tree")
+    matrix_free = tmp_path / "fast_tetra_cg.scn"
+    matrix_free.write_text(
+        example.read_text().replace(
+            '<EigenSimplicialLDLT template="CompressedRowSparseMatrixMat3x3"/>',
+            '<CGLinearSolver iterations="25" tolerance="1e-9" threshold="1e-9"/>',
+        )
+    )
+    assert "CGLinearSolver" in matrix_free.read_text()
+    counts = allocations(shim, [example, matrix_free])
+    assert counts == {str(example): [0, 0], str(matrix_free): [0, 0]}
+
+
 def test_supernodal_cholesky_does_not_allocate_in_a_step(shim: Path, tmp_path: Path) -> None:
     # W3's SparseCholeskySolver beam at 8x8x20 nodes (1.2e8 flops per factorisation): many
     # supernodes, each updated by its descendants, in runtime/sofac/direct.h's SupernodalCholesky

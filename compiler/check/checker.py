@@ -779,7 +779,13 @@ class _Checker:
                 return outputs[name]
         if checked.src is not None:
             source = self.checked.components.get(id(checked.src))
-            if source is not None and source.spec is not None and source.spec.field(name) is not None:
+            # SOFA's src= fills the Data the component has from the source's of the same name
+            if (
+                source is not None
+                and source.spec is not None
+                and source.spec.field(name) is not None
+                and checked.spec.field(name) is not None
+            ):
                 return self.value(source, name, depth + 1)
         if checked.category is Category.TOPOLOGY and name == "position":
             # Mesh2PointTopologicalMapping writes its output container's points.

@@ -1,4 +1,5 @@
-// Surface force fields on triangles, in SOFA's order of floating-point operations.
+// Surface force fields on triangles (and QuadularBendingSprings on quads), in SOFA's order of
+// floating-point operations.
 //
 // TriangularFEMForceFieldOptim (corotational membrane, "large" only): per triangle (a, b, c) the rest
 // frame gives bx, cx, cy (b and c in the frame of edge ab) and ss_factor = 1/2 / (bx cy); each
@@ -322,6 +323,60 @@ inline void assemble_triangular_bending(Assembler& A, Index offset, const Index*
     }
 }
 
+// QuadularBendingSprings: springs (e0, e1) with ks, kd, L each (params), SOFA's computeSpringForce:
+// u = x_e1 - x_e0, d = |u|; for d > 1e-4, direction u * (1/d), F = ks (d - L) + kd direction.(v_e1 -
+// v_e0), f_e0 += F direction, f_e1 -= it, and the force pass stores df/dx = (u/d)(u/d)^T (ks - F/d)
+// + F/d I (zero for d <= 1e-4; note u/d there, a division, where the force multiplies by 1/d).
+inline void quadular_bending_add_force(const Index* springs, const double* params, Index n, const double* x,
+                                       const double* v, double* f, double* dfdx) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double ks = params[3 * s], kd = params[3 * s + 1], rest = params[3 * s + 2];
+        double* m = dfdx + 9 * s;
+        for (int k = 0; k < 9; ++k) m[k] = 0.0;
+        double u[3];
+        for (int k = 0; k < 3; ++k) u[k] = x[3 * b + k] - x[3 * a + k];
+        const double d = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+        if (!(d > 1.0e-4)) continue;
+        const double inverse = 1 / d;
+        double direction[3], rv[3], unit[3];
+        for (int k = 0; k < 3; ++k) {
+            direction[k] = u[k] * inverse;
+            rv[k] = v[3 * b + k] - v[3 * a + k];
+            unit[k] = u[k] / d;
+        }
+        const double elongation = d - rest;
+        const double speed = direction[0] * rv[0] + direction[1] * rv[1] + direction[2] * rv[2];
+        const double intensity = ks * elongation + kd * speed;
+        for (int k = 0; k < 3; ++k) {
+            const double force = direction[k] * intensity;
+            f[3 * a + k] += force;
+            f[3 * b + k] -= force;
+        }
+        const double tgt = intensity * inverse;
+        for (int j = 0; j < 3; ++j) {
+            for (int k = 0; k < 3; ++k) m[3 * j + k] = unit[j] * unit[k] * (ks - tgt);
+            m[3 * j + j] += tgt;
+        }
+    }
+}
+
+// df_e0 += m (kfactor (dx_e1 - dx_e0)), df_e1 -= it (SOFA scales dx before the product).
+inline void quadular_bending_add_dforce(const Index* springs, Index n, const double* dfdx, const double* dx,
+                                        double* df, double kfactor) {
+    for (Index s = 0; s < n; ++s) {
+        const Index a = springs[2 * s], b = springs[2 * s + 1];
+        const double* m = dfdx + 9 * s;
+        double d[3];
+        for (int k = 0; k < 3; ++k) d[k] = (dx[3 * b + k] - dx[3 * a + k]) * kfactor;
+        for (int j = 0; j < 3; ++j) {
+            const double value = m[3 * j] * d[0] + m[3 * j + 1] * d[1] + m[3 * j + 2] * d[2];
+            df[3 * a + j] += value;
+            df[3 * b + j] -= value;
+        }
+    }
+}
+
 // TriangularFEMForceField, method "large" (SOFA's TriangleFEMUtils, non-anisotropic path): per
 // triangle the frame R (x along ab, z the normal) of the current positions, the displacement of b and
 // c in it against the rotated rest shape, J from the current local b and c, stress = K J^T D with
@@ -376,6 +431,76 @@ inline void local_forces(const double J[18], const double* K, const double D[6],
     F[4] = j(4, 2) * t2;
     F[5] = j(5, 1) * t1;
 }
+
+// The large method on one triangle (SOFA's accumulateForceLarge): the frame R of the current
+// positions, the displacement of b and c in it against the rest b_x, c_x, c_y, J from the current
+// local b and c; f += R^T F. Stores R^T in `rotation` and J for the derivative passes.
+inline void large_triangle_force(const Index* t, const double* x, double* f, double rest_bx, double rest_cx,
+                                 double rest_cy, const double* K, double* rotation, double* J) {
+    const V3 pa = load(x + 3 * t[0]), pb = load(x + 3 * t[1]), pc = load(x + 3 * t[2]);
+    double r[9];
+    triangle_rotation(pa, pb, pc, r);
+    const V3 b = mat_vec(r, sub(pb, pa)), c = mat_vec(r, sub(pc, pa));
+    const double D[6] = {0, 0, rest_bx - b[0], 0, rest_cx - c[0], rest_cy - c[1]};
+    double F[6];
+    strain_displacement(b, c, J);
+    local_forces(J, K, D, F);
+    for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < 3; ++k) rotation[3 * a + k] = r[3 * k + a];
+    for (int node = 0; node < 3; ++node) {
+        const V3 fw = mat_vec(rotation, V3{{F[2 * node], F[2 * node + 1], 0}});
+        for (int k = 0; k < 3; ++k) f[3 * t[node] + k] += fw[k];
+    }
+}
+
+// df += kfactor (df/dx) dx on one triangle with the stored R^T and J (SOFA's applyStiffnessLarge, h = 1).
+inline void large_triangle_dforce(const Index* t, const double* dx, double* df, double kfactor,
+                                  const double* rotation, const double* J, const double* K) {
+    double r[9];  // R_0_2 = transpose(rotation)
+    for (int a = 0; a < 3; ++a)
+        for (int k = 0; k < 3; ++k) r[3 * a + k] = rotation[3 * k + a];
+    double D[6], F[6];
+    for (int node = 0; node < 3; ++node) {
+        const V3 local = mat_vec(r, load(dx + 3 * t[node]));
+        D[2 * node] = local[0];
+        D[2 * node + 1] = local[1];
+    }
+    local_forces(J, K, D, F);
+    const double h = 1;
+    for (int node = 0; node < 3; ++node) {
+        const V3 fw = mat_vec(rotation, V3{{-h * F[2 * node], -h * F[2 * node + 1], 0}});
+        for (int k = 0; k < 3; ++k) df[3 * t[node] + k] += fw[k] * kfactor;
+    }
+}
+// SOFA's computeElementStiffnessMatrix (TriangleFEMForceField and TriangularFEMForceField): the
+// positive stiffness (9x9, row-major, node-major) Ke = J K J^T on the in-plane x, y of each node, then
+// RR Ke RR^T with RR the block-diagonal rotation (R^T, local to world); products in SOFA's Mat order.
+inline void corotational_triangle_matrix(const double* rotation, const double* J, const double* k, double* out) {
+    const double K[3][3] = {{k[0], k[1], 0}, {k[2], k[3], 0}, {0, 0, k[4]}};
+    double JK[6][3] = {}, JKJt[6][6] = {};
+    for (int i = 0; i < 6; ++i)
+        for (int m = 0; m < 3; ++m)
+            for (int j = 0; j < 3; ++j) JK[i][j] += J[3 * i + m] * K[m][j];
+    for (int i = 0; i < 6; ++i)
+        for (int m = 0; m < 3; ++m)
+            for (int j = 0; j < 6; ++j) JKJt[i][j] += JK[i][m] * J[3 * j + m];
+    double Ke[9][9] = {}, RR[9][9] = {}, S[9][9] = {};
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < 3; ++b)
+            for (int m = 0; m < 2; ++m)
+                for (int l = 0; l < 2; ++l) Ke[3 * a + m][3 * b + l] = JKJt[2 * a + m][2 * b + l];
+    for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) RR[3 * a + i][3 * a + j] = rotation[3 * i + j];
+    for (int i = 0; i < 9; ++i)
+        for (int m = 0; m < 9; ++m)
+            for (int j = 0; j < 9; ++j) S[i][j] += RR[i][m] * Ke[m][j];
+    for (int i = 0; i < 9; ++i)
+        for (int j = 0; j < 9; ++j) out[9 * i + j] = 0.0;
+    for (int i = 0; i < 9; ++i)
+        for (int m = 0; m < 9; ++m)
+            for (int j = 0; j < 9; ++j) out[9 * i + j] += S[i][m] * RR[j][m];
+}
 }  // namespace shell_detail
 
 constexpr int trifem_data_size(int /*method*/ = 1) { return shell_detail::TRI_FEM_DATA; }
@@ -410,25 +535,8 @@ inline void trifem_init(const Index* tri, Index n, const double* rest_x, const d
 inline void trifem_add_force(const Index* tri, Index n, const double* x, double* f, double* data, int /*method*/) {
     using namespace shell_detail;
     for (Index i = 0; i < n; ++i) {
-        const Index* t = tri + 3 * i;
         double* e = data + TRI_FEM_DATA * i;
-        const V3 pa = load(x + 3 * t[0]), pb = load(x + 3 * t[1]), pc = load(x + 3 * t[2]);
-        double r[9];
-        triangle_rotation(pa, pb, pc, r);
-        const V3 b = mat_vec(r, sub(pb, pa)), c = mat_vec(r, sub(pc, pa));
-        const double D[6] = {0, 0, e[9] - b[0], 0, e[10] - c[0], e[11] - c[1]};
-        double J[18], F[6];
-        strain_displacement(b, c, J);
-        local_forces(J, e + 30, D, F);
-        double rt[9];
-        for (int a = 0; a < 3; ++a)
-            for (int k = 0; k < 3; ++k) rt[3 * a + k] = r[3 * k + a];
-        for (int node = 0; node < 3; ++node) {
-            const V3 fw = mat_vec(rt, V3{{F[2 * node], F[2 * node + 1], 0}});
-            for (int k = 0; k < 3; ++k) f[3 * t[node] + k] += fw[k];
-        }
-        for (int k = 0; k < 18; ++k) e[12 + k] = J[k];
-        for (int k = 0; k < 9; ++k) e[k] = rt[k];
+        large_triangle_force(tri + 3 * i, x, f, e[9], e[10], e[11], e + 30, e, e + 12);
     }
 }
 
@@ -437,24 +545,143 @@ inline void trifem_add_dforce(const Index* tri, Index n, const double* dx, doubl
                               const double* data, int /*method*/) {
     using namespace shell_detail;
     for (Index i = 0; i < n; ++i) {
-        const Index* t = tri + 3 * i;
         const double* e = data + TRI_FEM_DATA * i;
-        double r[9];  // R_0_2 = transpose(rotation)
-        for (int a = 0; a < 3; ++a)
-            for (int k = 0; k < 3; ++k) r[3 * a + k] = e[3 * k + a];
-        double D[6], F[6];
-        for (int node = 0; node < 3; ++node) {
-            const V3 local = mat_vec(r, load(dx + 3 * t[node]));
-            D[2 * node] = local[0];
-            D[2 * node + 1] = local[1];
+        large_triangle_dforce(tri + 3 * i, dx, df, kfactor, e, e + 12, e + 30);
+    }
+}
+
+// The positive stiffness of triangle e of TriangularFEMForceField, for assembled solvers.
+inline void trifem_element_matrix(const double* data, Index e, int /*method*/, double* out) {
+    const double* d = data + shell_detail::TRI_FEM_DATA * e;
+    shell_detail::corotational_triangle_matrix(d, d + 12, d + 30, out);
+}
+
+// TriangleFEMForceField (SOFA's TriangleFEMForceField.inl with TriangleFEMUtils). Element data, 36
+// doubles: rotation R^T (9), rest b_x, b_y, c_x, c_y (4), J (6x3), K00 K01 K10 K11 K22 (5).
+// K = E/(1-nu^2) t A [[1, nu, 0], [nu, 1, 0], [0, 0, (1-nu)/2]] (plane stress) or
+// E/((1+nu)(1-2nu)) t A [[1-nu, nu, 0], [nu, 1-nu, 0], [0, 0, 1/2-nu]] (plane strain), A the 3D
+// area of the initial triangle. Large: as TriangularFEMForceField's, but the rest shape is
+// R pB - R pA (SOFA rotates the points, then subtracts). Small (SOFA warns it is unvalidated): no
+// rotation; the displacement and J are those of the in-plane x, y of the world frame, J from the
+// current edges, forces along x and y only; J is zero until the first force pass (SOFA's init does not
+// compute it). SOFA's getPotentialEnergy returns 0.
+namespace shell_detail {
+constexpr int TRIANGLE_FEM_DATA = 36;
+constexpr int TF_ROT = 0, TF_REST = 9, TF_J = 13, TF_K = 31;
+}  // namespace shell_detail
+
+constexpr int triangle_fem_data_size(int /*method*/ = 1) { return shell_detail::TRIANGLE_FEM_DATA; }
+
+inline void triangle_fem_init(const Index* tri, Index n, const double* initial_x, const double* young,
+                              Index n_young, const double* poisson, Index n_poisson, double thickness,
+                              bool plane_strain, int method, double* data) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        double* e = data + TRIANGLE_FEM_DATA * i;
+        for (int k = 0; k < TRIANGLE_FEM_DATA; ++k) e[k] = 0.0;
+        const V3 pa = load(initial_x + 3 * t[0]), pb = load(initial_x + 3 * t[1]), pc = load(initial_x + 3 * t[2]);
+        if (method == FEM_SMALL) {  // initSmall
+            for (int k = 0; k < 3; ++k) e[TF_ROT + 4 * k] = 1.0;
+            const V3 b = sub(pb, pa), c = sub(pc, pa);
+            e[TF_REST] = b[0];
+            e[TF_REST + 1] = b[1];
+            e[TF_REST + 2] = c[0];
+            e[TF_REST + 3] = c[1];
+        } else {  // initLarge
+            double r[9];
+            triangle_rotation(pa, pb, pc, r);
+            for (int a = 0; a < 3; ++a)
+                for (int k = 0; k < 3; ++k) e[TF_ROT + 3 * a + k] = r[3 * k + a];
+            const V3 ra = mat_vec(r, pa);
+            const V3 b = sub(mat_vec(r, pb), ra), c = sub(mat_vec(r, pc), ra);
+            e[TF_REST] = b[0];
+            e[TF_REST + 1] = b[1];
+            e[TF_REST + 2] = c[0];
+            e[TF_REST + 3] = c[1];
+            strain_displacement(b, c, e + TF_J);
         }
-        local_forces(e + 12, e + 30, D, F);
-        const double h = 1;
-        for (int node = 0; node < 3; ++node) {
-            const V3 fw = mat_vec(e, V3{{-h * F[2 * node], -h * F[2 * node + 1], 0}});
-            for (int k = 0; k < 3; ++k) df[3 * t[node] + k] += fw[k] * kfactor;
+        // computeMaterialStiffnesses
+        const double p = fem_detail::element_value(poisson, n_poisson, i);
+        const double E = fem_detail::element_value(young, n_young, i);
+        const double one_minus_p = 1 - p;
+        const double area = 0.5 * fem_detail::norm(cross(sub(pb, pa), sub(pc, pa)));
+        const double volume = thickness * area;
+        double* K = e + TF_K;
+        if (plane_strain) {
+            const double scale = E / ((1 + p) * (1 - 2 * p)) * volume;
+            K[0] = one_minus_p * scale;
+            K[1] = p * scale;
+            K[2] = p * scale;
+            K[3] = one_minus_p * scale;
+            K[4] = (0.5 - p) * scale;
+        } else {
+            const double scale = E / (1 - p * p) * volume;
+            K[0] = 1 * scale;
+            K[1] = p * scale;
+            K[2] = p * scale;
+            K[3] = 1 * scale;
+            K[4] = (0.5 * one_minus_p) * scale;
         }
     }
+}
+
+inline void triangle_fem_add_force(const Index* tri, Index n, const double* x, double* f, double* data, int method) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        double* e = data + TRIANGLE_FEM_DATA * i;
+        if (method != FEM_SMALL) {
+            large_triangle_force(t, x, f, e[TF_REST], e[TF_REST + 2], e[TF_REST + 3], e + TF_K, e + TF_ROT, e + TF_J);
+            continue;
+        }
+        // accumulateForceSmall: world x, y; J from the current edges
+        const V3 pa = load(x + 3 * t[0]);
+        const V3 b = sub(load(x + 3 * t[1]), pa), c = sub(load(x + 3 * t[2]), pa);
+        const double D[6] = {0, 0, e[TF_REST] - b[0], e[TF_REST + 1] - b[1], e[TF_REST + 2] - c[0],
+                             e[TF_REST + 3] - c[1]};
+        double F[6];
+        strain_displacement(b, c, e + TF_J);
+        local_forces(e + TF_J, e + TF_K, D, F);
+        for (int node = 0; node < 3; ++node) {
+            f[3 * t[node]] += F[2 * node];
+            f[3 * t[node] + 1] += F[2 * node + 1];
+            f[3 * t[node] + 2] += 0;
+        }
+    }
+}
+
+inline void triangle_fem_add_dforce(const Index* tri, Index n, const double* dx, double* df, double kfactor,
+                                    const double* data, int method) {
+    using namespace shell_detail;
+    for (Index i = 0; i < n; ++i) {
+        const Index* t = tri + 3 * i;
+        const double* e = data + TRIANGLE_FEM_DATA * i;
+        if (method != FEM_SMALL) {
+            large_triangle_dforce(t, dx, df, kfactor, e + TF_ROT, e + TF_J, e + TF_K);
+            continue;
+        }
+        // applyStiffnessSmall: the x, y of dx, h = 1
+        double D[6], F[6];
+        for (int node = 0; node < 3; ++node) {
+            D[2 * node] = dx[3 * t[node]];
+            D[2 * node + 1] = dx[3 * t[node] + 1];
+        }
+        local_forces(e + TF_J, e + TF_K, D, F);
+        const double h = 1;
+        for (int node = 0; node < 3; ++node) {
+            df[3 * t[node]] += -h * F[2 * node] * kfactor;
+            df[3 * t[node] + 1] += -h * F[2 * node + 1] * kfactor;
+            df[3 * t[node] + 2] += 0 * kfactor;
+        }
+    }
+}
+
+// The positive stiffness of triangle e of TriangleFEMForceField (9x9, row-major, node-major).
+inline void triangle_fem_element_matrix(const double* data, Index e, int /*method*/, double* out) {
+    using namespace shell_detail;
+    const double* d = data + TRIANGLE_FEM_DATA * e;
+    corotational_triangle_matrix(d + TF_ROT, d + TF_J, d + TF_K, out);
 }
 
 // trifem_optim_element_matrix as assemble_elements calls it: the materials bound, per element.

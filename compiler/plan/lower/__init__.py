@@ -14,7 +14,14 @@ from sofac.plan.lower.constraint_models import (
     lower_uniform,
 )
 from sofac.plan.lower.constraints import lower_constraint_correction, lower_constraint_solver
-from sofac.plan.lower.fem import lower_element_fem, lower_fem, lower_quad_bending, lower_trifem_optim
+from sofac.plan.lower.fem import (
+    lower_element_fem,
+    lower_fast_tetra_fem,
+    lower_fem,
+    lower_quad_bending,
+    lower_triangle_fem,
+    lower_trifem_optim,
+)
 from sofac.plan.lower.hyperelastic import lower_hyperelastic
 from sofac.plan.lower.loads import (
     lower_constant_force,
@@ -56,6 +63,7 @@ from sofac.plan.lower.springs import (
     lower_joint_springs,
     lower_mesh_springs,
     lower_quad_bending_springs,
+    lower_quadular_bending_springs,
     lower_springs,
     lower_triangular_bending_springs,
     lower_vector_springs,
@@ -69,11 +77,15 @@ LOWERINGS: dict[str, Lowering] = {
     "tetra_fem": lower_fem,
     "tetracorot_fem": lower_fem,
     "hexa_fem": lower_fem,
+    "hexahedral_fem": lower_fem,
+    "fast_tetra_fem": lower_fast_tetra_fem,
     "trifem": lower_fem,
     "trifem_optim": lower_trifem_optim,
+    "triangle_fem": lower_triangle_fem,
     "quad_bending": lower_quad_bending,
     "hyperelastic": lower_hyperelastic,
     "quad_bending_springs": lower_quad_bending_springs,
+    "quadular_bending_springs": lower_quadular_bending_springs,
     "triangular_bending_springs": lower_triangular_bending_springs,
     "interaction_ellipsoid": lower_interaction_ellipsoid,
     "distance_mapping": lower_distance_mapping,

@@ -67,6 +67,31 @@ def _target(
     return state, group
 
 
+def _rayleigh_refused(planner: Planner, checked: CheckedComponent) -> bool:
+    """A component-level rayleighStiffness (SOFA's kFactorIncludingRayleighDamping) is refused."""
+    if float(planner.value(checked.component, "rayleighStiffness") or 0.0) != 0.0:
+        planner.unsupported(
+            checked, "a component-level rayleighStiffness is not compiled yet", "rayleighStiffness"
+        )
+        return True
+    return False
+
+
+def _vec3_target(
+    planner: Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> tuple[StatePlan, Group, dict[str, np.ndarray]] | None:
+    """State, group and topology cells of a component compiled on Vec3d only (E222 otherwise)."""
+    found = _target(planner, checked, owner)
+    if found is None:
+        return None
+    state, group = found
+    if state.datatype.name != "Vec3d":
+        name = checked.component.type_name
+        planner.unsupported(checked, f"{name} on {state.datatype.name} is not compiled yet")
+        return None
+    return state, group, _topology_cells(planner, checked) or {}
+
+
 def _indices(
     planner: Planner, checked: CheckedComponent, name: str, size: int, all_if_empty: bool = True
 ) -> np.ndarray:
@@ -212,16 +237,10 @@ def _triangle_target(
     planner: Planner, checked: CheckedComponent, owner: dict[int, Group]
 ) -> tuple[StatePlan, Group, dict[str, np.ndarray]] | None:
     """A triangle-based component's state (Vec3d), group and topology cells, triangles included."""
-    found = _target(planner, checked, owner)
+    found = _vec3_target(planner, checked, owner)
     if found is None:
         return None
-    state, group = found
-    if state.datatype.name != "Vec3d":
-        planner.unsupported(
-            checked, f"{checked.component.type_name} on {state.datatype.name} is not compiled yet"
-        )
-        return None
-    cells = _topology_cells(planner, checked) or {}
+    state, group, cells = found
     triangles = cells.get("triangles")
     if triangles is None or not triangles.size or planner.checked.positions(state.component) is None:
         planner.unsupported(checked, "it needs triangles known at compile time")

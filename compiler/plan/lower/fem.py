@@ -20,6 +20,7 @@ from sofac.plan.ir import (
     Group,
     Op,
     Scheme,
+    StatePlan,
     kernel,
     origin_of,
 )
@@ -30,12 +31,14 @@ from sofac.plan.lower.common import (
     _call,
     _default,
     _element_target,
+    _rayleigh_refused,
     _sparse_grid_coefficients,
     _split_argument,
     _split_hexahedra,
     _target,
     _topology_cells,
     _triangle_target,
+    _vec3_target,
     _written_float,
 )
 from sofac.plan.lower.masses import lower_hexa_mass
@@ -50,15 +53,19 @@ FEM_KINDS = {
     "tetra_fem": ("tetra_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "tetracorot_fem": ("tetracorot_fem", "tetrahedra", 4, {0: 24, 1: 30, 2: 36, 3: 54}),
     "hexa_fem": ("hexa_fem", "hexahedra", 8, {0: 609, 1: 609, 2: 609, 3: 609}),
+    "hexahedral_fem": ("hexahedral_fem", "hexahedra", 8, {1: 609, 2: 609}),
     "trifem": ("trifem", "triangles", 3, {1: 35}),
 }
 # runtime quad_bending.h QUAD_BENDING_DATA: doubles per quad (rest offsets 12, material 4)
 QUAD_BENDING_DATA = 16
+# runtime shell.h triangle_fem_data_size: doubles per triangle (rotation 9, rest 4, J 18, K 5)
+TRIANGLE_FEM_DATA = 36
 # The runtime's data sizes of those kinds, which tests/test_layout.py checks against this table.
 DATA_SIZE_FUNCTIONS = {
     "tetra_fem": "tetra_fem_data_size",
     "tetracorot_fem": "tetracorot_fem_data_size",
     "hexa_fem": "hexa_fem_data_size",
+    "hexahedral_fem": "hexahedral_fem_data_size",
     "trifem": "trifem_data_size",
 }
 
@@ -107,10 +114,8 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         planner.unsupported(checked, f"{checked.spec.name} on {state.datatype.name} is not compiled yet")
         return
     method = _FEM_METHODS.get(str(planner.value(component, "method") or "large"), FemMethod.LARGE)
-    if prefix == "trifem" and (method != FemMethod.LARGE or group.assembled):
-        planner.unsupported(
-            checked, "TriangularFEMForceField is compiled for method large with the matrix-free CG only"
-        )
+    if prefix == "trifem" and method != FemMethod.LARGE:
+        planner.unsupported(checked, "TriangularFEMForceField is compiled for method large only", "method")
         return
     if prefix != "tetra_fem" and method == FemMethod.SVD:
         method = FemMethod.LARGE  # svd exists only for TetrahedronFEMForceField; SOFA falls back to large
@@ -197,7 +202,7 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
         planner, checked, state, group, elements, count, data, method, coefficient_buffer
     ):
         return
-    if prefix not in ("tetracorot_fem", "trifem"):  # SOFA's potential energy (0 for these, as SOFA)
+    if prefix not in ("tetracorot_fem", "trifem", "hexahedral_fem"):  # SOFA's energy (0 for these)
         group.energy.append(
             Op(
                 origin,
@@ -236,6 +241,229 @@ def lower_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Grou
             group,
             state,
             _call(assembler, Env.ASSEMBLER, elements, count, data, method, OFFSET, Env.KFACT, matrices),
+        )
+
+
+def _initial_points(
+    planner: Planner, checked: CheckedComponent, state: StatePlan, cells: np.ndarray
+) -> Buffer | None:
+    """A FEM's ``initialPoints`` when the scene gives them (SOFA's init keeps a non-empty list), else
+    the state's rest positions; None (refused) when they do not cover the elements' nodes."""
+    given = planner.value(checked.component, "initialPoints")
+    if given is None or not np.size(given):
+        return state.rest
+    points = np.asarray(given, dtype=float).reshape(-1, 3)
+    if cells.size and int(cells.max()) >= len(points):
+        planner.unsupported(
+            checked,
+            f"its initialPoints hold {len(points)} points, its elements use point {int(cells.max())}",
+            "initialPoints",
+        )
+        return None
+    return planner.buffer(checked.component, "initialPoints", points.ravel(), columns=3)
+
+
+def lower_triangle_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """TriangleFEMForceField: its topology's triangles, or two per quad (q0 q1 q2)(q0 q2 q3) when it
+    has none, as SOFA's init; method large or small (runtime shell.h triangle_fem_*)."""
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
+        return
+    state, group, cells = found
+    component = checked.component
+    triangles = cells.get("triangles")
+    if (triangles is None or not triangles.size) and cells.get("quads") is not None:
+        quads = cells["quads"].reshape(-1, 4)
+        triangles = np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).ravel()
+    if triangles is None or not triangles.size:
+        planner.ignored.append((component, "its topology has no triangles or quads: SOFA applies no force"))
+        return
+    method = FemMethod.SMALL if planner.value(component, "method") == "small" else FemMethod.LARGE
+    initial = _initial_points(planner, checked, state, triangles)
+    if initial is None:
+        return
+    if method is FemMethod.SMALL:
+        # SOFA's small method builds J from the world x, y of the edges ab, ac and stops (the
+        # component turns invalid) when b_x c_y is below machine epsilon
+        points = initial.initial.reshape(-1, 3)
+        tri = triangles.reshape(-1, 3)
+        ab, ac = points[tri[:, 1]] - points[tri[:, 0]], points[tri[:, 2]] - points[tri[:, 0]]
+        if np.any(np.abs(ab[:, 0] * ac[:, 1]) < np.finfo(float).eps):
+            planner.unsupported(
+                checked,
+                "method small divides by b_x c_y of each triangle's world edges, zero here (SOFA stops "
+                "with 'Null determinant')",
+                "method",
+            )
+            return
+    count = triangles.size // 3
+    elements = planner.buffer(component, "triangles", triangles, "i64", columns=3)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    thickness = float(planner.value(component, "thickness") or _default(checked, "thickness"))
+    plane_strain = bool(planner.value(component, "planeStrain"))
+    data = planner.buffer(component, "elements", np.zeros(count * TRIANGLE_FEM_DATA), role="scratch")
+    origin = origin_of(component)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "triangle_fem_init",
+                    elements,
+                    count,
+                    initial,
+                    *material,
+                    thickness,
+                    plane_strain,
+                    method,
+                    data,
+                )
+            ],
+        )
+    )
+    group.forces.append(
+        Op(origin, [_call("triangle_fem_add_force", elements, count, state.x, state.f, data, method)])
+    )
+    if group.scheme is not Scheme.IMPLICIT:
+        return
+    group.stiffness_dx.append(
+        Op(
+            origin,
+            [_call("triangle_fem_add_dforce", elements, count, state.dx, state.df, Env.KFACT, data, method)],
+        )
+    )
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        _call(
+            kernel("assemble_elements", 3),
+            Env.ASSEMBLER,
+            elements,
+            count,
+            data,
+            method,
+            OFFSET,
+            Env.KFACT,
+            Function("triangle_fem_element_matrix"),
+        ),
+    )
+
+
+# SOFA's FastTetrahedralCorotationalForceField method names, as its RotationDecompositionMethod
+# (runtime fast_tetra_fem.h FastTetraMethod: polar, qr, polar2, linear)
+FAST_TETRA_METHODS = {"polar": 0, "qr": 1, "large": 1, "polar2": 2, "none": 3, "linear": 3, "small": 3}
+# runtime fast_tetra_fem.h fast_tetra_fem_data_size: doubles per tetrahedron
+FAST_TETRA_DATA = 144
+
+
+def lower_fast_tetra_fem(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
+    """FastTetrahedralCorotationalForceField: the topology's tetrahedra, K dx on its edges (SOFA's
+    order, or the edges of the tetrahedra as SOFA creates them), runtime fast_tetra_fem.h."""
+    from sofac.geometry import masses
+
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
+        return
+    state, group, cells = found
+    component = checked.component
+    tetrahedra = cells.get("tetrahedra")
+    if tetrahedra is None or not tetrahedra.size:
+        # SOFA: "No tetrahedra found in linked Topology" (a grid's hexahedra are not split for it)
+        planner.unsupported(
+            checked,
+            "its topology has no tetrahedra known at compile time "
+            "(a grid's hexahedra: split them with Hexa2TetraTopologicalMapping)",
+        )
+        return
+    tets = tetrahedra.reshape(-1, 4)
+    edges = cells.get("edges")
+    edges = (
+        masses.topology_edges(state.size, tetrahedra=tets) if edges is None or not edges.size else edges
+    ).reshape(-1, 2)
+    try:
+        tet_edges = masses.element_edge_indices("tetrahedra", tets, edges, state.size)
+    except ValueError as error:
+        planner.unsupported(checked, str(error))
+        return
+    method = FAST_TETRA_METHODS[str(planner.value(component, "method") or _default(checked, "method"))]
+    count, n_edges = len(tets), len(edges)
+    elements = planner.buffer(component, "tetrahedra", tets, "i64", columns=4)
+    edges_in = planner.buffer(component, "edgesInTetrahedron", tet_edges, "i64", columns=6)
+    edge_list = planner.buffer(component, "edges", edges, "i64", columns=2)
+    young_buffer, poisson_buffer = _material(planner, checked)
+    material = (young_buffer, Count(young_buffer), poisson_buffer, Count(poisson_buffer))
+    data = planner.buffer(component, "tetrahedronInfo", np.zeros(count * FAST_TETRA_DATA), role="scratch")
+    origin = origin_of(component)
+    group.init.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "fast_tetra_fem_init",
+                    elements,
+                    count,
+                    state.rest,
+                    *material,
+                    method,
+                    edges_in,
+                    edge_list,
+                    data,
+                )
+            ],
+        )
+    )
+    force = _call("fast_tetra_fem_add_force", elements, count, state.x, state.f, data, method)
+    if group.scheme is not Scheme.IMPLICIT:
+        group.forces.append(Op(origin, [force]))
+        return
+    edge_matrices = planner.buffer(component, "edgeInfo", np.zeros(9 * n_edges), columns=9, role="scratch")
+    # SOFA rebuilds the edge blocks at the first K dx after a force pass: here right after it
+    group.forces.append(
+        Op(
+            origin,
+            [force, _call("fast_tetra_fem_edge_matrices", edges_in, count, n_edges, data, edge_matrices)],
+        )
+    )
+    group.stiffness_dx.append(
+        Op(
+            origin,
+            [
+                _call(
+                    "fast_tetra_fem_add_dforce",
+                    edge_list,
+                    n_edges,
+                    edge_matrices,
+                    state.dx,
+                    state.df,
+                    Env.KFACT,
+                )
+            ],
+        )
+    )
+    if group.assembled:
+        points = planner.buffer(component, "pointInfo", np.zeros(9 * state.size), columns=9, role="scratch")
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call(
+                "assemble_fast_tetra_fem",
+                Env.ASSEMBLER,
+                OFFSET,
+                elements,
+                count,
+                state.size,
+                edge_list,
+                n_edges,
+                edge_matrices,
+                data,
+                points,
+                Env.KFACT,
+            ),
         )
 
 

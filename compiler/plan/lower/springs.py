@@ -23,11 +23,13 @@ from sofac.plan.lower.common import (
     _add_springs,
     _assemble,
     _call,
+    _rayleigh_refused,
     _springs_from_fields,
     _target,
     _topology_cells,
     _topology_of,
     _triangle_target,
+    _vec3_target,
 )
 
 if TYPE_CHECKING:
@@ -158,6 +160,94 @@ def lower_quad_bending_springs(planner: Planner, checked: CheckedComponent, owne
         register((q[2], q[3]), (q[1], q[0]))
         register((q[3], q[0]), (q[2], q[1]))
     _add_springs(planner, checked, np.array(rows, dtype=float).reshape(-1, 5), state, state, group)
+
+
+def quadular_springs(quads: np.ndarray, edges: np.ndarray, n_points: int) -> list[tuple[int, int]]:
+    """QuadularBendingSprings' spring ends, in SOFA's order: for each edge (the topology's order)
+    shared by exactly two quads, t2 the first quad listing it (the one whose creation initialises
+    it) and t1 the other, i1 and i2 the edge's place in each (edge j of a quad is (q[j+1], q[j+2])):
+    (t1[i1], t2[i2+3]) then (t1[i1+3], t2[i2]), indices mod 4."""
+    from sofac.geometry import masses
+
+    quads = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    edges_in_quad = masses.element_edge_indices("quads", quads, edges, n_points).tolist()
+    around: dict[int, list[int]] = {}
+    for index, in_quad in enumerate(edges_in_quad):
+        for edge in in_quad:
+            around.setdefault(edge, []).append(index)
+    ends: dict[int, tuple[tuple[int, int], tuple[int, int]]] = {}
+    initialised: set[int] = set()
+    rows = quads.tolist()
+    for index, in_quad in enumerate(edges_in_quad):
+        for edge in in_quad:
+            if edge in initialised:
+                continue
+            initialised.add(edge)
+            shell = around[edge]
+            if len(shell) != 2:
+                continue
+            other = shell[1] if shell[0] == index else shell[0]
+            t1, t2 = rows[other], rows[index]
+            i1, i2 = edges_in_quad[other].index(edge), in_quad.index(edge)
+            ends[edge] = ((t1[i1], t2[(i2 + 3) % 4]), (t1[(i1 + 3) % 4], t2[i2]))
+    return [pair for edge in sorted(ends) for pair in ends[edge]]
+
+
+def lower_quadular_bending_springs(
+    planner: Planner, checked: CheckedComponent, owner: dict[int, Group]
+) -> None:
+    """QuadularBendingSprings: two springs across each edge between two quads (quadular_springs),
+    uniform stiffness and damping, rest lengths from the rest positions (runtime shell.h)."""
+    from sofac.geometry import masses
+
+    found = _vec3_target(planner, checked, owner)
+    if found is None or _rayleigh_refused(planner, checked):
+        return
+    state, group, cells = found
+    component = checked.component
+    quads = cells.get("quads")
+    rest = planner.checked.positions(state.component)
+    if quads is None or not quads.size or rest is None:
+        planner.unsupported(checked, "it needs quads known at compile time")
+        return
+    edges = cells.get("edges")
+    if edges is None or not edges.size:
+        edges = masses.topology_edges(state.size, quads=quads)
+    try:
+        pairs = quadular_springs(quads, np.asarray(edges).reshape(-1, 2), state.size)
+    except ValueError as error:
+        planner.unsupported(checked, str(error))
+        return
+    ks, kd = float(planner.value(component, "stiffness")), float(planner.value(component, "damping"))
+    points = np.asarray(rest, dtype=float)
+    params = [(ks, kd, float(np.sqrt(np.sum((points[a] - points[b]) ** 2)))) for a, b in pairs]
+    count = len(pairs)
+    springs = planner.buffer(
+        component, "springs", np.asarray(pairs, dtype=np.int64).reshape(-1), "i64", columns=2
+    )
+    values = planner.buffer(component, "springParams", np.asarray(params, dtype=float).reshape(-1), columns=3)
+    dfdx = planner.buffer(component, "dfdx", np.zeros(9 * count), columns=9, role="scratch")
+    origin = origin_of(component)
+    group.forces.append(
+        Op(
+            origin,
+            [_call("quadular_bending_add_force", springs, values, count, state.x, state.v, state.f, dfdx)],
+        )
+    )
+    if group.scheme is Scheme.IMPLICIT:
+        group.stiffness_dx.append(
+            Op(
+                origin,
+                [_call("quadular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, Env.KFACT)],
+            )
+        )
+        _assemble(
+            planner,
+            checked,
+            group,
+            state,
+            _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
+        )
 
 
 def lower_bending_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:

@@ -37,6 +37,14 @@ _GATHER = (
     FieldSpec("gatherBsize", Text(), doc="GPU version only: gather block size"),
 )
 
+# drawColor1..4 of the tetrahedral corotational force fields (display only)
+_TETRA_DRAW_COLORS = tuple(
+    FieldSpec(f"drawColor{i}", Color(), c)
+    for i, c in enumerate(
+        ((0.0, 0.0, 1.0, 1.0), (0.0, 0.5, 1.0, 1.0), (0.0, 1.0, 1.0, 1.0), (0.5, 1.0, 1.0, 1.0)), start=1
+    )
+)
+
 TETRAHEDRON_FEM_FORCE_FIELD = ComponentSpec(
     name="TetrahedronFEMForceField",
     lowering="tetra_fem",
@@ -133,13 +141,7 @@ TETRAHEDRAL_COROTATIONAL_FEM_FORCE_FIELD = ComponentSpec(
         FieldSpec("vonMisesPerElement", Reals(), doc="output: von Mises stress per element"),
         FieldSpec("vonMisesPerNode", Reals(), doc="output: von Mises stress per node"),
         FieldSpec("drawing", Bool(), True),
-        *(
-            FieldSpec(f"drawColor{i}", Color(), c)
-            for i, c in enumerate(
-                ((0.0, 0.0, 1.0, 1.0), (0.0, 0.5, 1.0, 1.0), (0.0, 1.0, 1.0, 1.0), (0.5, 1.0, 1.0, 1.0)),
-                start=1,
-            )
-        ),
+        *_TETRA_DRAW_COLORS,
         *ELASTICITY_FIELDS,
     ),
 )
@@ -188,6 +190,55 @@ HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS = ComponentSpec(
         FieldSpec("lumpedMass", Bool(), False, "lump the element masses onto the diagonal"),
         *_HEXAHEDRON_FIELDS,
         *MASS_ONLY_FIELDS,
+    ),
+)
+
+FAST_TETRAHEDRAL_COROTATIONAL_FORCE_FIELD = ComponentSpec(
+    name="FastTetrahedralCorotationalForceField",
+    lowering="fast_tetra_fem",
+    category=Category.FORCEFIELD,
+    module=_MODULE,
+    doc="Corotational linear tetrahedra written on the topology's edges (runtime/sofac/"
+    "fast_tetra_fem.h): rotations by QR of two edges (qr, large), polar decomposition of the "
+    "deformation gradient (polar) or of the edges from vertex 0 (polar2), or none (none, linear, "
+    "small). SOFA has no energy for it.",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=_FEM_EFFECTS,
+    fields=(
+        FieldSpec(
+            "method",
+            Enum(values=("qr", "large", "polar", "polar2", "none", "linear", "small"), case_sensitive=True),
+            "qr",
+            "how element rotations are found",
+        ),
+        FieldSpec("drawing", Bool(), True),
+        *_TETRA_DRAW_COLORS,
+        *ELASTICITY_FIELDS,
+    ),
+)
+
+HEXAHEDRAL_FEM_FORCE_FIELD = ComponentSpec(
+    name="HexahedralFEMForceField",
+    lowering="hexahedral_fem",
+    category=Category.FORCEFIELD,
+    module=_MODULE,
+    doc="Corotational trilinear hexahedra (large or polar) with SOFA's closed-form element stiffness "
+    "for axis-aligned boxes (runtime/sofac/hexahedral_fem.h); SOFA has no energy for it and "
+    "assembles its stiffness with the rotation transposed (kept).",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=_FEM_EFFECTS,
+    fields=(
+        FieldSpec(
+            "method",
+            Enum(values=("large", "polar"), case_sensitive=True),
+            "large",
+            "corotational frame: mean edges orthonormalised (large) or their polar rotation",
+        ),
+        *ELASTICITY_FIELDS,
     ),
 )
 
@@ -249,9 +300,12 @@ TRIANGULAR_FEM_FORCE_FIELD_OPTIM = ComponentSpec(
 
 TRIANGLE_FEM_FORCE_FIELD = ComponentSpec(
     name="TriangleFEMForceField",
+    lowering="triangle_fem",
     category=Category.FORCEFIELD,
     module=_MODULE,
-    doc="Constant-strain triangles on a static topology, plane stress (or plane strain).",
+    doc="Constant-strain triangles on a static topology (its triangles, or two per quad), plane "
+    "stress (or plane strain), corotational for 'large'; SOFA's 'small' works in the world x, y "
+    "plane. SOFA has no energy for it.",
     templates=("Vec3d",),
     default_template="Vec3d",
     supported=True,
@@ -505,6 +559,8 @@ COMPONENTS = (
     TETRAHEDRAL_COROTATIONAL_FEM_FORCE_FIELD,
     HEXAHEDRON_FEM_FORCE_FIELD,
     HEXAHEDRON_FEM_FORCE_FIELD_AND_MASS,
+    HEXAHEDRAL_FEM_FORCE_FIELD,
+    FAST_TETRAHEDRAL_COROTATIONAL_FORCE_FIELD,
     TRIANGULAR_FEM_FORCE_FIELD,
     TRIANGULAR_FEM_FORCE_FIELD_OPTIM,
     TRIANGLE_FEM_FORCE_FIELD,

@@ -313,6 +313,28 @@ TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     ),
 )
 
+QUADULAR_BENDING_SPRINGS = ComponentSpec(
+    name="QuadularBendingSprings",
+    lowering="quadular_bending_springs",
+    category=Category.FORCEFIELD,
+    module=_SPRING_MODULE,
+    doc="Two springs across each edge shared by two quads, between the vertices next to the edge's "
+    "ends (SOFA's applyQuadCreation, in the topology's edge order); rest lengths from the rest "
+    "positions. SOFA has no energy for it.",
+    templates=("Vec3d",),
+    default_template="Vec3d",
+    supported=True,
+    effects=_SPRING_EFFECTS,
+    fields=(
+        FieldSpec(
+            "stiffness", Real(), 100000.0, "uniform stiffness of the springs", valid=MUST_BE_NONNEGATIVE
+        ),
+        FieldSpec("damping", Real(), 1.0, "uniform damping of the springs", valid=MUST_BE_NONNEGATIVE),
+        *FORCEFIELD_FIELDS,
+        TOPOLOGY_LINK,
+    ),
+)
+
 FAST_TRIANGULAR_BENDING_SPRINGS = ComponentSpec(
     name="FastTriangularBendingSprings",
     lowering="bending_springs",
@@ -537,6 +559,7 @@ COMPONENTS = (
     JOINT_SPRING_FORCE_FIELD,
     QUAD_BENDING_SPRINGS,
     TRIANGULAR_BENDING_SPRINGS,
+    QUADULAR_BENDING_SPRINGS,
     FAST_TRIANGULAR_BENDING_SPRINGS,
     CONSTANT_FORCE_FIELD,
     PLANE_FORCE_FIELD,
