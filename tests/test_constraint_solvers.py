@@ -43,12 +43,9 @@ struct DenseCorrections {
     }
 };
 
-// method: 0 BGS, 1 NNCG, 2 UGS (W_block for the resolutions, W for the corrections), 3 LCP
-API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree,
-               double* f, const int* kinds, const double* parameters, double* previous, Index blocks,
-               Index max_iterations, double tolerance, double sor, int scale, int all_verified, double* out) {
-    std::vector<double> w(W_block ? W_block : W, (W_block ? W_block : W) + n * n), d(n), scratch(3 * n + 1);
-    std::vector<double> free(dfree, dfree + n);
+// The blocks in row order; previous: 3 kept forces a block, or null.
+std::vector<sofac::RowBlock> row_blocks(const int* kinds, const double* parameters, double* previous,
+                                        Index blocks) {
     std::vector<sofac::RowBlock> rows(blocks);
     Index first = 0;
     for (Index k = 0; k < blocks; ++k) {
@@ -58,6 +55,26 @@ API void solve(int method, Index n, const double* W, const double* W_block, cons
         rows[k].previous = previous ? previous + 3 * k : nullptr;
         first += sofac::resolution_lines(rows[k].kind);
     }
+    return rows;
+}
+
+// LCPConstraintSolver's nlcp_gaussseidel with these settings, the others the defaults.
+sofac::ConstraintResult lcp_solve(sofac::ConstraintProblem& p, Index max_iterations, double tolerance,
+                                  double mu) {
+    sofac::LcpSettings lcp;
+    lcp.max_iterations = max_iterations;
+    lcp.tolerance = tolerance;
+    lcp.mu = mu;
+    return sofac::lcp_gauss_seidel(p, lcp);
+}
+
+// method: 0 BGS, 1 NNCG, 2 UGS (W_block for the resolutions, W for the corrections), 3 LCP
+API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree,
+               double* f, const int* kinds, const double* parameters, double* previous, Index blocks,
+               Index max_iterations, double tolerance, double sor, int scale, int all_verified, double* out) {
+    std::vector<double> w(W_block ? W_block : W, (W_block ? W_block : W) + n * n), d(n), scratch(3 * n + 1);
+    std::vector<double> free(dfree, dfree + n);
+    std::vector<sofac::RowBlock> rows = row_blocks(kinds, parameters, previous, blocks);
     sofac::ConstraintProblem p{n, w.data(), free.data(), f, d.data(), rows.data(), blocks, scratch.data()};
     const sofac::ConstraintSettings settings{max_iterations, tolerance, sor, scale != 0, all_verified != 0};
     sofac::ConstraintResult r;
@@ -67,13 +84,7 @@ API void solve(int method, Index n, const double* W, const double* W_block, cons
         DenseCorrections corrections{W, n, std::vector<double>(n, 0.0)};
         r = sofac::unbuilt_gauss_seidel(p, settings, corrections);
     }
-    if (method == 3) {
-        sofac::LcpSettings lcp;
-        lcp.max_iterations = max_iterations;
-        lcp.tolerance = tolerance;
-        lcp.mu = parameters[0];
-        r = sofac::lcp_gauss_seidel(p, lcp);
-    }
+    if (method == 3) r = lcp_solve(p, max_iterations, tolerance, parameters[0]);
     out[0] = double(r.iterations);
     out[1] = double(r.sweeps);
     out[2] = r.error;
@@ -134,15 +145,8 @@ API void whole_and_sparse(int method, Index n, const double* W_dense, const doub
             for (Index j = 0; j < n; ++j)
                 if (W_dense[n * i + j] != 0.0) P.add(w.data(), i, j, W_dense[n * i + j]);
         P.finish();
-        std::vector<sofac::RowBlock> rows(blocks);
-        Index first = 0;
-        for (Index k = 0; k < blocks; ++k) {
-            rows[k].first = first;
-            rows[k].kind = sofac::Resolution(kinds[k]);
-            rows[k].parameter = parameters[k];
-            rows[k].previous = previous ? kept.data() + 3 * k : nullptr;
-            first += sofac::resolution_lines(rows[k].kind);
-        }
+        double* kept_forces = previous ? kept.data() : nullptr;
+        std::vector<sofac::RowBlock> rows = row_blocks(kinds, parameters, kept_forces, blocks);
         double* f = sparse ? f_sparse : f_whole;
         sofac::ConstraintProblem p{n, w.data(), free.data(), f, d.data(), rows.data(), blocks,
                                    scratch.data()};
@@ -151,13 +155,7 @@ API void whole_and_sparse(int method, Index n, const double* W_dense, const doub
         sofac::ConstraintResult r;
         if (method == 0) r = sofac::block_gauss_seidel(p, settings);
         if (method == 1) r = sofac::nncg(p, settings);
-        if (method == 3) {
-            sofac::LcpSettings lcp;
-            lcp.max_iterations = max_iterations;
-            lcp.tolerance = tolerance;
-            lcp.mu = parameters[0];
-            r = sofac::lcp_gauss_seidel(p, lcp);
-        }
+        if (method == 3) r = lcp_solve(p, max_iterations, tolerance, parameters[0]);
         double* o = out + 6 * sparse;
         o[0] = double(r.iterations), o[1] = double(r.sweeps), o[2] = r.error;
         o[3] = r.converged ? 1.0 : 0.0, o[4] = double(r.singular_blocks), o[5] = r.stalled ? 1.0 : 0.0;
