@@ -17,8 +17,9 @@ import itertools
 
 import numpy as np
 import pytest
-from kernel_shim import D, build_shim
+from kernel_shim import I64, D, build_shim
 from kernel_shim import doubles as _d
+from kernel_shim import indices as _i
 
 SHIM = r"""
 #include "sofac/constraints.h"
@@ -42,12 +43,9 @@ struct DenseCorrections {
     }
 };
 
-// method: 0 BGS, 1 NNCG, 2 UGS (W_block for the resolutions, W for the corrections), 3 LCP
-API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree,
-               double* f, const int* kinds, const double* parameters, double* previous, Index blocks,
-               Index max_iterations, double tolerance, double sor, int scale, int all_verified, double* out) {
-    std::vector<double> w(W_block ? W_block : W, (W_block ? W_block : W) + n * n), d(n), scratch(3 * n + 1);
-    std::vector<double> free(dfree, dfree + n);
+// The blocks in row order; previous: 3 kept forces a block, or null.
+std::vector<sofac::RowBlock> row_blocks(const int* kinds, const double* parameters, double* previous,
+                                        Index blocks) {
     std::vector<sofac::RowBlock> rows(blocks);
     Index first = 0;
     for (Index k = 0; k < blocks; ++k) {
@@ -57,6 +55,26 @@ API void solve(int method, Index n, const double* W, const double* W_block, cons
         rows[k].previous = previous ? previous + 3 * k : nullptr;
         first += sofac::resolution_lines(rows[k].kind);
     }
+    return rows;
+}
+
+// LCPConstraintSolver's nlcp_gaussseidel with these settings, the others the defaults.
+sofac::ConstraintResult lcp_solve(sofac::ConstraintProblem& p, Index max_iterations, double tolerance,
+                                  double mu) {
+    sofac::LcpSettings lcp;
+    lcp.max_iterations = max_iterations;
+    lcp.tolerance = tolerance;
+    lcp.mu = mu;
+    return sofac::lcp_gauss_seidel(p, lcp);
+}
+
+// method: 0 BGS, 1 NNCG, 2 UGS (W_block for the resolutions, W for the corrections), 3 LCP
+API void solve(int method, Index n, const double* W, const double* W_block, const double* dfree,
+               double* f, const int* kinds, const double* parameters, double* previous, Index blocks,
+               Index max_iterations, double tolerance, double sor, int scale, int all_verified, double* out) {
+    std::vector<double> w(W_block ? W_block : W, (W_block ? W_block : W) + n * n), d(n), scratch(3 * n + 1);
+    std::vector<double> free(dfree, dfree + n);
+    std::vector<sofac::RowBlock> rows = row_blocks(kinds, parameters, previous, blocks);
     sofac::ConstraintProblem p{n, w.data(), free.data(), f, d.data(), rows.data(), blocks, scratch.data()};
     const sofac::ConstraintSettings settings{max_iterations, tolerance, sor, scale != 0, all_verified != 0};
     sofac::ConstraintResult r;
@@ -66,13 +84,7 @@ API void solve(int method, Index n, const double* W, const double* W_block, cons
         DenseCorrections corrections{W, n, std::vector<double>(n, 0.0)};
         r = sofac::unbuilt_gauss_seidel(p, settings, corrections);
     }
-    if (method == 3) {
-        sofac::LcpSettings lcp;
-        lcp.max_iterations = max_iterations;
-        lcp.tolerance = tolerance;
-        lcp.mu = parameters[0];
-        r = sofac::lcp_gauss_seidel(p, lcp);
-    }
+    if (method == 3) r = lcp_solve(p, max_iterations, tolerance, parameters[0]);
     out[0] = double(r.iterations);
     out[1] = double(r.sweeps);
     out[2] = r.error;
@@ -101,7 +113,9 @@ void compliance(Index rows, Index dofs, const double* dense, const double* comp,
     }
     const sofac::JacobianRows J{rows, row_index.data(), start.data(), dof.data(), values.data()};
     std::vector<double> scaled(comp_size + 1);
-    sofac::uncoupled_add_compliance<DT>(W, rows, J, comp0, comp, comp_size, factor, scaled.data());
+    sofac::CompliancePattern P;
+    P.start(W, rows);
+    sofac::uncoupled_add_compliance<DT>(P, W, J, dofs, comp0, comp, comp_size, factor, scaled.data());
 }
 
 API void compliance_vec3(Index rows, Index dofs, const double* J, const double* comp, Index comp_size,
@@ -111,6 +125,113 @@ API void compliance_vec3(Index rows, Index dofs, const double* J, const double* 
 
 API void compliance_rigid(Index rows, const double* J, const double* comp, double factor, double* W) {
     compliance<sofac::Rigid3d>(rows, 1, J, comp, 7, 0.0, factor, W);
+}
+
+// The solvers on one W read two ways: whole, and through a CompliancePattern holding W's non-zero
+// entries (written with add(), as the corrections write them). W_dense: n x n; previous: kept
+// forces (3 a block) or null. out: the reports (6 numbers each: whole, then sparse) and whether
+// the sparse run had rows to read (W sparse enough).
+API void whole_and_sparse(int method, Index n, const double* W_dense, const double* dfree, const int* kinds,
+                          const double* parameters, const double* previous, Index blocks,
+                          Index max_iterations,
+                          double tolerance, double* f_whole, double* f_sparse, double* out) {
+    for (int sparse = 0; sparse < 2; ++sparse) {
+        std::vector<double> w(n * n, 1.0), d(n), scratch(3 * n + 1), free(dfree, dfree + n);
+        std::vector<double> kept(previous ? previous : dfree, previous ? previous + 3 * blocks : dfree);
+        sofac::CompliancePattern P;
+        P.reset(n);
+        P.start(w.data(), n);
+        for (Index i = 0; i < n; ++i)
+            for (Index j = 0; j < n; ++j)
+                if (W_dense[n * i + j] != 0.0) P.add(w.data(), i, j, W_dense[n * i + j]);
+        P.finish();
+        double* kept_forces = previous ? kept.data() : nullptr;
+        std::vector<sofac::RowBlock> rows = row_blocks(kinds, parameters, kept_forces, blocks);
+        double* f = sparse ? f_sparse : f_whole;
+        sofac::ConstraintProblem p{n, w.data(), free.data(), f, d.data(), rows.data(), blocks,
+                                   scratch.data()};
+        if (sparse) P.view(p);
+        const sofac::ConstraintSettings settings{max_iterations, tolerance, 1.0, true, false};
+        sofac::ConstraintResult r;
+        if (method == 0) r = sofac::block_gauss_seidel(p, settings);
+        if (method == 1) r = sofac::nncg(p, settings);
+        if (method == 3) r = lcp_solve(p, max_iterations, tolerance, parameters[0]);
+        double* o = out + 6 * sparse;
+        o[0] = double(r.iterations), o[1] = double(r.sweeps), o[2] = r.error;
+        o[3] = r.converged ? 1.0 : 0.0, o[4] = double(r.singular_blocks), o[5] = r.stalled ? 1.0 : 0.0;
+        if (sparse) out[12] = p.columns != nullptr ? 1.0 : 0.0;
+    }
+}
+
+// UncoupledConstraintCorrection's W as SOFA builds it: every pair of rows tried.
+void all_pairs_compliance(double* W, Index n, const sofac::JacobianRows& J, double comp0, const double* comp,
+                          Index comp_size) {
+    using DT = sofac::Vec3d;
+    for (Index r = 0; r < J.rows; ++r) {
+        if (J.start[r] == J.start[r + 1]) continue;
+        const Index row = J.row_index[r];
+        double w = 0.0;
+        for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
+            w += sofac::uncoupled_pair<DT>(J.dof[e], J.values + 3 * e, J.values + 3 * e, comp0, comp,
+                                           comp_size);
+        W[n * row + row] += w;
+        for (Index s = r + 1; s < J.rows; ++s) {
+            const Index column = J.row_index[s];
+            double v = 0.0;
+            for (Index a = J.start[r]; a < J.start[r + 1]; ++a)
+                for (Index b = J.start[s]; b < J.start[s + 1]; ++b)
+                    if (J.dof[a] == J.dof[b])
+                        v += sofac::uncoupled_pair<DT>(J.dof[a], J.values + 3 * a, J.values + 3 * b, comp0,
+                                                       comp, comp_size);
+            if (v != 0.0) {
+                W[n * row + column] += v;
+                W[n * column + row] += v;
+            }
+        }
+    }
+}
+
+// `corrections` Vec3d corrections' J (rows ascending, a row index possibly repeated; DOFs ascending
+// in a row) added into one W, both ways, factor 1: W_pairs by all pairs, W by the pattern's
+// correction. Then the pattern's rows (start: n + 1, columns) and W after the next step's start().
+API void compliance_both_ways(Index n, Index corrections, const Index* rows, const Index* row_index,
+                              const Index* start, const Index* dof, const double* values, Index dofs,
+                              const double* comp, double* W_pairs, double* W, Index* pattern_start,
+                              Index* pattern_columns, double* W_next) {
+    sofac::CompliancePattern P;
+    P.reset(n);
+    P.start(W, n);
+    std::vector<double> scaled(dofs);
+    Index row_offset = 0, entry_offset = 0;
+    for (Index c = 0; c < corrections; ++c) {
+        std::vector<Index> begin(start + row_offset + c, start + row_offset + c + rows[c] + 1);
+        for (Index& b : begin) b -= begin[0];
+        const sofac::JacobianRows J{rows[c], row_index + row_offset, begin.data(), dof + entry_offset,
+                                    values + 3 * entry_offset};
+        all_pairs_compliance(W_pairs, n, J, 0.0, comp, dofs);
+        sofac::uncoupled_add_compliance<sofac::Vec3d>(P, W, J, dofs, 0.0, comp, dofs, 1.0, scaled.data());
+        row_offset += rows[c];
+        entry_offset += begin[rows[c]];
+    }
+    P.finish();
+    sofac::ConstraintProblem p{n, W, nullptr, nullptr, nullptr, nullptr, 0, nullptr};
+    P.view(p);
+    for (Index i = 0; i <= n && p.row_start; ++i) pattern_start[i] = p.row_start[i];
+    for (Index e = 0; p.row_start && e < p.row_start[n]; ++e) pattern_columns[e] = p.columns[e];
+    std::copy(W, W + n * n, W_next);
+    P.start(W_next, n);
+}
+
+// After reset() W's values are not known (a recompiled instance takes the old W over): a step of
+// n1 rows, then one of n2 > n1 rows, each starting on a W holding stale values. first: W after
+// the first start().
+API void stale_entries_cleared(Index capacity, Index n1, Index n2, double* W, double* first) {
+    sofac::CompliancePattern P;
+    P.reset(capacity);
+    P.start(W, n1);
+    std::copy(W, W + n2 * n2, first);
+    P.add(W, 0, 1, 5.0);
+    P.start(W, n2);
 }
 
 // A particle of mass m at the anchor (object2 of a BilateralLagrangianConstraint whose object1
@@ -131,7 +252,9 @@ API void hanging(double mass, double g, double dt, Index steps, double* out) {
             dfree[c] = x_free[c] - anchor[c];
         }
         const double comp = 1.0 / mass;
-        sofac::uncoupled_add_compliance<sofac::Vec3d>(W, 3, J, comp, &comp, 1, dt, scaled);
+        sofac::CompliancePattern P;
+        P.start(W, 3);
+        sofac::uncoupled_add_compliance<sofac::Vec3d>(P, W, J, 1, comp, &comp, 1, dt, scaled);
         sofac::RowBlock block;
         block.kind = sofac::Resolution::Bilateral3;
         block.previous = kept;
@@ -174,7 +297,9 @@ API void pendulum(double dt, Index steps, const double* start_position, const do
         const sofac::Vec3 w_free(v_free[3], v_free[4], v_free[5]);
         const sofac::Vec3 end_velocity = sofac::Vec3(v_free[0], v_free[1], v_free[2]) + w_free.cross(arm);
         for (int c = 0; c < 3; ++c) dfree[c] = x[c] + arm[c] + dt * end_velocity[c];
-        sofac::uncoupled_add_compliance<sofac::Rigid3d>(W, 3, J, 0.0, comp, 7, dt, scaled);
+        sofac::CompliancePattern P;
+        P.start(W, 3);
+        sofac::uncoupled_add_compliance<sofac::Rigid3d>(P, W, J, 1, 0.0, comp, 7, dt, scaled);
         sofac::RowBlock block;
         block.kind = sofac::Resolution::Bilateral3;
         block.previous = kept;
@@ -203,6 +328,9 @@ def lib(tmp_path_factory: pytest.TempPathFactory) -> ctypes.CDLL:
     library.compliance_vec3.argtypes = [i64, i64, D, D, i64, ctypes.c_double, ctypes.c_double, D]
     library.compliance_rigid.argtypes = [i64, D, D, ctypes.c_double, D]
     library.hanging.argtypes = [ctypes.c_double, ctypes.c_double, ctypes.c_double, i64, D]
+    library.whole_and_sparse.argtypes = [c_int, i64, D, D, ints, D, D, i64, i64, ctypes.c_double, D, D, D]
+    library.compliance_both_ways.argtypes = [i64, i64, I64, I64, I64, I64, D, i64, D, D, D, I64, I64, D]
+    library.stale_entries_cleared.argtypes = [i64, i64, i64, D, D]
     library.pendulum.argtypes = [ctypes.c_double, i64, D, D, D]
     return library
 
@@ -435,3 +563,187 @@ def test_a_pendulum_held_by_a_bilateral_constraint_keeps_its_length(lib: ctypes.
     lib.pendulum(0.005, steps, _d(start), _d(r_local), _d(out))
     assert np.isfinite(out).all()
     np.testing.assert_allclose(out, 1.0, atol=2e-3)  # the linearised correction drifts by O(dt^2 w^2)
+
+
+# ---- W read through its written entries (CompliancePattern): the same numbers, bit for bit ----
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=float).view(np.int64)
+
+
+def whole_and_sparse(
+    lib: ctypes.CDLL,
+    method: int,
+    W: np.ndarray,
+    dfree: np.ndarray,
+    kinds: list[int],
+    parameters: list[float],
+    previous: np.ndarray | None = None,
+    max_iterations: int = 1000,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """f and the reports of one solve read two ways: W whole, and W's written entries only."""
+    n = len(dfree)
+    W, dfree = np.ascontiguousarray(W, dtype=float), np.ascontiguousarray(dfree, dtype=float)
+    kind_array = np.asarray(kinds, dtype=np.intc)
+    params = np.asarray(parameters, dtype=float)
+    f_whole, f_sparse, out = np.zeros(n), np.zeros(n), np.zeros(13)
+    lib.whole_and_sparse(
+        method,
+        n,
+        _d(W),
+        _d(dfree),
+        kind_array.ctypes.data_as(ctypes.POINTER(ctypes.c_int)),
+        _d(params),
+        _d(np.ascontiguousarray(previous, dtype=float)) if previous is not None else None,
+        len(kinds),
+        max_iterations,
+        1e-12,
+        _d(f_whole),
+        _d(f_sparse),
+        _d(out),
+    )
+    return f_whole, f_sparse, out
+
+
+def contacts_on_particles(contacts: int, particles: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """W = J C Jᵀ of contacts of three rows, each on one particle (several share one, so W has
+    coupled blocks and exact zeros), and violations pressing them in, some exactly -0."""
+    rng = np.random.default_rng(seed)
+    J = np.zeros((3 * contacts, 3 * particles))
+    for c in range(contacts):
+        p = rng.integers(particles)
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        t = np.cross(normal, [0.3, 1.0, 0.2])
+        t /= np.linalg.norm(t)
+        J[3 * c : 3 * c + 3, 3 * p : 3 * p + 3] = [normal, t, np.cross(normal, t)]
+    C = np.kron(np.diag(rng.uniform(0.5, 2.0, particles)), np.eye(3))
+    dfree = rng.normal(scale=0.1, size=3 * contacts)
+    dfree[0::3] = -np.abs(dfree[0::3])
+    dfree[[1, 5, 8]] = -0.0
+    return J @ C @ J.T, dfree
+
+
+@pytest.mark.parametrize("method", [BGS, NNCG, LCP])
+def test_reading_only_the_written_entries_of_w_changes_no_bit(lib: ctypes.CDLL, method: int) -> None:
+    W, dfree = contacts_on_particles(contacts=16, particles=12, seed=11)
+    assert (W == 0).mean() > 0.75  # a sparse W
+    kinds = [FRICTION3] * 16 if method != LCP else [0]
+    f_whole, f_sparse, out = whole_and_sparse(lib, method, W, dfree, kinds, [0.5] * 16)
+    assert out[12] == 1  # the sparse rows were read
+    np.testing.assert_array_equal(_bits(f_sparse), _bits(f_whole))
+    np.testing.assert_array_equal(out[6:12], out[:6])  # iterations, error, convergence
+    assert (f_whole[0::3] >= 0).all() and f_whole[0::3].max() > 0  # contacts pushing
+
+
+def test_a_w_more_than_a_quarter_written_is_read_whole(lib: ctypes.CDLL) -> None:
+    # LinearSolverConstraintCorrection's W (A^-1 couples every row of its state): the pattern
+    # stops noting entries and the solvers read W whole, the same bits
+    W, dfree = spd(9, 5), np.array([-0.3, 0.1, 0.2, -0.1, 0.0, 0.4, -0.2, 0.3, -0.5])
+    f_whole, f_sparse, out = whole_and_sparse(lib, BGS, W, dfree, [FRICTION3] * 3, [0.5] * 3)
+    assert out[12] == 0 and out[3] == 1
+    np.testing.assert_array_equal(_bits(f_sparse), _bits(f_whole))
+
+
+def test_a_sum_starting_at_minus_zero_reads_every_column(lib: ctypes.CDLL) -> None:
+    # row 0: dfree -0 and its own term -0 (f warm-started at -0): W f summed over every column adds
+    # 0 * 1.33 = +0 and gives +0, so f[0] stays -0; over its written entries only, d would stay -0
+    # and f[0] become +0. The sparse run reads row 0 whole.
+    W = np.diag([2.0, 3.0, *[1.0] * 8])  # (ten rows: W sparse enough to be read so)
+    previous = np.zeros(30)
+    previous[[0, 3]] = -0.0, 1.0
+    dfree = np.array([-0.0, -4.0, *[-1.0] * 8])
+    f_whole, f_sparse, out = whole_and_sparse(lib, BGS, W, dfree, [BILATERAL1] * 10, [1.0] * 10, previous)
+    assert out[12] == 1 and out[3] == 1
+    assert f_whole[0] == 0 and np.signbit(f_whole[0])
+    np.testing.assert_array_equal(_bits(f_sparse), _bits(f_whole))
+
+
+@pytest.mark.parametrize("method", [BGS, LCP])
+def test_a_non_finite_force_makes_the_sweeps_read_every_column(lib: ctypes.CDLL, method: int) -> None:
+    # 0 * inf is NaN: an unwritten W entry facing an infinite force spreads NaN over the dense sum,
+    # and the sparse sweeps read W whole once a force is not finite, the same NaN bits.
+    if method == BGS:  # a warm start at inf in the second (uncoupled) block
+        W, dfree, kinds = np.diag([2.0, 3.0, *[1.0] * 8]), np.array([0.5, *[1.0] * 9]), [BILATERAL1] * 10
+        previous: np.ndarray | None = np.zeros(30)
+        previous[3] = np.inf
+    else:  # the first contact has no compliance: its force becomes infinite
+        W = np.zeros((15, 15))  # (five contacts: W sparse enough to be read so)
+        for c in range(1, 5):
+            W[3 * c : 3 * c + 3, 3 * c : 3 * c + 3] = spd(3, 8 + c)
+        dfree, kinds, previous = np.tile([-0.1, 0.1, 0.0], 5), [0], None
+    f_whole, f_sparse, out = whole_and_sparse(lib, method, W, dfree, kinds, [0.5] * 10, previous, 5)
+    assert out[12] == 1
+    assert np.isnan(f_whole[0] if method == BGS else f_whole[3])
+    np.testing.assert_array_equal(_bits(f_sparse), _bits(f_whole))
+    np.testing.assert_array_equal(out[6:12], out[:6], strict=False)
+
+
+def test_uncoupled_compliance_tries_only_rows_sharing_a_dof_and_clears_what_it_wrote(
+    lib: ctypes.CDLL,
+) -> None:
+    # three corrections writing into one W, against SOFA's every-pair loop, bit for bit: rows on one
+    # to three DOFs, DOFs shared by several rows, a row index repeated (a contact with both sides
+    # on one body), an empty row, and two rows sharing a DOF with orthogonal directions (a zero sum:
+    # not written)
+    rng = np.random.default_rng(12)
+    n, dofs = 18, 9
+    jacobians = []
+    for correction in range(3):
+        rows = sorted(rng.choice(n, size=10, replace=False).tolist())
+        rows.insert(3, rows[3])  # a repeated row index
+        entries = []
+        for k, _ in enumerate(rows):
+            count = 0 if k == 5 else int(rng.integers(1, 4))
+            entries.append(sorted(rng.choice(dofs, size=count, replace=False).tolist()))
+        values = [[rng.normal(size=3) for _ in row] for row in entries]
+        if correction == 0:  # rows 0 and 1 on DOF 8 only, orthogonal
+            entries[0], entries[1] = [8], [8]
+            values[0], values[1] = [np.array([1.0, 0, 0])], [np.array([0, 2.0, 0])]
+        jacobians.append((rows, entries, values))
+    row_counts = np.array([len(r) for r, _, _ in jacobians], dtype=np.int64)
+    row_index = np.array([i for r, _, _ in jacobians for i in r], dtype=np.int64)
+    starts = np.array(
+        [s for _, e, _ in jacobians for s in np.concatenate([[0], np.cumsum([len(x) for x in e])])],
+        dtype=np.int64,
+    )
+    dof = np.array([g for _, e, _ in jacobians for row in e for g in row], dtype=np.int64)
+    values = np.ascontiguousarray([v for _, _, vs in jacobians for row in vs for v in row], dtype=float)
+    comp = rng.uniform(0.5, 2.0, dofs)
+    W_pairs, W, W_next = np.zeros((n, n)), np.full((n, n), 7.0), np.zeros((n, n))
+    pattern_start, pattern_columns = np.zeros(n + 1, dtype=np.int64), np.zeros(n * n, dtype=np.int64)
+    lib.compliance_both_ways(
+        n,
+        3,
+        _i(row_counts),
+        _i(row_index),
+        _i(starts),
+        _i(dof),
+        _d(values),
+        dofs,
+        _d(comp),
+        _d(W_pairs),
+        _d(W),
+        _i(pattern_start),
+        _i(pattern_columns),
+        _d(W_next),
+    )
+    np.testing.assert_array_equal(_bits(W), _bits(W_pairs))
+    assert (W != 0).sum() > n and (W == 0).any()
+    first_rows = jacobians[0][0]
+    assert W_pairs[first_rows[0], first_rows[1]] == 0  # the orthogonal pair
+    if pattern_start[n] > 0:  # the rows handed to the solvers: W's non-zeros, sorted, and the diagonal
+        for i in range(n):
+            columns = pattern_columns[pattern_start[i] : pattern_start[i + 1]]
+            assert (np.diff(columns) > 0).all() and i in columns
+            assert set(np.flatnonzero(W[i])) <= set(columns.tolist())
+    # the next step's start() zeroes every entry written (+0, not a stale value)
+    assert not _bits(W_next).any()
+
+
+def test_a_step_with_more_rows_than_any_before_clears_the_new_entries(lib: ctypes.CDLL) -> None:
+    W, first = np.full(25, 3.0), np.zeros(25)  # a recompiled instance takes the old W over
+    lib.stale_entries_cleared(2, 3, 5, _d(W), _d(first))
+    assert not _bits(first[:9]).any() and (first[9:] == 3.0).all()  # its 3 rows only
+    assert not _bits(W).any()  # then the 5 rows: the written entry and the stale ones beyond

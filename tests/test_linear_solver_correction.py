@@ -55,7 +55,9 @@ API void run(Index n, const double* A, const Index* fixed, Index rows, const Ind
     D.factor();
     const sofac::JacobianRows J{rows, row_index, start, dof, values};
     const Index m = row_index[rows - 1] + 1;
-    sofac::linear_add_compliance<sofac::Vec3d>(W, m, J, D, 0, dt, reg);
+    sofac::CompliancePattern P;
+    P.start(W, m);  // (a fresh pattern clears all of W)
+    sofac::linear_add_compliance<sofac::Vec3d>(P, W, J, D, 0, dt, reg);
     sofac::linear_correct<sofac::Vec3d>(x, v, lambda, dx, J, f, n / 3, D, 0, dt, 1.0);
 }
 """

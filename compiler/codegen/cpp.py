@@ -90,6 +90,7 @@ _ENV = {
     Env.NONE: "nullptr",
     Env.CONTACTS: "S.contacts",
     Env.LAGRANGIAN: "S.lagrangian",
+    Env.CONSTRAINT_PATTERN: "S.constraint_pattern",
 }
 _CONSTANTS = {Constant.TETRA_LANES: "sofac::TETRA_LANES"}
 _PRECONDITIONER_TYPES = {
@@ -767,7 +768,10 @@ def generate_source(plan: Plan) -> str:
         ptr=_ptr,
         size=_size,
         maybe_unused=_maybe_unused,
-        init_reads_instance=bool(collisions) or on_read or any(_initialises(g) for g in plan.groups),
+        init_reads_instance=bool(collisions)
+        or on_read
+        or any(_initialises(g) for g in plan.groups)
+        or bool(plan.constraints and plan.constraints.capacity),
     )
     # Comments name scene files relative to the scene's folder: a moved scene keeps its source,
     # and so its cache entry. (Nothing else in the source comes from a path.)

@@ -19,12 +19,20 @@
 //   lcp_gauss_seidel      LCPConstraintSolver's nlcp_gaussseidel (built, with friction)
 // and the UncoupledConstraintCorrection kernels (W += factor J C J^T, dx = C J^T f).
 //
-// Storage is the caller's (instance buffers sized at compile time): nothing here allocates.
+// W is stored dense, but written and read as sparse (CompliancePattern): the corrections add only
+// the entries of rows that share a DOF, the step clears only what was written, and the sweeps read
+// each row's written entries only, in the dense loops' order (which changes no bit: see
+// add_rows_product).
+//
+// Storage is the caller's (instance buffers sized at compile time), but for CompliancePattern's
+// lists, reserved with the rows' capacity: a steady-state step allocates nothing.
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <vector>
 
 #include "quaternion.h"
 #include "types.h"
@@ -63,9 +71,56 @@ struct ConstraintProblem {
     RowBlock* blocks = nullptr;
     Index block_count = 0;
     double* scratch = nullptr;  // 3 n: NNCG's lambda, deltaF, p; SOR's previous forces (n)
+    // W's written entries, row by row (CompliancePattern::finish): row i's columns, ascending, are
+    // columns[row_start[i] .. row_start[i + 1]); null: W is read whole.
+    const Index* row_start = nullptr;
+    const Index* columns = nullptr;
+    bool forces_finite = false;  // every f[c] finite (the sweeps keep it; see add_rows_product)
 
     double w(Index i, Index j) const { return W[n * i + j]; }
 };
+
+// Whether the sweeps may read only W's written entries from now on: f all finite (a sweep checks it
+// at its start, then after each block it changes).
+inline void check_forces(ConstraintProblem& p) {
+    p.forces_finite = true;
+    if (p.columns == nullptr) return;
+    for (Index c = 0; c < p.n; ++c)
+        if (!std::isfinite(p.f[c])) p.forces_finite = false;
+}
+
+inline void check_forces(ConstraintProblem& p, Index first, int lines) {
+    for (int l = 0; l < lines; ++l)
+        if (!std::isfinite(p.f[first + l])) p.forces_finite = false;
+}
+
+// d[l] + sum over c ascending of W(row + l, c) f[c] for the `lines` (at most 3) rows of a block,
+// SOFA's dense loop, bit for bit. A row is summed over its written entries when W's are known, f
+// is finite and d[l] is not -0: every entry left out is +0 (never written since W was cleared), so
+// its term (+0) f[c] is +0 or -0, and adding a zero gives back any sum but -0 exactly; a sum is -0
+// only when it starts at -0 and adds -0 terms only. Otherwise (a non-finite force: 0 inf is NaN)
+// over every column, the block's rows side by side (three independent sums: SOFA's loop order).
+inline void add_rows_product(const ConstraintProblem& p, Index row, int lines, double* d) {
+    const bool sparse = p.columns != nullptr && p.forces_finite;
+    if (!sparse) {
+        for (Index c = 0; c < p.n; ++c)
+            for (int l = 0; l < lines; ++l) d[l] += p.w(row + l, c) * p.f[c];
+        return;
+    }
+    for (int l = 0; l < lines; ++l) {
+        const double* w = p.W + p.n * (row + l);
+        double sum = d[l];
+        if (sum == 0.0 && std::signbit(sum)) {
+            for (Index c = 0; c < p.n; ++c) sum += w[c] * p.f[c];
+        } else {
+            for (Index e = p.row_start[row + l]; e < p.row_start[row + l + 1]; ++e) {
+                const Index c = p.columns[e];
+                sum += w[c] * p.f[c];
+            }
+        }
+        d[l] = sum;
+    }
+}
 
 struct ConstraintSettings {
     Index max_iterations = 1000;
@@ -258,9 +313,10 @@ inline double block_error(const ConstraintProblem& p, const RowBlock& b, const d
 }
 
 // BlockGaussSeidelConstraintSolver::gaussSeidel_increment: one sweep over the blocks in row order,
-// d recomputed densely (k ascending over all rows, the block's own included).
+// d = dfree + W f (k ascending over the rows, the block's own included; add_rows_product).
 inline double gauss_seidel_sweep(ConstraintProblem& p, bool measure, double tol, bool& verified) {
     double error = 0.0;
+    check_forces(p);
     for (Index k = 0; k < p.block_count; ++k) {
         const RowBlock& b = p.blocks[k];
         const int nb = resolution_lines(b.kind);
@@ -270,9 +326,9 @@ inline double gauss_seidel_sweep(ConstraintProblem& p, bool measure, double tol,
             before[l] = p.f[j + l];
             p.d[j + l] = p.dfree[j + l];
         }
-        for (Index c = 0; c < p.n; ++c)
-            for (int l = 0; l < nb; ++l) p.d[j + l] += p.w(j + l, c) * p.f[c];
+        add_rows_product(p, j, nb, p.d + j);
         resolution_solve(b, p, p.d, p.f);
+        check_forces(p, j, nb);
         if (measure)
             error += block_error(p, b, before, tol, verified);
         else
@@ -496,17 +552,14 @@ inline ConstraintResult lcp_gauss_seidel(ConstraintProblem& p, const LcpSettings
     Index it = 0;
     for (it = 0; it < s.max_iterations; ++it) {
         error = 0.0;
+        check_forces(p);
         for (Index c = 0; c < contacts; ++c) {
             const Index r = 3 * c;
             double* fc = p.f + r;
             double f1[3] = {fc[0], fc[1], fc[2]};
             fc[0] = fc[1] = fc[2] = 0.0;
             double d[3] = {p.dfree[r], p.dfree[r + 1], p.dfree[r + 2]};
-            for (Index i = 0; i < n; ++i) {
-                d[0] += p.w(r, i) * p.f[i];
-                d[1] += p.w(r + 1, i) * p.f[i];
-                d[2] += p.w(r + 2, i) * p.f[i];
-            }
+            add_rows_product(p, r, 3, d);
             double before[3];
             for (int l = 0; l < 3; ++l)
                 before[l] = d[l] + p.w(r + l, r) * f1[0] + p.w(r + l, r + 1) * f1[1] + p.w(r + l, r + 2) * f1[2];
@@ -519,6 +572,7 @@ inline ConstraintResult lcp_gauss_seidel(ConstraintProblem& p, const LcpSettings
             }
             error += abs_error(d, before);
             fc[0] = f1[0], fc[1] = f1[1], fc[2] = f1[2];
+            check_forces(p, r, 3);
         }
         if (error < s.tolerance * double(contacts + 1)) {
             result.converged = true;
@@ -547,6 +601,156 @@ struct JacobianRows {
     const double* values = nullptr;
 };
 
+// W's entries written this step. W is stored dense (n x n, row-major: the resolutions read its
+// diagonal blocks in place), but with UncoupledConstraintCorrection two rows couple only when they
+// share a DOF, so most of W stays zero: the corrections write through add(), which notes each entry
+// it makes non-zero; start() clears only the entries the last step wrote (and the diagonal, where
+// the regularization goes); finish() hands the built solvers each row's written columns,
+// ascending, the diagonal included, for add_rows_product. Once more than a quarter of W is written
+// (LinearSolverConstraintCorrection: A^-1 couples all of its state's rows) nothing more is noted:
+// the solvers read W whole and the next start() clears it whole, as before.
+// Memory: the lists reserved for `capacity` rows at reset() (a quarter of W's size for the entries
+// noted), and again when a step has more rows: a step with no more rows allocates nothing.
+class CompliancePattern {
+public:
+    // The instance's init: W's values unknown (each start() clears the rows no step had before:
+    // all of them at the first); the lists reserved.
+    void reset(Index capacity) {
+        cleared_ = 0;
+        stride_ = 0;
+        written_.clear();
+        whole_ = false;
+        rows_ = 0;
+        reserve(capacity);
+    }
+
+    // A step of n rows begins: W zeroed over them, as GenericConstraintProblem::clear does, by
+    // zeroing what the last step wrote (W's first cleared_ rows hold nothing else) and, when the
+    // rows outgrow every earlier step's, the entries beyond.
+    void start(double* W, Index n) {
+        if (n > capacity_) reserve(std::max(n, 2 * capacity_));
+        if (whole_) {
+            std::fill_n(W, stride_ * stride_, 0.0);
+        } else {
+            for (const Entry& e : written_) W[stride_ * e.row + e.column] = 0.0;
+            for (Index i = 0; i < stride_; ++i) W[stride_ * i + i] = 0.0;
+        }
+        if (n > cleared_) {
+            std::fill(W + cleared_ * cleared_, W + n * n, 0.0);
+            cleared_ = n;
+        }
+        written_.clear();
+        whole_ = false;
+        stride_ = n;
+        limit_ = std::max<Index>(n * n / 4 - n, 0);
+        rows_ = 0;
+    }
+
+    // W(row, column) += value.
+    void add(double* W, Index row, Index column, double value) {
+        double& entry = W[stride_ * row + column];
+        if (entry == 0.0 && !whole_) {
+            if (Index(written_.size()) < limit_)
+                written_.push_back(Entry{row, column});
+            else
+                whole_ = true;
+        }
+        entry += value;
+    }
+
+    // After the corrections: each row's written columns, for the solvers (none when W is read whole).
+    void finish() {
+        const Index n = stride_;
+        rows_ = 0;
+        if (n == 0 || whole_) return;
+        start_.assign(static_cast<std::size_t>(n + 1), 0);
+        for (Index i = 0; i < n; ++i) start_[i + 1] = 1;  // the diagonal
+        for (const Entry& e : written_) ++start_[e.row + 1];
+        for (Index i = 0; i < n; ++i) start_[i + 1] += start_[i];
+        columns_.resize(static_cast<std::size_t>(start_[n]));
+        for (Index i = 0; i < n; ++i) columns_[start_[i]++] = i;  // start_[i] as row i's cursor
+        for (const Entry& e : written_) columns_[start_[e.row]++] = e.column;
+        for (Index i = n; i > 0; --i) start_[i] = start_[i - 1];  // the cursors back to the starts
+        start_[0] = 0;
+        Index kept = 0;  // each row sorted, repeats dropped (an entry zeroed then written again)
+        for (Index i = 0; i < n; ++i) {
+            const Index begin = start_[i], end = start_[i + 1];
+            start_[i] = kept;
+            std::sort(columns_.begin() + begin, columns_.begin() + end);
+            for (Index e = begin; e < end; ++e)
+                if (kept == start_[i] || columns_[kept - 1] != columns_[e]) columns_[kept++] = columns_[e];
+        }
+        start_[n] = kept;
+        rows_ = n;
+    }
+
+    // The built solvers' view of W (finish()): sparse rows or, when W is read whole, none.
+    void view(ConstraintProblem& p) const {
+        p.row_start = rows_ > 0 ? start_.data() : nullptr;
+        p.columns = rows_ > 0 ? columns_.data() : nullptr;
+    }
+
+    // A correction's rows by DOF (its J, DOFs below `dofs`), for rows_sharing().
+    void index_rows(const JacobianRows& J, Index dofs) {
+        const Index entries = J.rows > 0 ? J.start[J.rows] : 0;
+        grow(by_dof_start_, dofs + 1);
+        grow(by_dof_, entries);
+        grow(mark_, J.rows);
+        grow(sharing_, J.rows);
+        std::fill_n(by_dof_start_.begin(), dofs + 1, 0);
+        for (Index e = 0; e < entries; ++e) ++by_dof_start_[J.dof[e] + 1];
+        for (Index g = 0; g < dofs; ++g) by_dof_start_[g + 1] += by_dof_start_[g];
+        for (Index r = 0; r < J.rows; ++r)  // rows ascending within each DOF
+            for (Index e = J.start[r]; e < J.start[r + 1]; ++e) by_dof_[by_dof_start_[J.dof[e]]++] = r;
+        for (Index g = dofs; g > 0; --g) by_dof_start_[g] = by_dof_start_[g - 1];
+        by_dof_start_[0] = 0;
+        std::fill_n(mark_.begin(), J.rows, Index(-1));
+    }
+
+    // The rows after row r of the indexed J that share a DOF with it, ascending: `count` of them at
+    // the returned pointer.
+    const Index* rows_sharing(const JacobianRows& J, Index r, Index& count) {
+        count = 0;
+        for (Index e = J.start[r]; e < J.start[r + 1]; ++e) {
+            const Index dof = J.dof[e];
+            for (Index k = by_dof_start_[dof]; k < by_dof_start_[dof + 1]; ++k) {
+                const Index s = by_dof_[k];
+                if (s <= r || mark_[s] == r) continue;
+                mark_[s] = r;
+                sharing_[count++] = s;
+            }
+        }
+        std::sort(sharing_.begin(), sharing_.begin() + count);
+        return sharing_.data();
+    }
+
+private:
+    struct Entry {
+        Index row, column;
+    };
+    static void grow(std::vector<Index>& v, Index size) {
+        if (Index(v.size()) < size) v.resize(static_cast<std::size_t>(size));
+    }
+    // Lists for `rows` rows: W's entries noted, at most a quarter of them (limit_); J's entries, up
+    // to 8 DOFs a row on each of a contact's two sides.
+    void reserve(Index rows) {
+        capacity_ = rows;
+        const auto n = static_cast<std::size_t>(rows);
+        written_.reserve(std::max<std::size_t>(n * n / 4, n) - n);
+        start_.reserve(n + 1);
+        columns_.reserve(std::max<std::size_t>(n * n / 4, n));
+        by_dof_.reserve(16 * n);
+        mark_.reserve(2 * n);
+        sharing_.reserve(2 * n);
+    }
+
+    std::vector<Entry> written_;
+    std::vector<Index> start_, columns_;  // finish(): the rows' columns
+    std::vector<Index> by_dof_start_, by_dof_, mark_, sharing_;  // index_rows(), rows_sharing()
+    Index capacity_ = 0, cleared_ = 0, stride_ = 0, limit_ = 0, rows_ = 0;
+    bool whole_ = false;  // more than limit_ entries written: W read and cleared whole
+};
+
 // c(n1, n2) of one DOF: (n1 . n2) comp (Vec, comp[dof] or the default) or SOFA's rigid formula on
 // the 7 compliance numbers (translation comp[0], rotation the symmetric 3x3 comp[1..6]).
 template <class DT>
@@ -569,12 +773,15 @@ inline double uncoupled_pair(Index dof, const double* n1, const double* n2, doub
 }
 
 // UncoupledConstraintCorrection::addComplianceInConstraintSpace: W += factor-scaled J C J^T
-// (comp and comp0 multiplied by `factor` first, as SOFA does), n the rows of W.
+// (comp and comp0 multiplied by `factor` first, as SOFA does) on a state of `dofs` DOFs. SOFA tries
+// every pair of rows (r, s > r) and writes the non-zero sums over their common DOFs; only the
+// pairs that share a DOF can have one, so those alone are tried, in the same order.
 template <class DT>
-inline void uncoupled_add_compliance(double* W, Index n, const JacobianRows& J, double comp0, const double* comp,
-                                     Index comp_size, double factor, double* scaled_comp) {
+inline void uncoupled_add_compliance(CompliancePattern& P, double* W, const JacobianRows& J, Index dofs, double comp0,
+                                     const double* comp, Index comp_size, double factor, double* scaled_comp) {
     comp0 *= factor;
     for (Index i = 0; i < comp_size; ++i) scaled_comp[i] = comp[i] * factor;
+    P.index_rows(J, dofs);
     for (Index r = 0; r < J.rows; ++r) {
         if (J.start[r] == J.start[r + 1]) continue;
         const Index row = J.row_index[r];
@@ -582,9 +789,11 @@ inline void uncoupled_add_compliance(double* W, Index n, const JacobianRows& J, 
         for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
             w += uncoupled_pair<DT>(J.dof[e], J.values + DT::deriv * e, J.values + DT::deriv * e, comp0, scaled_comp,
                                     comp_size);
-        W[n * row + row] += w;
-        for (Index s = r + 1; s < J.rows; ++s) {
-            if (J.start[s] == J.start[s + 1]) continue;
+        P.add(W, row, row, w);
+        Index count = 0;
+        const Index* sharing = P.rows_sharing(J, r, count);
+        for (Index k = 0; k < count; ++k) {
+            const Index s = sharing[k];
             const Index column = J.row_index[s];
             double v = 0.0;
             Index a = J.start[r], b = J.start[s];
@@ -600,8 +809,8 @@ inline void uncoupled_add_compliance(double* W, Index n, const JacobianRows& J, 
                 }
             }
             if (v != 0.0) {
-                W[n * row + column] += v;
-                W[n * column + row] += v;
+                P.add(W, row, column, v);
+                P.add(W, column, row, v);
             }
         }
     }
@@ -662,9 +871,9 @@ inline void apply_motion_correction(double* x, const double* x_free, double* v, 
 
 // ---- the compiled constraint phase (FreeMotionAnimationLoop) ----------------------------------
 
-// GenericConstraintProblem::clear(n): W, dfree, f and d zeroed.
-inline void constraint_clear(double* W, double* dfree, double* f, double* d, Index n) {
-    for (Index i = 0; i < n * n; ++i) W[i] = 0.0;
+// GenericConstraintProblem::clear(n): W (what the last step wrote of it), dfree, f and d zeroed.
+inline void constraint_clear(CompliancePattern& P, double* W, double* dfree, double* f, double* d, Index n) {
+    P.start(W, n);
     for (Index i = 0; i < n; ++i) dfree[i] = f[i] = d[i] = 0.0;
 }
 
@@ -766,9 +975,9 @@ inline void stopper_violation(double* dfree, Index row, const double* x, Index i
 // error of the last solve, solves that hit the iteration limit, and the time, error and iterations
 // of the last such solve.
 template <int K>
-inline void solve_constraints(BuiltSolver solver, double* W, double* dfree, double* f, double* d, double* scratch, Index n,
-                              const Index* first, const Index* kind, const double* parameter, const Index* kept,
-                              double* previous, double max_iterations, double tolerance, double sor,
+inline void solve_constraints(BuiltSolver solver, CompliancePattern& P, double* W, double* dfree, double* f, double* d,
+                              double* scratch, Index n, const Index* first, const Index* kind, const double* parameter,
+                              const Index* kept, double* previous, double max_iterations, double tolerance, double sor,
                               double scale_tolerance, double all_verified, double regularization, double* report,
                               double time) {
     RowBlock blocks[K];
@@ -782,6 +991,8 @@ inline void solve_constraints(BuiltSolver solver, double* W, double* dfree, doub
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
     ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
+    P.finish();
+    P.view(p);
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     record_solve(report, solve_built(solver, p, settings), time);
@@ -875,7 +1086,7 @@ struct UnbuiltUncoupled {
             }
         }
     }
-    void block_compliance(double* W, Index n, Index first, Index last) const {
+    void block_compliance(CompliancePattern& P, double* W, Index first, Index last) const {
         for (Index id1 = first; id1 <= last; ++id1) {
             const Index r = row_of(id1);
             if (r < 0) continue;
@@ -883,7 +1094,7 @@ struct UnbuiltUncoupled {
             for (Index e = J.start[r]; e < J.start[r + 1]; ++e)
                 w += uncoupled_pair<DT>(J.dof[e], J.values + DT::deriv * e, J.values + DT::deriv * e, comp0, comp,
                                         comp_size);
-            W[n * id1 + id1] += w;
+            P.add(W, id1, id1, w);
             for (Index id2 = id1 + 1; id2 <= last; ++id2) {
                 const Index s = row_of(id2);
                 if (s < 0) continue;
@@ -901,8 +1112,8 @@ struct UnbuiltUncoupled {
                     }
                 }
                 if (v != 0.0) {
-                    W[n * id1 + id2] += v;
-                    W[n * id2 + id1] += v;
+                    P.add(W, id1, id2, v);
+                    P.add(W, id2, id1, v);
                 }
             }
         }
@@ -927,10 +1138,11 @@ struct UnbuiltSet {
 // UnbuiltGaussSeidelConstraintSolver on K blocks with C uncoupled corrections of one DataType:
 // W holds only the blocks' diagonal blocks (raw compliance), forces start from zero.
 template <class DT, int K, class... Items>
-inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double* scratch, Index n, const Index* first,
-                          const Index* kind, const double* parameter, const Index* kept, double* previous,
-                          double max_iterations, double tolerance, double sor, double scale_tolerance,
-                          double all_verified, double* report, double time, const Items&... items) {
+inline void solve_unbuilt(CompliancePattern& P, double* W, double* dfree, double* f, double* d, double* scratch,
+                          Index n, const Index* first, const Index* kind, const double* parameter, const Index* kept,
+                          double* previous, double max_iterations, double tolerance, double sor,
+                          double scale_tolerance, double all_verified, double* report, double time,
+                          const Items&... items) {
     UnbuiltSet<DT, int(sizeof...(Items))> set{{items...}};
     RowBlock blocks[K];
     for (int k = 0; k < K; ++k) {
@@ -944,7 +1156,7 @@ inline void solve_unbuilt(double* W, double* dfree, double* f, double* d, double
     for (int k = 0; k < K; ++k) {
         const Index last = first[k] + resolution_lines(blocks[k].kind) - 1;
         for (const auto& item : set.items)
-            if (item.row_of(first[k]) >= 0) item.block_compliance(W, n, first[k], last);
+            if (item.row_of(first[k]) >= 0) item.block_compliance(P, W, first[k], last);
     }
     ConstraintProblem p{n, W, dfree, f, d, blocks, K, scratch};
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,

@@ -202,12 +202,12 @@ public:
         rows_total_ = row;
     }
 
-    // The problem's size this step, W, dfree, f and d zeroed over it (GenericConstraintProblem::clear),
-    // and the blocks of the contact rows after the static ones.
-    Index begin(double* W, double* dfree, double* f, double* d) {
+    // The problem's size this step, W (what the last step wrote of it), dfree, f and d zeroed over it
+    // (GenericConstraintProblem::clear).
+    Index begin(CompliancePattern& P, double* W, double* dfree, double* f, double* d) {
         const Index n = rows_total_;
         n_ = n;
-        for (Index i = 0; i < n * n; ++i) W[i] = 0.0;
+        P.start(W, n);
         for (Index i = 0; i < n; ++i) dfree[i] = f[i] = d[i] = 0.0;
         return n;
     }
@@ -605,19 +605,20 @@ inline void lagrangian_fit(LagrangianPipeline& L, std::vector<std::vector<double
     L->fit(retired, W, dfree, f, d, scratch);
 }
 
-inline void lagrangian_begin(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d) {
-    L->begin(W, dfree, f, d);
+inline void lagrangian_begin(LagrangianPipeline& L, CompliancePattern& P, double* W, double* dfree, double* f,
+                             double* d) {
+    L->begin(P, W, dfree, f, d);
 }
 
 inline void lagrangian_violation(LagrangianPipeline& L, double* dfree) { L->violation(dfree); }
 
 // UncoupledConstraintCorrection::addComplianceInConstraintSpace on the body's rows of this step.
 template <class DT>
-inline void lagrangian_add_compliance(LagrangianPipeline& L, Index body, double* W, const JacobianRows& fixed,
-                                      double comp0, const double* comp, Index comp_size, double factor,
-                                      double* scaled_comp) {
+inline void lagrangian_add_compliance(LagrangianPipeline& L, Index body, CompliancePattern& P, double* W,
+                                      const JacobianRows& fixed, Index dofs, double comp0, const double* comp,
+                                      Index comp_size, double factor, double* scaled_comp) {
     const collide::DynamicRows& rows = L->template jacobian<DT>(body, fixed);
-    uncoupled_add_compliance<DT>(W, L->rows(), rows.view(), comp0, comp, comp_size, factor, scaled_comp);
+    uncoupled_add_compliance<DT>(P, W, rows.view(), dofs, comp0, comp, comp_size, factor, scaled_comp);
 }
 
 // The correction of a body after the solve (its rows as jacobian() last built them).
@@ -632,16 +633,18 @@ inline void lagrangian_correct(LagrangianPipeline& L, Index body, double* x, dou
 
 // The loop's solve on the static blocks and this step's contact blocks (see solve_constraints).
 template <int K>
-inline void lagrangian_solve(LagrangianPipeline& L, BuiltSolver solver, double* W, double* dfree, double* f, double* d,
-                             double* scratch, Index /*capacity*/, const Index* first, const Index* kind, const double* parameter,
-                             const Index* kept, double* previous, double max_iterations, double tolerance,
-                             double sor, double scale_tolerance, double all_verified, double regularization,
-                             double* report, double time) {
+inline void lagrangian_solve(LagrangianPipeline& L, BuiltSolver solver, CompliancePattern& P, double* W, double* dfree,
+                             double* f, double* d, double* scratch, Index /*capacity*/, const Index* first,
+                             const Index* kind, const double* parameter, const Index* kept, double* previous,
+                             double max_iterations, double tolerance, double sor, double scale_tolerance,
+                             double all_verified, double regularization, double* report, double time) {
     const Index n = L->rows();
     RowBlock* blocks = L->blocks(first, kind, parameter, kept, previous, K);
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
     ConstraintProblem p{n, W, dfree, f, d, blocks, L->block_count(), scratch};
+    P.finish();
+    P.view(p);
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
                                       all_verified != 0.0};
     record_solve(report, solve_built(solver, p, settings), time, n > 0);
@@ -657,9 +660,9 @@ struct LagrangianUnbuilt {
 // UnbuiltGaussSeidelConstraintSolver on the static blocks and this step's contact blocks, the
 // corrections' rows those of this step (see solve_unbuilt).
 template <class DT, int K, class... Items>
-inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
-                                     double* scratch, Index /*capacity*/, const Index* first, const Index* kind,
-                                     const double* parameter, const Index* kept, double* previous,
+inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, CompliancePattern& P, double* W, double* dfree, double* f,
+                                     double* d, double* scratch, Index /*capacity*/, const Index* first,
+                                     const Index* kind, const double* parameter, const Index* kept, double* previous,
                                      double max_iterations, double tolerance, double sor, double scale_tolerance,
                                      double all_verified, double* report, double time, const Items&... items) {
     UnbuiltSet<DT, int(sizeof...(Items))> set{{items.item...}};
@@ -673,7 +676,7 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
     for (Index k = 0; k < count; ++k) {
         const Index last = blocks[k].first + resolution_lines(blocks[k].kind) - 1;
         for (const auto& item : set.items)
-            if (item.row_of(blocks[k].first) >= 0) item.block_compliance(W, n, blocks[k].first, last);
+            if (item.row_of(blocks[k].first) >= 0) item.block_compliance(P, W, blocks[k].first, last);
     }
     ConstraintProblem p{n, W, dfree, f, d, blocks, count, scratch};
     const ConstraintSettings settings{Index(max_iterations), tolerance, sor, scale_tolerance != 0.0,
@@ -684,15 +687,17 @@ inline void lagrangian_solve_unbuilt(LagrangianPipeline& L, double* W, double* d
 
 // LCPConstraintSolver, built, on this step's contact rows (3 per contact): nlcp_gaussseidel with
 // the solver's own mu (see lcp_gauss_seidel); W already holds the corrections' compliance.
-inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
-                                 double* scratch, Index /*capacity*/, double max_iterations, double tolerance,
-                                 double mu, double min_w, double max_f, double regularization, double initial_guess,
-                                 double* report, double time) {
+inline void lagrangian_solve_lcp(LagrangianPipeline& L, CompliancePattern& P, double* W, double* dfree, double* f,
+                                 double* d, double* scratch, Index /*capacity*/, double max_iterations,
+                                 double tolerance, double mu, double min_w, double max_f, double regularization,
+                                 double initial_guess, double* report, double time) {
     const Index n = L->rows();
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index i = 0; i < n; ++i) W[n * i + i] += regularization;
     if (initial_guess != 0.0 && n != 0) L->initial_guess(f);
     ConstraintProblem p{n, W, dfree, f, d, nullptr, 0, scratch};
+    P.finish();
+    P.view(p);
     const LcpSettings settings{Index(max_iterations), tolerance, mu, min_w, max_f, initial_guess != 0.0};
     const ConstraintResult result = lcp_gauss_seidel(p, settings);
     if (initial_guess != 0.0) L->keep_forces(f);
@@ -703,11 +708,11 @@ inline void lagrangian_solve_lcp(LagrangianPipeline& L, double* W, double* dfree
 // row's 1x1 compliance from the (at most two) corrections holding it, the displacements through the
 // corrections; the initial guess from the previous solve by persistent id; then the forces kept.
 template <class DT, class... Items>
-inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, double* dfree, double* f, double* d,
-                                         double* /*scratch*/, Index /*capacity*/, double max_iterations,
-                                         double tolerance, double mu, double /*min_w*/, double /*max_f*/,
-                                         double regularization, double initial_guess, double* report, double time,
-                                         const Items&... items) {
+inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, CompliancePattern& P, double* W, double* dfree,
+                                         double* f, double* d, double* /*scratch*/, Index /*capacity*/,
+                                         double max_iterations, double tolerance, double mu, double /*min_w*/,
+                                         double /*max_f*/, double regularization, double initial_guess,
+                                         double* report, double time, const Items&... items) {
     UnbuiltSet<DT, int(sizeof...(Items))> set{{items.item...}};
     const Index bodies[] = {items.body...};
     constexpr int C = int(sizeof...(Items));
@@ -736,7 +741,7 @@ inline void lagrangian_solve_lcp_unbuilt(LagrangianPipeline& L, double* W, doubl
     const Index lines = mu > 0.0 ? 3 : 1;
     for (Index c = 0; c + lines <= n; c += lines)
         for (int k = 0; k < C; ++k)
-            if (set.items[k].row_of(c) >= 0) set.items[k].block_compliance(W, n, c, c + lines - 1);
+            if (set.items[k].row_of(c) >= 0) set.items[k].block_compliance(P, W, c, c + lines - 1);
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index c = 0; c < n; ++c) W[n * c + c] += regularization;
     const auto holders = [&](Index c, int which) {  // _cclist_elem1 / _cclist_elem2

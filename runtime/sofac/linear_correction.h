@@ -37,25 +37,26 @@ inline void linear_scatter_row(double* rhs, const DirectSolver& D, const Jacobia
 
 // W(a, b) += factor J_b . y for the rows b >= a, mirrored; y = A^-1 J_a^T.
 template <class DT>
-inline void linear_add_row(double* W, Index n, const JacobianRows& J, Index a, const double* y, Index offset,
-                           double factor) {
+inline void linear_add_row(CompliancePattern& P, double* W, const JacobianRows& J, Index a, const double* y,
+                           Index offset, double factor) {
     const Index row = J.row_index[a];
     for (Index b = a; b < J.rows; ++b) {
         double w = 0.0;
         for (Index e = J.start[b]; e < J.start[b + 1]; ++e)
             for (int c = 0; c < DT::deriv; ++c) w += J.values[DT::deriv * e + c] * y[offset + DT::deriv * J.dof[e] + c];
         const Index column = J.row_index[b];
-        W[n * column + row] += factor * w;
-        if (column != row) W[n * row + column] += factor * w;
+        P.add(W, column, row, factor * w);
+        if (column != row) P.add(W, row, column, factor * w);
     }
 }
 
-// W += factor J A^-1 J^T over the state's rows (n the rows of W), then the regularization. The
-// solves go DirectSolver::kSolveColumns rows at a time when the factor allows (the same solutions,
-// W filled in the same order), else one row at a time.
+// W += factor J A^-1 J^T over the state's rows, then the regularization. The solves go
+// DirectSolver::kSolveColumns rows at a time when the factor allows (the same solutions, W filled in
+// the same order), else one row at a time. Every pair of the state's rows is written: W's part of
+// it is dense.
 template <class DT>
-inline void linear_add_compliance(double* W, Index n, const JacobianRows& J, DirectSolver& D, Index offset,
-                                  double factor, double regularization) {
+inline void linear_add_compliance(CompliancePattern& P, double* W, const JacobianRows& J, DirectSolver& D,
+                                  Index offset, double factor, double regularization) {
     constexpr int C = DirectSolver::kSolveColumns;
     const auto empty = [&](Index a) { return J.start[a] == J.start[a + 1]; };
     if (D.can_solve_columns()) {
@@ -69,19 +70,19 @@ inline void linear_add_compliance(double* W, Index n, const JacobianRows& J, Dir
                 else D.rhs_columns.col(c).setZero();
             }
             D.solve_columns();
-            for (int c = 0; c < count; ++c) linear_add_row<DT>(W, n, J, batch[c], D.column_solution(c), offset, factor);
+            for (int c = 0; c < count; ++c) linear_add_row<DT>(P, W, J, batch[c], D.column_solution(c), offset, factor);
         }
     } else {
         for (Index a = 0; a < J.rows; ++a) {
             if (empty(a)) continue;
             linear_scatter_row<DT>(D.rhs.data(), D, J, a, offset);
             D.solve();
-            linear_add_row<DT>(W, n, J, a, D.solution.data(), offset, factor);
+            linear_add_row<DT>(P, W, J, a, D.solution.data(), offset, factor);
         }
     }
     if (regularization > std::numeric_limits<double>::epsilon())
         for (Index a = 0; a < J.rows; ++a)
-            if (!empty(a)) W[n * J.row_index[a] + J.row_index[a]] += regularization;
+            if (!empty(a)) P.add(W, J.row_index[a], J.row_index[a], regularization);
 }
 
 // lambda = J^T f, dx = A^-1 lambda, then x = x_free + position_factor dx, v = v_free + velocity_factor dx
@@ -103,10 +104,11 @@ inline void linear_correct(double* x, double* v, double* lambda, double* dx, con
 
 // The same on a body of the Lagrangian contacts: its rows this step (static, then contact rows).
 template <class DT>
-inline void lagrangian_linear_add_compliance(LagrangianPipeline& L, Index body, double* W, const JacobianRows& fixed,
-                                             DirectSolver& D, Index offset, double factor, double regularization) {
+inline void lagrangian_linear_add_compliance(LagrangianPipeline& L, Index body, CompliancePattern& P, double* W,
+                                             const JacobianRows& fixed, DirectSolver& D, Index offset, double factor,
+                                             double regularization) {
     const collide::DynamicRows& rows = L->template jacobian<DT>(body, fixed);
-    linear_add_compliance<DT>(W, L->rows(), rows.view(), D, offset, factor, regularization);
+    linear_add_compliance<DT>(P, W, rows.view(), D, offset, factor, regularization);
 }
 
 template <class DT>

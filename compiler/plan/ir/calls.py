@@ -56,6 +56,8 @@ class Env(enum.Enum):
     NONE = "none"  # an absent pointer
     CONTACTS = "contacts"  # the scene's penalty contacts, one per pipeline (runtime/sofac/penalty.h)
     LAGRANGIAN = "lagrangian"  # the scene's Lagrangian contacts (runtime/sofac/lagrangian_contact.h)
+    # the constraint phase's record of W's entries written (runtime/sofac/constraints.h CompliancePattern)
+    CONSTRAINT_PATTERN = "constraint_pattern"
 
 
 class FemMethod(enum.IntEnum):

@@ -102,9 +102,10 @@ class ConstraintProblem:
     scratch: Buffer
     rows: int
 
-    def arguments(self) -> tuple[Buffer | int, ...]:
-        """As the runtime's solvers take them: W, dfree, f, d, scratch, rows."""
-        return (self.W, self.dfree, self.f, self.d, self.scratch, self.rows)
+    def arguments(self) -> tuple[Buffer | int | Env, ...]:
+        """As the runtime's solvers take them: W's pattern (the entries written), W, dfree, f, d,
+        scratch, rows."""
+        return (Env.CONSTRAINT_PATTERN, self.W, self.dfree, self.f, self.d, self.scratch, self.rows)
 
 
 @dataclass(frozen=True)

@@ -101,13 +101,24 @@ def uncoupled_correction(
     velocity = 1.0 if use_ode else float(planner.value(component, "correctionVelocityFactor")) / dt
     t = state.datatype.name
     comp_args = (comp0, comp_buffer, len(comp))
-    W, f, n = problem.W, problem.f, problem.rows
+    W, f, pattern = problem.W, problem.f, Env.CONSTRAINT_PATTERN
     if contacts:
         add = call(
-            kernel("lagrangian_add_compliance", t), Env.LAGRANGIAN, body, W, J, *comp_args, factor, scaled
+            kernel("lagrangian_add_compliance", t),
+            Env.LAGRANGIAN,
+            body,
+            pattern,
+            W,
+            J,
+            state.size,
+            *comp_args,
+            factor,
+            scaled,
         )
     else:
-        add = call(kernel("uncoupled_add_compliance", t), W, n, J, *comp_args, factor, scaled)
+        add = call(
+            kernel("uncoupled_add_compliance", t), pattern, W, J, state.size, *comp_args, factor, scaled
+        )
     phase.compliance.append(Op(correction.origin, [add]))
     moved = moved_vectors(planner, component, state)
     if contacts:

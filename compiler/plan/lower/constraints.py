@@ -325,7 +325,8 @@ def _rows_compiled(planner: Planner, lowering: ConstraintLowering, lagrangian: C
 
 
 def _problem(planner: Planner, phase: ConstraintPhase, lagrangian: Collision | None) -> ConstraintProblem:
-    """W, dfree, f, d and the solvers' scratch, sized by the phase's rows, cleared first each step."""
+    """W, dfree, f, d and the solvers' scratch, sized by the phase's rows, cleared first each step
+    (W where the last step wrote it: the instance's CompliancePattern)."""
     n = phase.capacity
     problem = ConstraintProblem(
         W=planner.buffer("/", "constraint_W", np.zeros(n * n), columns=n, role="scratch"),
@@ -340,9 +341,19 @@ def _problem(planner: Planner, phase: ConstraintPhase, lagrangian: Collision | N
     )
     if lagrangian is not None:
         lagrangian.problem = [problem.W, problem.dfree, problem.f, problem.d, problem.scratch]
-        clear = call("lagrangian_begin", Env.LAGRANGIAN, problem.W, problem.dfree, problem.f, problem.d)
+        clear = call(
+            "lagrangian_begin",
+            Env.LAGRANGIAN,
+            Env.CONSTRAINT_PATTERN,
+            problem.W,
+            problem.dfree,
+            problem.f,
+            problem.d,
+        )
     else:
-        clear = call("constraint_clear", problem.W, problem.dfree, problem.f, problem.d, n)
+        clear = call(
+            "constraint_clear", Env.CONSTRAINT_PATTERN, problem.W, problem.dfree, problem.f, problem.d, n
+        )
     phase.rows.append(Op(phase.loop, [clear]))
     return problem
 

@@ -121,7 +121,7 @@ def linear_solver_correction(
     system = _linear_system_of(planner, checked, correction.group)
     if system is None:
         return
-    W, f, n = problem.W, problem.f, problem.rows
+    W, f = problem.W, problem.f
     state, component = correction.state, checked.component
     dt = float(planner.dt.initial[0])
     regularization = Element(
@@ -138,6 +138,7 @@ def linear_solver_correction(
             kernel("lagrangian_linear_add_compliance", t),
             Env.LAGRANGIAN,
             body,
+            Env.CONSTRAINT_PATTERN,
             W,
             J,
             system,
@@ -146,7 +147,9 @@ def linear_solver_correction(
             regularization,
         )
     else:
-        add = call(kernel("linear_add_compliance", t), W, n, J, system, 0, dt, regularization)
+        add = call(
+            kernel("linear_add_compliance", t), Env.CONSTRAINT_PATTERN, W, J, system, 0, dt, regularization
+        )
     phase.compliance.append(Op(correction.origin, [add]))
     moved = moved_vectors(planner, component, state)
     if lagrangian:
