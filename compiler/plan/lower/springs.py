@@ -17,6 +17,7 @@ from sofac.plan.ir import (
     Group,
     Op,
     Scheme,
+    StatePlan,
     origin_of,
 )
 from sofac.plan.lower.common import (
@@ -75,6 +76,24 @@ def lower_triangular_bending_springs(
         d = [points[m1][k] - points[m2][k] for k in range(3)]
         pairs.append((m1, m2))
         params.append((ks, kd, math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])))
+    kernels = ("triangular_bending_add_force", "triangular_bending_add_dforce", "triangular_bending_energy")
+    _place_bending_springs(planner, checked, group, state, pairs, params, kernels)
+
+
+def _place_bending_springs(
+    planner: Planner,
+    checked: CheckedComponent,
+    group: Group,
+    state: StatePlan,
+    pairs: list[tuple[int, int]],
+    params: list[tuple[float, float, float]],
+    kernels: tuple[str, str, str | None],
+) -> None:
+    """The spring table (ends, then ks, kd, rest length per spring) of a bending-spring field as
+    buffers, and its calls (shell.h): ``kernels`` = (the force, which leaves each spring's df/dx in
+    a scratch buffer; K dx from those; the potential energy, or None), then the assembled blocks."""
+    add_force, add_dforce, energy = kernels
+    component = checked.component
     count = len(pairs)
     springs = planner.buffer(
         component, "springs", np.asarray(pairs, dtype=np.int64).reshape(-1), "i64", columns=2
@@ -83,28 +102,22 @@ def lower_triangular_bending_springs(
     dfdx = planner.buffer(component, "dfdx", np.zeros(9 * count), columns=9, role="scratch")
     origin = origin_of(component)
     group.forces.append(
-        Op(
-            origin,
-            [_call("triangular_bending_add_force", springs, values, count, state.x, state.v, state.f, dfdx)],
-        )
+        Op(origin, [_call(add_force, springs, values, count, state.x, state.v, state.f, dfdx)])
     )
-    group.energy.append(
-        Op(origin, [_call("triangular_bending_energy", springs, values, count, state.x, into=Env.POTENTIAL)])
+    if energy is not None:
+        group.energy.append(Op(origin, [_call(energy, springs, values, count, state.x, into=Env.POTENTIAL)]))
+    if group.scheme is not Scheme.IMPLICIT:
+        return
+    group.stiffness_dx.append(
+        Op(origin, [_call(add_dforce, springs, count, dfdx, state.dx, state.df, Env.KFACT)])
     )
-    if group.scheme is Scheme.IMPLICIT:
-        group.stiffness_dx.append(
-            Op(
-                origin,
-                [_call("triangular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, Env.KFACT)],
-            )
-        )
-        _assemble(
-            planner,
-            checked,
-            group,
-            state,
-            _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
-        )
+    _assemble(
+        planner,
+        checked,
+        group,
+        state,
+        _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
+    )
 
 
 def lower_quad_bending_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
@@ -221,33 +234,8 @@ def lower_quadular_bending_springs(
     ks, kd = float(planner.value(component, "stiffness")), float(planner.value(component, "damping"))
     points = np.asarray(rest, dtype=float)
     params = [(ks, kd, float(np.sqrt(np.sum((points[a] - points[b]) ** 2)))) for a, b in pairs]
-    count = len(pairs)
-    springs = planner.buffer(
-        component, "springs", np.asarray(pairs, dtype=np.int64).reshape(-1), "i64", columns=2
-    )
-    values = planner.buffer(component, "springParams", np.asarray(params, dtype=float).reshape(-1), columns=3)
-    dfdx = planner.buffer(component, "dfdx", np.zeros(9 * count), columns=9, role="scratch")
-    origin = origin_of(component)
-    group.forces.append(
-        Op(
-            origin,
-            [_call("quadular_bending_add_force", springs, values, count, state.x, state.v, state.f, dfdx)],
-        )
-    )
-    if group.scheme is Scheme.IMPLICIT:
-        group.stiffness_dx.append(
-            Op(
-                origin,
-                [_call("quadular_bending_add_dforce", springs, count, dfdx, state.dx, state.df, Env.KFACT)],
-            )
-        )
-        _assemble(
-            planner,
-            checked,
-            group,
-            state,
-            _call("assemble_triangular_bending", Env.ASSEMBLER, OFFSET, springs, count, dfdx, Env.KFACT),
-        )
+    kernels = ("quadular_bending_add_force", "quadular_bending_add_dforce", None)  # SOFA gives it no energy
+    _place_bending_springs(planner, checked, group, state, pairs, params, kernels)
 
 
 def lower_bending_springs(planner: Planner, checked: CheckedComponent, owner: dict[int, Group]) -> None:
