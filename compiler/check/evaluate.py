@@ -15,6 +15,7 @@ from typing import Any, Protocol
 import numpy as np
 from sofac import limits
 from sofac.front import meshes
+from sofac.registry.components.topology import CONTAINERS
 
 
 class EvaluationError(Exception):
@@ -711,7 +712,7 @@ def _engine_cells(ctx: Context, name: str, corners: int, *, from_topology: bool)
     topology, cells = found
     if cells is not None and np.size(cells):
         return np.asarray(cells, dtype=np.int64).reshape(-1, corners)
-    if topology == "TriangleSetTopologyContainer" and name == "edges":  # createEdgesInTriangleArray's
+    if topology == CONTAINERS["Triangle"].name and name == "edges":  # createEdgesInTriangleArray's
         triangles = ctx.context_topology("triangles")
         if triangles is not None and triangles[1] is not None and np.size(triangles[1]):
             return triangle_edges(np.asarray(triangles[1], dtype=np.int64).reshape(-1, 3))
@@ -918,12 +919,12 @@ def _container_edges(triangles: np.ndarray, given: Any) -> tuple[np.ndarray, np.
 def triangle_to_edge(ctx: Context) -> Outputs:
     """Triangle2EdgeTopologicalMapping: the input container's edges that bound one triangle only,
     in the container's edge order, as written (SOFA's init)."""
-    for link, expected in (("input", "TriangleSetTopologyContainer"), ("output", "EdgeSetTopologyContainer")):
+    source, target = CONTAINERS["Triangle"].name, CONTAINERS["Edge"].name
+    for link, expected in (("input", source), ("output", target)):
         found = ctx.linked_type(link)
         if found is not None and found != expected:
             raise EvaluationError(
-                f"{link} is a {found}: sofac evaluates this mapping from a TriangleSetTopologyContainer "
-                "to an EdgeSetTopologyContainer only",
+                f"{link} is a {found}: sofac evaluates this mapping from a {source} to an {target} only",
                 link,
                 code="E222",
             )

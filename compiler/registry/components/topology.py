@@ -337,8 +337,10 @@ def _geometry(kind: str) -> ComponentSpec:
 
 
 _KINDS = tuple(_KIND_FIELDS)
+# The dynamic containers by element kind ("Edge", "Triangle", ...): what later stages compare with.
+CONTAINERS = {kind: _container(kind) for kind in _KINDS}
 DYNAMIC_TOPOLOGY = tuple(
-    spec for kind in _KINDS for spec in (_container(kind), _modifier(kind), _geometry(kind))
+    spec for kind in _KINDS for spec in (CONTAINERS[kind], _modifier(kind), _geometry(kind))
 )
 
 # --- topological mappings ----------------------------------------------------------------------
