@@ -48,6 +48,7 @@ from sofac.plan.lower.corrections import (
     mapped_free_motion,
 )
 from sofac.registry import Category, Variant
+from sofac.registry.components.constraint import FIXED_PROJECTIVE_CONSTRAINT
 from sofac.registry.spec import Effect
 
 if TYPE_CHECKING:
@@ -430,7 +431,7 @@ def _without_held_dofs(
             if fix_all
             else set(values_of(planner, component, "indices", np.int64).tolist())
         )
-        if checked.spec.name == "FixedProjectiveConstraint" and not frames & held:
+        if checked.spec is FIXED_PROJECTIVE_CONSTRAINT and not frames & held:
             entries = [entry for entry in entries if entry[1] not in held]
         elif dofs & held or checked.spec.field("indices") is None:
             assert correction.checked is not None
